@@ -1,0 +1,109 @@
+"""The parameters of the screen-space model, as a pytree."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .validation import InvalidInputError
+
+__all__ = ["SSSParams"]
+
+_FIELDS = ("sss_level", "correction", "maxdd", "weights", "variances")
+
+
+def _as_float(x) -> Array:
+    # jnp.asarray with the default float type: float32, or float64 under x64.
+    return jnp.asarray(x, dtype=jnp.result_type(float))
+
+
+class SSSParams(eqx.Module):
+    """Stretch factors and sum-of-Gaussians profile (MODEL.md sections 2, 4, 6).
+
+    Parameters
+    ----------
+    sss_level : float
+        ``L`` in ``s = L / (d + c min(|dd|, maxdd))``; pixels per scene unit at unit
+        depth (the focal length in pixels for depth in mm and no correction).
+    correction : float
+        ``c`` >= 0, how strongly a depth slope narrows the blur.
+    maxdd : float
+        ``delta`` > 0, the slope above which the correction stops growing.
+    weights : array, shape (K,) or (K, C)
+        Gaussian weights, one per Gaussian or one per Gaussian and channel.
+    variances : array, shape (K,)
+        Gaussian variances in scene units squared (mm^2).
+
+    Examples
+    --------
+    >>> import invsss
+    >>> p = invsss.SSSParams(0.5, 2000.0, 0.001, [0.4, 0.6], [0.5, 2.0])
+    >>> p.num_gaussians
+    2
+    """
+
+    sss_level: Float[Array, ""] = eqx.field(converter=_as_float)
+    correction: Float[Array, ""] = eqx.field(converter=_as_float)
+    maxdd: Float[Array, ""] = eqx.field(converter=_as_float)
+    weights: Float[Array, "K *C"] = eqx.field(converter=_as_float)
+    variances: Float[Array, " K"] = eqx.field(converter=_as_float)
+
+    @property
+    def num_gaussians(self) -> int:
+        return int(self.variances.shape[-1])
+
+    @classmethod
+    def from_dict(cls, d: dict, source: str = "params") -> "SSSParams":
+        """Build from a mapping with the keys of a params JSON file.
+
+        Unknown keys other than the optional ``model``, ``tap_weights`` and the
+        estimator's report fields are an error, so a typo never passes silently.
+        """
+        missing = [k for k in _FIELDS if k not in d]
+        if missing:
+            raise InvalidInputError(f"{source}: missing key(s) {', '.join(missing)}")
+        try:
+            values = {k: np.asarray(d[k], dtype=np.float64) for k in _FIELDS}
+        except (TypeError, ValueError):
+            raise InvalidInputError(f"{source}: parameter values must be numbers") from None
+        for k in ("sss_level", "correction", "maxdd"):
+            if values[k].ndim != 0:
+                raise InvalidInputError(f"{source}: {k} must be a single number")
+        w, v = values["weights"], values["variances"]
+        if v.ndim != 1 or v.size == 0:
+            raise InvalidInputError(f"{source}: variances must be a non-empty list")
+        if w.ndim not in (1, 2) or w.shape[0] != v.shape[0]:
+            raise InvalidInputError(
+                f"{source}: weights must have one entry (or one per channel) for each of "
+                f"the {v.shape[0]} variances, got shape {w.shape}"
+            )
+        params = cls(**values)
+        params.check(source)
+        return params
+
+    def to_dict(self) -> dict:
+        """Plain-Python mapping (lists and floats) suitable for JSON."""
+        return {k: np.asarray(getattr(self, k)).tolist() for k in _FIELDS}
+
+    def check(self, name: str = "params") -> None:
+        """Raise :class:`InvalidInputError` if the values break the constraints."""
+        from .validation import is_concrete
+
+        if not all(is_concrete(getattr(self, k)) for k in _FIELDS):
+            return
+        vals = {k: np.asarray(getattr(self, k)) for k in _FIELDS}
+        for k, v in vals.items():
+            if not np.all(np.isfinite(v)):
+                raise InvalidInputError(f"{name}: {k} contains NaN or infinite values")
+        if vals["sss_level"] <= 0:
+            raise InvalidInputError(f"{name}: sss_level must be > 0, got {float(vals['sss_level']):g}")
+        if vals["correction"] < 0:
+            raise InvalidInputError(f"{name}: correction must be >= 0, got {float(vals['correction']):g}")
+        if vals["maxdd"] <= 0:
+            raise InvalidInputError(f"{name}: maxdd must be > 0, got {float(vals['maxdd']):g}")
+        if np.any(vals["variances"] < 0):
+            raise InvalidInputError(f"{name}: variances must be >= 0")
+        if np.any(vals["weights"] < 0) or np.any(vals["weights"].sum(axis=0) <= 0):
+            raise InvalidInputError(f"{name}: weights must be >= 0 with a positive sum")
