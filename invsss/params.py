@@ -58,8 +58,9 @@ class SSSParams(eqx.Module):
     def from_dict(cls, d: dict, source: str = "params") -> "SSSParams":
         """Build from a mapping with the keys of a params JSON file.
 
-        Unknown keys other than the optional ``model``, ``tap_weights`` and the
-        estimator's report fields are an error, so a typo never passes silently.
+        Only the five parameter keys are read; other keys are ignored here.
+        :func:`invsss.read_params` is the place that rejects unknown keys in a
+        params file.
         """
         missing = [k for k in _FIELDS if k not in d]
         if missing:

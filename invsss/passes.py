@@ -17,6 +17,7 @@ __all__ = [
     "tap_weights",
     "tap_spread",
     "sample_along",
+    "pixel_coordinates",
     "directional_pass",
 ]
 
@@ -53,32 +54,53 @@ def tap_spread(weights: Float[Array, "7"]) -> Float[Array, ""]:
 
 
 def sample_along(
-    image: Float[Array, "H W C"], positions: Float[Array, "H W T"], axis: int
-) -> Float[Array, "H W T C"]:
+    image: Float[Array, "H W C"], positions: Float[Array, "H W *T"], axis: int
+) -> Float[Array, "H W *T C"]:
     """Read ``image`` at real ``positions`` along rows (``axis=1``) or columns (``axis=0``).
 
-    ``positions[y, x, t]`` is a coordinate along the axis for output pixel
-    ``(y, x)``; the other coordinate is the pixel's own. Linear interpolation
-    between the two nearest pixel centres, coordinates clamped to
-    ``[0, n - 1]`` (clamp-to-edge). At an integer coordinate the slope used by
-    the derivative is the one to the right (to the left at ``n - 1``).
+    ``positions[y, x]`` (or ``positions[y, x, t]`` for several taps) is a
+    coordinate along the axis for output pixel ``(y, x)``; the other coordinate
+    is the pixel's own. Linear interpolation between the two nearest pixel
+    centres, coordinates clamped to ``[0, n - 1]`` (clamp-to-edge). At an
+    integer coordinate the derivative uses the slope to the right (to the left
+    at ``n - 1``).
     """
+    if positions.ndim == 3:
+        # Prefer one (H, W) tap at a time: XLA fuses each gather into the
+        # caller's accumulation, while a stacked (H, W, T, C) gather is an order
+        # of magnitude slower on CPU (experiments/bench_forward.py).
+        taps = [_sample_one(image, positions[..., t], axis) for t in range(positions.shape[2])]
+        return jnp.stack(taps, axis=2)
+    return _sample_one(image, positions, axis)
+
+
+def _sample_one(image, positions, axis):
     h, w, c = image.shape
-    n = image.shape[axis]
-    u = jnp.clip(positions, 0.0, n - 1.0)
-    i0 = jnp.clip(jnp.floor(u), 0, n - 2).astype(jnp.int32)
+    # ``axis`` may be a Python int or a traced scalar (the models scan over
+    # alternating passes with one body), so both layouts go through jnp.where.
+    along_rows = jnp.asarray(axis) == 1
+    n = jnp.where(along_rows, w, h)
+    u = jnp.clip(positions, 0.0, (n - 1).astype(positions.dtype))
+    i0 = jnp.clip(jnp.floor(u).astype(jnp.int32), 0, n - 2)
     frac = (u - i0)[..., None]
-    # Gather from the flattened image: one index computation serves both axes.
-    if axis == 1:
-        rows = jnp.arange(h, dtype=jnp.int32)[:, None, None]
-        flat0, step = rows * w + i0, 1
-    else:
-        cols = jnp.arange(w, dtype=jnp.int32)[None, :, None]
-        flat0, step = i0 * w + cols, w
+    # Gather from the flattened image; the indices are in bounds by
+    # construction, so XLA's bounds handling is skipped.
+    rows = jnp.arange(h, dtype=jnp.int32)[:, None]
+    cols = jnp.arange(w, dtype=jnp.int32)[None, :]
+    flat0 = jnp.where(along_rows, rows * w + i0, i0 * w + cols)
+    step = jnp.where(along_rows, 1, w)
     flat = image.reshape(h * w, c)
-    left = flat[flat0]
-    right = flat[flat0 + step]
+    left = flat.at[flat0].get(mode="promise_in_bounds")
+    right = flat.at[flat0 + step].get(mode="promise_in_bounds")
     return left + frac * (right - left)
+
+
+def pixel_coordinates(shape, axis, dtype):
+    """Each pixel's own coordinate along ``axis`` (x for 1, y for 0), shape (H, W)."""
+    h, w = shape[:2]
+    xs = jnp.broadcast_to(jnp.arange(w, dtype=dtype)[None, :], (h, w))
+    ys = jnp.broadcast_to(jnp.arange(h, dtype=dtype)[:, None], (h, w))
+    return jnp.where(jnp.asarray(axis) == 1, xs, ys)
 
 
 def directional_pass(
@@ -90,14 +112,17 @@ def directional_pass(
 ) -> Float[Array, "H W C"]:
     """``P(I; f)[y, x] = sum_k W_k I(y, x + t_k f[y, x])``, blended by the mask.
 
-    ``axis=1`` is the horizontal pass ``P_x``, ``axis=0`` the vertical ``P_y``.
+    ``axis=1`` is the horizontal pass ``P_x``, ``axis=0`` the vertical ``P_y``;
+    ``axis`` may be traced, so one scan body can alternate between the two.
     Where ``mask`` is 0 the image is returned unchanged; in between the result
     is ``m P + (1 - m) I``.
     """
-    t = jnp.asarray(TAP_OFFSETS, dtype=image.dtype)
-    coord = jnp.arange(image.shape[axis], dtype=image.dtype)
-    base = coord[None, :] if axis == 1 else coord[:, None]
-    positions = base[..., None] + footprint[..., None] * t
-    blurred = jnp.einsum("hwkc,k->hwc", sample_along(image, positions, axis), weights)
+    base = pixel_coordinates(image.shape, axis, image.dtype)
+    # The centre tap (t = 0) reads the pixel itself; the other six are gathered
+    # one at a time so that each gather fuses into the running sum.
+    blurred = weights[3] * image
+    for k, t in enumerate(TAP_OFFSETS):
+        if t != 0.0:
+            blurred = blurred + weights[k] * sample_along(image, base + t * footprint, axis)
     # I + m (P - I) equals m P + (1 - m) I and returns I bit-exactly where m = 0.
     return image + mask[..., None] * (blurred - image)

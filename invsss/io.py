@@ -1,0 +1,702 @@
+"""Reading and writing images, depth, masks and parameter files.
+
+Pixels go through OpenImageIO (EXR, PNG, TIFF, JPEG) or NumPy (``.npy``). The
+model works on *linear* values (MODEL.md section 1), so every reader returns
+linear float32 arrays and every writer encodes them for the file format. How an
+integer file is decoded:
+
+============  ===========================================  ================
+stored as     declared colour space (``oiio:ColorSpace``)  decoded with
+============  ===========================================  ================
+float / half  anything                                     nothing (linear)
+integer       linear (e.g. a PNG ``gAMA`` of 1.0)          ``c``
+integer       a pure gamma ``g`` (a PNG ``gAMA`` chunk)    ``c ** g``
+8-bit         sRGB, or nothing                             the sRGB EOTF
+16-bit        sRGB, declared by a TIFF                     the sRGB EOTF
+16-bit        nothing, or the sRGB label of a PNG          ``c`` (linear)
+============  ===========================================  ================
+
+with ``c`` the code value divided by its maximum (255 or 65535). 8-bit images
+are display-referred by convention (cameras, the web). 16-bit files are taken as
+linear, the usual convention for 16-bit renders, depth maps and raw-derived
+photographs; a PNG's sRGB label is ignored for them because OpenImageIO labels
+(and writes) every PNG as sRGB whether or not its pixels are encoded, so the
+label says nothing. Give a 16-bit PNG an explicit ``gAMA`` chunk if it really
+is gamma-encoded, or convert it to EXR.
+
+Depth and masks are data, not colour: their integer codes are never
+colour-decoded. Every failure raises :class:`~invsss.validation.InvalidInputError`
+with one line that names the file and what was expected. Writers are atomic:
+they write a temporary file next to the target and ``os.replace`` it, so an
+interrupted run never leaves half a file behind.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import difflib
+import json
+import math
+import os
+import secrets
+from collections.abc import Mapping
+from pathlib import Path
+from typing import NamedTuple
+
+import equinox as eqx
+import numpy as np
+import OpenImageIO as oiio
+
+from .params import SSSParams
+from .passes import TAP_WEIGHTS
+from .screen_space import MODELS
+from .validation import InvalidInputError, check_image, check_same_size
+
+__all__ = [
+    "IMAGE_EXTENSIONS",
+    "PARAMS_KEYS",
+    "PARAMS_OPTIONAL_KEYS",
+    "ImagePair",
+    "load_pair",
+    "read_depth",
+    "read_image",
+    "read_mask",
+    "read_params",
+    "write_image",
+    "write_params",
+    "srgb_to_linear",
+    "linear_to_srgb",
+]
+
+#: File extensions the readers and :func:`write_image` accept (case-insensitive).
+IMAGE_EXTENSIONS = (".exr", ".png", ".tif", ".tiff", ".jpg", ".jpeg", ".npy")
+
+#: The keys every params JSON file must have (the fields of :class:`SSSParams`).
+PARAMS_KEYS = ("sss_level", "correction", "maxdd", "weights", "variances")
+
+#: Keys a params JSON file may have besides :data:`PARAMS_KEYS`: the model
+#: choice, and the report the estimator writes next to the fitted values.
+PARAMS_OPTIONAL_KEYS = (
+    "model",
+    "tap_weights",
+    "stderr",
+    "undetermined",
+    "loss",
+    "psnr",
+    "ssim",
+    "converged",
+    "iterations",
+    "fixed",
+    "gauge",
+    "channels_mix",
+    "gain",
+    "offset",
+    "profile",
+)
+
+# Bits written for each extension when write_image is not told (EXR/TIFF keep
+# full float precision, PNG/JPEG are 8-bit sRGB like any viewer expects).
+_DEFAULT_BITS = {".exr": 32, ".png": 8, ".tif": 32, ".tiff": 32, ".jpg": 8, ".jpeg": 8, ".npy": 32}
+_ALLOWED_BITS = {
+    ".exr": (16, 32),
+    ".png": (8, 16),
+    ".tif": (8, 16, 32),
+    ".tiff": (8, 16, 32),
+    ".jpg": (8,),
+    ".jpeg": (8,),
+    ".npy": (32,),
+}
+_DEPTH_FORMATS = "expected float EXR, NPY, or 16-bit PNG with a scale"
+
+
+# --------------------------------------------------------------------------- sRGB
+
+
+def srgb_to_linear(encoded):
+    """The sRGB EOTF (IEC 61966-2-1): encoded values in [0, 1] to linear light.
+
+    ``c / 12.92`` for ``c <= 0.04045``, else ``((c + 0.055) / 1.055) ** 2.4``.
+
+    Examples
+    --------
+    >>> from invsss.io import srgb_to_linear
+    >>> round(float(srgb_to_linear(0.5)), 6)
+    0.214041
+    """
+    c = np.asarray(encoded, dtype=np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((np.maximum(c, 0.04045) + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(linear):
+    """The inverse of :func:`srgb_to_linear`: linear light in [0, 1] to sRGB-encoded values.
+
+    Examples
+    --------
+    >>> from invsss.io import linear_to_srgb, srgb_to_linear
+    >>> round(float(linear_to_srgb(srgb_to_linear(0.5))), 6)
+    0.5
+    """
+    x = np.asarray(linear, dtype=np.float64)
+    return np.where(
+        x <= 0.0031308, 12.92 * x, 1.055 * np.maximum(x, 0.0031308) ** (1.0 / 2.4) - 0.055
+    )
+
+
+# ----------------------------------------------------------------- reading pixels
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def _checked_path(path, kind: str) -> tuple[str, str]:
+    """The path as a string and its lower-case extension, or a one-line error."""
+    name = os.fspath(path)
+    ext = os.path.splitext(name)[1].lower()
+    if ext not in IMAGE_EXTENSIONS:
+        raise InvalidInputError(
+            f"{name}: unsupported {kind} file extension {ext or '(none)'!r}, "
+            f"expected one of {', '.join(IMAGE_EXTENSIONS)}"
+        )
+    if not os.path.exists(name):
+        raise InvalidInputError(f"{name}: {kind} file not found")
+    if os.path.isdir(name):
+        raise InvalidInputError(f"{name}: is a directory, expected a {kind} file")
+    return name, ext
+
+
+def _declared_encoding(spec: oiio.ImageSpec) -> str | float | None:
+    """The file's declared transfer function: "srgb", a gamma (1.0 = linear), or None."""
+    name = spec.get_string_attribute("oiio:ColorSpace")
+    if name:
+        if oiio.equivalent_colorspace(name, "srgb_rec709_scene"):
+            return "srgb"
+        # A fresh config each time: one cached for the process outlives the bindings
+        # at exit (nanobind reports a leak); files are read rarely, this is cheap.
+        gamma = oiio.ColorConfig().get_transfer_function_gamma(name)
+        if gamma > 0:
+            return float(gamma)
+    gamma = spec.get_float_attribute("oiio:Gamma", 0.0)
+    return float(gamma) if gamma > 0 else None
+
+
+class _Raster(NamedTuple):
+    """Pixels as stored: ``codes`` (H, W, C) uint8, uint16 or float (images: alpha removed)."""
+
+    codes: np.ndarray
+    encoding: str | float | None  # see _declared_encoding
+    file_format: str  # OpenImageIO's format name ("png", "openexr", ...) or "npy"
+
+
+def _read_raster(path, kind: str) -> tuple[str, _Raster]:
+    name, ext = _checked_path(path, kind)
+    if ext == ".npy":
+        try:
+            array = np.load(name, allow_pickle=False)
+        except Exception as err:  # NumPy raises several types for a bad file
+            raise InvalidInputError(f"{name}: cannot read NPY file ({_one_line(err)})") from None
+        if array.ndim == 2:
+            array = array[..., None]
+        if array.ndim != 3 or array.dtype.kind not in "biuf":
+            raise InvalidInputError(
+                f"{name}: expected a numeric (H, W) or (H, W, C) array, "
+                f"got {array.dtype} of shape {array.shape}"
+            )
+        return name, _Raster(array, None, "npy")
+
+    image_input = oiio.ImageInput.open(name)
+    if image_input is None:
+        raise InvalidInputError(
+            f"{name}: cannot read {kind} file ({_one_line(oiio.geterror()) or 'unknown error'})"
+        )
+    try:
+        spec = image_input.spec()
+        basetype = spec.format.basetype
+        read_as = {oiio.UINT8: "uint8", oiio.UINT16: "uint16"}.get(basetype, "float")
+        if read_as == "float" and basetype not in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE):
+            raise InvalidInputError(
+                f"{name}: unsupported pixel type {spec.format}, "
+                "expected 8- or 16-bit unsigned integers or floats"
+            )
+        codes = image_input.read_image(format=read_as)
+        if codes is None or image_input.has_error:
+            raise InvalidInputError(
+                f"{name}: cannot read {kind} file, it may be truncated or corrupt "
+                f"({_one_line(image_input.geterror()) or 'no pixels'})"
+            )
+        file_format = image_input.format_name()
+    finally:
+        image_input.close()
+    codes = np.asarray(codes).reshape(spec.height, spec.width, spec.nchannels)
+    if kind == "image":
+        # Alpha and a render's depth channel (Z) are not colour.
+        extra = [c for c in (spec.alpha_channel, spec.z_channel) if c >= 0]
+        codes = np.delete(codes, extra, axis=2)
+    elif kind == "depth" and spec.z_channel >= 0:
+        # A render with a named depth channel: that is the depth, not channel 0.
+        codes = codes[..., spec.z_channel : spec.z_channel + 1]
+    return name, _Raster(codes, _declared_encoding(spec), file_format)
+
+
+def _bits(codes: np.ndarray) -> int | None:
+    """8 or 16 for unsigned integer codes, None for floats."""
+    if codes.dtype == np.uint8 or codes.dtype == np.bool_:
+        return 8
+    if codes.dtype.kind in "iu":
+        return 8 * codes.dtype.itemsize
+    return None
+
+
+def _decode_colour(raster: _Raster) -> np.ndarray:
+    """Linear float values from stored codes, by the rule in the module docstring."""
+    codes = raster.codes
+    bits = _bits(codes)
+    if bits is None:
+        return codes.astype(np.float32)
+    c = codes.astype(np.float64) / float(2**bits - 1)
+    encoding = raster.encoding
+    if encoding == "srgb" and bits > 8 and raster.file_format == "png":
+        encoding = None  # OpenImageIO's default label for every PNG: no information
+    if encoding is None:
+        encoding = "srgb" if bits == 8 else 1.0
+    decoded = srgb_to_linear(c) if encoding == "srgb" else c**encoding
+    return decoded.astype(np.float32)
+
+
+def read_image(path) -> np.ndarray:
+    """Read a colour or grey image as linear float32.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        An EXR, PNG (8/16-bit), TIFF, JPEG or float ``.npy`` file.
+
+    Returns
+    -------
+    numpy.ndarray, shape (H, W, C), float32
+        ``C`` is 1 or 3 (alpha and a ``Z`` depth channel are dropped). Integer files are decoded
+        to linear [0, 1]: 8-bit as sRGB, 16-bit as linear, unless the file
+        declares otherwise (table in :mod:`invsss.io`). Float files are returned
+        as stored.
+
+    Raises
+    ------
+    InvalidInputError
+        Missing, unreadable or corrupt file, unsupported extension, a channel
+        count other than 1 or 3, fewer than 2x2 pixels, NaN or infinite values.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os, invsss
+    >>> path = os.path.join(tempfile.mkdtemp(), "grey.png")
+    >>> invsss.write_image(path, np.full((4, 4), 0.5, np.float32))
+    >>> image = invsss.read_image(path)
+    >>> image.shape, round(float(image[0, 0, 0]), 2)
+    ((4, 4, 1), 0.5)
+    """
+    name, raster = _read_raster(path, "image")
+    if raster.file_format == "npy" and raster.codes.dtype.kind != "f":
+        raise InvalidInputError(
+            f"{name}: expected a float NPY array of linear values, got {raster.codes.dtype} "
+            "(save integer-coded images as PNG or TIFF so their encoding is known)"
+        )
+    image = _decode_colour(raster)
+    if image.shape[2] not in (1, 3):
+        raise InvalidInputError(
+            f"{name}: expected 1 or 3 colour channels (plus optional alpha), got {image.shape[2]}"
+        )
+    check_image(image, name)
+    return image
+
+
+def read_depth(path, scale: float = 1.0) -> np.ndarray:
+    """Read linear eye-space depth as float32 (H, W), multiplied by ``scale``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A float EXR or TIFF (the ``Z`` channel if the file names one, else the
+        first channel), a ``.npy`` array, or a 16-bit PNG/TIFF whose integer
+        codes (0..65535, not normalised) times ``scale`` are the depth, as depth
+        cameras store millimetres or fractions of a metre.
+    scale : float
+        Multiplies the stored values; use it to convert units (millimetres are
+        recommended, MODEL.md section 1).
+
+    Returns
+    -------
+    numpy.ndarray, shape (H, W), float32, finite and > 0
+
+    Raises
+    ------
+    InvalidInputError
+        Missing or corrupt file, 8-bit data (too coarse for depth), NaN or
+        infinite values, depth <= 0 anywhere, a bad ``scale``.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os, invsss
+    >>> path = os.path.join(tempfile.mkdtemp(), "depth.npy")
+    >>> np.save(path, np.full((4, 4), 0.5))
+    >>> float(invsss.read_depth(path, scale=1000.0)[0, 0])
+    500.0
+    """
+    if not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
+        raise InvalidInputError(f"depth scale: expected a finite number > 0, got {scale!r}")
+    name, raster = _read_raster(path, "depth")
+    codes = raster.codes[..., 0]
+    bits = _bits(codes)
+    if bits == 8:
+        raise InvalidInputError(f"{name}: 8-bit depth is too coarse, {_DEPTH_FORMATS}")
+    if bits is not None and raster.file_format != "npy" and codes.dtype != np.uint16:
+        raise InvalidInputError(f"{name}: unsupported depth type {codes.dtype}, {_DEPTH_FORMATS}")
+    depth = (codes.astype(np.float64) * scale).astype(np.float32)
+    if depth.shape[0] < 2 or depth.shape[1] < 2:
+        raise InvalidInputError(f"{name}: expected at least 2x2 pixels, got {depth.shape}")
+    if not np.all(np.isfinite(depth)):
+        raise InvalidInputError(f"{name}: depth contains NaN or infinite values")
+    if not np.all(depth > 0):
+        raise InvalidInputError(
+            f"{name}: expected depth > 0 everywhere, {int(np.sum(~(depth > 0)))} pixel(s) "
+            f"are <= 0 (min {float(depth.min()):g})"
+        )
+    return depth
+
+
+def read_mask(path) -> np.ndarray:
+    """Read a skin mask as float32 (H, W) in [0, 1] from its first channel.
+
+    Integer image codes are divided by their maximum (255 or 65535) with no
+    colour decoding: a mask is data. Float files and ``.npy`` arrays (float,
+    bool or integer) must already hold values in [0, 1].
+
+    Raises
+    ------
+    InvalidInputError
+        Missing or corrupt file, values outside [0, 1] or NaN, an empty mask
+        (no pixel > 0).
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os, invsss
+    >>> path = os.path.join(tempfile.mkdtemp(), "mask.npy")
+    >>> np.save(path, np.eye(4, dtype=bool))
+    >>> float(invsss.read_mask(path).sum())
+    4.0
+    """
+    name, raster = _read_raster(path, "mask")
+    codes = raster.codes[..., 0]
+    bits = _bits(codes)
+    if bits is not None and raster.file_format != "npy":
+        mask = codes.astype(np.float64) / float(2**bits - 1)
+    else:
+        mask = codes.astype(np.float64)
+    mask = mask.astype(np.float32)
+    if mask.shape[0] < 2 or mask.shape[1] < 2:
+        raise InvalidInputError(f"{name}: expected at least 2x2 pixels, got {mask.shape}")
+    if not np.all(np.isfinite(mask)) or mask.min() < 0 or mask.max() > 1:
+        raise InvalidInputError(
+            f"{name}: expected mask values in [0, 1], got range "
+            f"[{float(np.nanmin(mask)):g}, {float(np.nanmax(mask)):g}]"
+            + (" with NaN" if np.any(np.isnan(mask)) else "")
+        )
+    if not np.any(mask > 0):
+        raise InvalidInputError(f"{name}: mask is empty (no pixel > 0), expected some skin")
+    return mask
+
+
+class ImagePair(eqx.Module):
+    """One training example for the fit: ``(source, depth, mask) -> target``.
+
+    Attributes
+    ----------
+    source : numpy.ndarray, shape (H, W, C), float32
+        Linear image without scattering, C in {1, 3}.
+    target : numpy.ndarray, shape (H, W, C'), float32
+        Linear photograph to match, C' in {1, 3}.
+    depth : numpy.ndarray, shape (H, W), float32
+    mask : numpy.ndarray, shape (H, W), float32
+    """
+
+    source: np.ndarray
+    target: np.ndarray
+    depth: np.ndarray
+    mask: np.ndarray
+
+
+def load_pair(source, target, depth, mask, depth_scale: float = 1.0) -> ImagePair:
+    """Read and cross-check the four files of one example.
+
+    Parameters
+    ----------
+    source, target : str or os.PathLike
+        Images for :func:`read_image`, 1 or 3 channels each.
+    depth : str or os.PathLike
+        Depth for :func:`read_depth`, multiplied by ``depth_scale``.
+    mask : str or os.PathLike
+        Mask for :func:`read_mask`.
+
+    Returns
+    -------
+    ImagePair
+
+    Raises
+    ------
+    InvalidInputError
+        Anything the readers reject, or a file whose size differs from the source's.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os, invsss
+    >>> d = tempfile.mkdtemp(); p = lambda n: os.path.join(d, n)
+    >>> invsss.write_image(p("s.exr"), np.ones((4, 6, 3), np.float32))
+    >>> invsss.write_image(p("t.exr"), np.ones((4, 6), np.float32))
+    >>> np.save(p("d.npy"), np.full((4, 6), 500.0)); np.save(p("m.npy"), np.ones((4, 6)))
+    >>> pair = invsss.load_pair(p("s.exr"), p("t.exr"), p("d.npy"), p("m.npy"))
+    >>> pair.source.shape, pair.target.shape, pair.depth.shape
+    ((4, 6, 3), (4, 6, 1), (4, 6))
+    """
+    source_image = read_image(source)
+    target_image = read_image(target)
+    depth_map = read_depth(depth, scale=depth_scale)
+    mask_map = read_mask(mask)
+    reference = os.fspath(source)
+    for other, array in ((target, target_image), (depth, depth_map), (mask, mask_map)):
+        check_same_size(source_image.shape, array.shape, reference, os.fspath(other))
+    return ImagePair(source_image, target_image, depth_map, mask_map)
+
+
+# ------------------------------------------------------------------------ writing
+
+
+@contextlib.contextmanager
+def _atomic_target(path: str):
+    """Yield a temporary sibling of ``path``; on success it replaces ``path``."""
+    directory, base = os.path.split(os.path.abspath(path))
+    if not os.path.isdir(directory):
+        raise InvalidInputError(f"{path}: cannot write, directory {directory} does not exist")
+    ext = os.path.splitext(base)[1]
+    # Same directory (so os.replace is a rename on one file system) and the same
+    # extension (OpenImageIO picks the format from it); hidden while incomplete.
+    temporary = os.path.join(directory, f".{base}.{secrets.token_hex(4)}.tmp{ext}")
+    try:
+        yield temporary
+        os.replace(temporary, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.remove(temporary)
+        raise
+
+
+def _encode(image: np.ndarray, bits: int, ext: str) -> tuple[np.ndarray, str, str | None]:
+    """Pixels for the file, their OpenImageIO type and the colour space to declare."""
+    if bits == 32:
+        return image.astype(np.float32), "float", None
+    if bits == 16 and ext == ".exr":
+        return image.astype(np.float32), "half", None
+    if bits == 8:
+        encoded = linear_to_srgb(np.clip(image, 0.0, 1.0))
+        return np.round(encoded * 255.0).astype(np.uint8), "uint8", "srgb_rec709_scene"
+    linear = np.clip(image.astype(np.float64), 0.0, 1.0)
+    # Declared linear: a PNG gets gAMA = 1.0, so any reader knows it is not sRGB.
+    return np.round(linear * 65535.0).astype(np.uint16), "uint16", "lin_rec709_scene"
+
+
+def write_image(path, image, *, bits: int | None = None) -> None:
+    """Write a linear float image, encoded for the file type, atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        ``.exr``, ``.png``, ``.tif``/``.tiff``, ``.jpg``/``.jpeg`` or ``.npy``.
+    image : array, shape (H, W) or (H, W, C), C in {1, 3}
+        Linear values; must be finite.
+    bits : int, optional
+        32: float (default for EXR, TIFF, NPY). 16: half for EXR, else 16-bit
+        linear integers declared linear. 8: sRGB-encoded bytes (default for PNG
+        and JPEG). Integer encodings clip to [0, 1] first.
+
+    Raises
+    ------
+    InvalidInputError
+        Bad shape or values, unsupported extension or bit depth, a missing
+        directory, or a write failure.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os, invsss
+    >>> path = os.path.join(tempfile.mkdtemp(), "out.exr")
+    >>> invsss.write_image(path, np.full((4, 4, 3), 0.25, np.float32))
+    >>> float(invsss.read_image(path).mean())
+    0.25
+    """
+    name = os.fspath(path)
+    ext = os.path.splitext(name)[1].lower()
+    if ext not in IMAGE_EXTENSIONS:
+        raise InvalidInputError(
+            f"{name}: unsupported image file extension {ext or '(none)'!r}, "
+            f"expected one of {', '.join(IMAGE_EXTENSIONS)}"
+        )
+    bits = _DEFAULT_BITS[ext] if bits is None else bits
+    if bits not in _ALLOWED_BITS[ext]:
+        raise InvalidInputError(
+            f"{name}: cannot write {bits}-bit {ext} files, expected bits in {_ALLOWED_BITS[ext]}"
+        )
+    image = np.asarray(image)
+    check_image(image, f"image for {name}")
+    if image.ndim == 2:
+        image = image[..., None]
+    pixels, pixel_type, colour_space = _encode(image, bits, ext)
+
+    with _atomic_target(name) as temporary:
+        if ext == ".npy":
+            with open(temporary, "xb") as f:
+                np.save(f, pixels if pixels.shape[2] > 1 else pixels[..., 0])
+            return
+        height, width, channels = pixels.shape
+        spec = oiio.ImageSpec(width, height, channels, pixel_type)
+        if colour_space is not None:
+            spec.attribute("oiio:ColorSpace", colour_space)
+        if ext in (".jpg", ".jpeg"):
+            # High quality and no chroma subsampling: these are data, not thumbnails.
+            spec.attribute("Compression", "jpeg:95")
+            spec.attribute("jpeg:subsampling", "4:4:4")
+        output = oiio.ImageOutput.create(temporary)
+        if output is None:
+            raise InvalidInputError(f"{name}: cannot write ({_one_line(oiio.geterror())})")
+        ok = output.open(temporary, spec) and output.write_image(pixels)
+        error = _one_line(output.geterror())
+        ok = output.close() and ok
+        if not ok:
+            raise InvalidInputError(f"{name}: cannot write ({error or 'unknown error'})")
+
+
+# ----------------------------------------------------------------- params files
+
+
+def _check_keys(keys, name: str) -> None:
+    allowed = PARAMS_KEYS + PARAMS_OPTIONAL_KEYS
+    for key in keys:
+        if key not in allowed:
+            close = difflib.get_close_matches(str(key), allowed, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise InvalidInputError(
+                f"{name}: unknown key {key!r}{hint}; expected {', '.join(PARAMS_KEYS)} "
+                f"and optionally {', '.join(PARAMS_OPTIONAL_KEYS)}"
+            )
+
+
+def _check_model_choice(extras: Mapping, name: str) -> None:
+    if "model" in extras and extras["model"] not in MODELS:
+        raise InvalidInputError(
+            f"{name}: model must be one of {', '.join(MODELS)}, got {extras['model']!r}"
+        )
+    if "tap_weights" in extras:
+        taps = extras["tap_weights"]
+        named = isinstance(taps, str) and taps in TAP_WEIGHTS
+        numbers = (
+            isinstance(taps, list)
+            and len(taps) == 7
+            and all(isinstance(t, (int, float)) and not isinstance(t, bool) for t in taps)
+        )
+        if not (named or numbers):
+            raise InvalidInputError(
+                f"{name}: tap_weights must be one of {', '.join(TAP_WEIGHTS)} or a list of "
+                f"7 numbers, got {taps!r}"
+            )
+
+
+def read_params(path) -> tuple[SSSParams, dict]:
+    """Read a params JSON file.
+
+    The file is one JSON object with the keys :data:`PARAMS_KEYS`
+    (``weights`` a list, or a list of per-channel lists; ``variances`` a list)
+    and optionally any of :data:`PARAMS_OPTIONAL_KEYS`. Any other key is an
+    error, so a misspelt key never silently falls back to a default.
+
+    Returns
+    -------
+    params : SSSParams
+    extras : dict
+        The optional keys present in the file (``model``, ``tap_weights``, the
+        estimator's report), as parsed.
+
+    Raises
+    ------
+    InvalidInputError
+        Missing file, invalid JSON, missing or unknown keys, values that break
+        the constraints of :meth:`SSSParams.check`, an unknown ``model`` or
+        ``tap_weights``.
+
+    Examples
+    --------
+    >>> import tempfile, os, invsss
+    >>> path = os.path.join(tempfile.mkdtemp(), "params.json")
+    >>> invsss.write_params(path, {"sss_level": 900.0, "correction": 0.0, "maxdd": 1.0,
+    ...                            "weights": [1.0], "variances": [2.0], "model": "sog"})
+    >>> params, extras = invsss.read_params(path)
+    >>> float(params.sss_level), extras
+    (900.0, {'model': 'sog'})
+    """
+    name = os.fspath(path)
+    try:
+        text = Path(name).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InvalidInputError(f"{name}: params file not found") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise InvalidInputError(f"{name}: cannot read params file ({_one_line(err)})") from None
+    try:
+        content = json.loads(text)
+    except json.JSONDecodeError as err:
+        raise InvalidInputError(
+            f"{name}: invalid JSON at line {err.lineno} column {err.colno} ({err.msg})"
+        ) from None
+    if not isinstance(content, dict):
+        raise InvalidInputError(f"{name}: expected a JSON object with the parameter keys")
+    _check_keys(content, name)
+    extras = {k: v for k, v in content.items() if k not in PARAMS_KEYS}
+    _check_model_choice(extras, name)
+    params = SSSParams.from_dict({k: content[k] for k in PARAMS_KEYS if k in content}, source=name)
+    return params, extras
+
+
+def _to_json(value):
+    # NumPy/JAX scalars and arrays, as found in an estimator's report.
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
+def write_params(path, mapping) -> None:
+    """Write parameters (and optional report keys) as JSON, atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    mapping : Mapping or SSSParams
+        The keys :func:`read_params` accepts; arrays become lists. Keys that
+        :func:`read_params` would reject are rejected here, so every file this
+        writes can be read back.
+
+    Raises
+    ------
+    InvalidInputError
+        Unknown keys, values that are not JSON-serialisable, a missing directory.
+    """
+    name = os.fspath(path)
+    if isinstance(mapping, SSSParams):
+        mapping = mapping.to_dict()
+    if not isinstance(mapping, Mapping):
+        raise InvalidInputError(
+            f"{name}: expected a mapping or SSSParams to write, got {type(mapping).__name__}"
+        )
+    _check_keys(mapping, name)
+    try:
+        text = json.dumps(dict(mapping), indent=2, default=_to_json) + "\n"
+    except (TypeError, ValueError) as err:
+        raise InvalidInputError(f"{name}: cannot write params ({_one_line(err)})") from None
+    with _atomic_target(name) as temporary:
+        with open(temporary, "x", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
