@@ -54,12 +54,16 @@ def _taps(spec, dtype):
     return tap_weight_set(spec, dtype) if isinstance(spec, str) else spec
 
 
-def _pass_sequence(image, s_x, s_y, mask, w_taps, axes, widths, mix=None):
+def _pass_sequence(
+    image, s_x, s_y, mask, w_taps, axes, widths, mix=None, slots=None, num_slots=0
+):
     """Directional passes applied in sequence, pass ``j`` along ``axes[j]`` with
     footprint ``s * widths[j]``.
 
-    Returns the last pass, or with ``mix`` (one weight, or one per channel, per
-    pass) the sum ``sum_j mix[j] * pass_j`` accumulated on the way.
+    Returns the last pass; with ``mix`` (one weight, or one per channel, per
+    pass) the sum ``sum_j mix[j] * pass_j`` accumulated on the way; with
+    ``slots`` a stack of ``num_slots`` passes, pass ``j`` stored at
+    ``slots[j]`` (an index past the end discards it).
 
     Each pass is one scan step: a pass reads its input at data-dependent
     positions, and keeping passes in separate steps stops XLA from fusing a
@@ -73,18 +77,28 @@ def _pass_sequence(image, s_x, s_y, mask, w_taps, axes, widths, mix=None):
         footprint = jnp.where(axis == 1, s_x, s_y) * width
         return directional_pass(layer, footprint, mask, w_taps, axis)
 
-    if mix is None:
-        out, _ = jax.lax.scan(lambda layer, xs: (blur(layer, *xs), None), image, (axes, widths))
-        return out
+    if mix is not None:
 
-    def step(carry, xs):
-        layer, total = carry
-        axis, width, weight = xs
-        layer = blur(layer, axis, width)
-        return (layer, total + weight * layer), None
+        def step(carry, xs):
+            layer, total = carry
+            axis, width, weight = xs
+            layer = blur(layer, axis, width)
+            return (layer, total + weight * layer), None
 
-    (_, total), _ = jax.lax.scan(step, (image, jnp.zeros_like(image)), (axes, widths, mix))
-    return total
+        (_, total), _ = jax.lax.scan(step, (image, jnp.zeros_like(image)), (axes, widths, mix))
+        return total
+    if slots is not None:
+        def step(carry, xs):
+            layer, stack = carry
+            axis, width, slot = xs
+            layer = blur(layer, axis, width)
+            return (layer, stack.at[slot].set(layer, mode="drop")), None
+
+        stack = jnp.zeros((num_slots,) + image.shape, image.dtype)
+        (_, stack), _ = jax.lax.scan(step, (image, stack), (axes, widths, slots))
+        return stack
+    out, _ = jax.lax.scan(lambda layer, xs: (blur(layer, *xs), None), image, (axes, widths))
+    return out
 
 
 def _sog_widths(variances, w_taps):
@@ -117,14 +131,14 @@ def sog_layers(
     s_x, s_y = stretch_factors(depth, sss_level, correction, maxdd)
     order, widths = _sog_widths(variances, w_taps)
     k = widths.shape[0]
-    # Stack each pass pair's output: a one-hot mix per layer over the 2K passes.
-    pick = jnp.zeros((k, 2 * k), image.dtype).at[jnp.arange(k), 2 * jnp.arange(k) + 1].set(1.0)
     axes = jnp.tile(jnp.array([1, 0], jnp.int32), k)
-
-    def layer(one_hot):
-        return _pass_sequence(image, s_x, s_y, mask, w_taps, axes, jnp.repeat(widths, 2), one_hot)
-
-    return jax.vmap(layer)(pick), order
+    # Keep each vertical pass (B_i) in slot i; horizontal passes go to slot k,
+    # which is out of range and dropped.
+    slots = jnp.stack([jnp.full(k, k), jnp.arange(k)], axis=1).reshape(-1)
+    layers = _pass_sequence(
+        image, s_x, s_y, mask, w_taps, axes, jnp.repeat(widths, 2), slots=slots, num_slots=k
+    )
+    return layers, order
 
 
 def render_sog(image, depth, mask, params: SSSParams, tap_weights="jimenez"):
