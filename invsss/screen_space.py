@@ -61,7 +61,7 @@ def _pass_sequence(
     footprint ``s * widths[j]``.
 
     Returns the last pass; with ``mix`` (one weight, or one per channel, per
-    pass) the sum ``sum_j mix[j] * pass_j`` accumulated on the way; with
+    pass, summing to 1) the sum ``sum_j mix[j] * pass_j`` accumulated on the way; with
     ``slots`` a stack of ``num_slots`` passes, pass ``j`` stored at
     ``slots[j]`` (an index past the end discards it).
 
@@ -79,14 +79,17 @@ def _pass_sequence(
 
     if mix is not None:
 
+        # Accumulate mix * (pass - image) and add the image back at the end:
+        # where the mask is 0 every pass equals the image bit-exactly, and so
+        # does the result (a weighted mean of equal numbers can round).
         def step(carry, xs):
             layer, total = carry
             axis, width, weight = xs
             layer = blur(layer, axis, width)
-            return (layer, total + weight * layer), None
+            return (layer, total + weight * (layer - image)), None
 
         (_, total), _ = jax.lax.scan(step, (image, jnp.zeros_like(image)), (axes, widths, mix))
-        return total
+        return image + total
     if slots is not None:
         def step(carry, xs):
             layer, stack = carry

@@ -52,7 +52,8 @@ def check_image(image, name: str = "image", *, allow_batch: bool = False) -> Non
         raise InvalidInputError(f"{name}: expected shape (H, W) or (H, W, C), got {shape}")
     if h < 2 or w < 2:
         raise InvalidInputError(f"{name}: expected at least 2x2 pixels, got shape {shape}")
-    dtype = np.dtype(getattr(image, "dtype", np.asarray(image).dtype))
+    # Tracers have a dtype; only plain sequences need converting to find one.
+    dtype = np.dtype(image.dtype if hasattr(image, "dtype") else np.asarray(image).dtype)
     if not np.issubdtype(dtype, np.floating):
         raise InvalidInputError(
             f"{name}: expected linear floating-point values, got dtype {dtype} "
