@@ -13,12 +13,27 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 
 import numpy as np
 
 from . import __version__
-from .io import IMAGE_EXTENSIONS, read_depth, read_image, read_mask, read_params, write_image
+from .estimator import fit_pair, fit_pairs
+from .estimator.parametrisation import GAUGES
+from .estimator.solve import SOLVERS
+from .export import EXPORT_FORMATS, export_params
+from .io import (
+    IMAGE_EXTENSIONS,
+    load_pair,
+    read_depth,
+    read_image,
+    read_mask,
+    read_params,
+    write_image,
+    write_params,
+)
 from .passes import TAP_WEIGHTS
+from .profiles import PROFILE_NAMES
 from .screen_space import MODELS, render
 from .validation import InvalidInputError, check_same_size
 
@@ -113,10 +128,253 @@ def _run_render(args: argparse.Namespace) -> int:
 
 
 # -------------------------------------------------------------------- fit (estimator helper)
-# _add_fit_parser / _run_fit go here.
+
+
+#: Parameters ``--fix`` accepts: one number each, or a comma-separated list.
+_FIX_SCALARS = ("sss_level", "correction", "maxdd")
+_FIX_LISTS = ("weights", "variances")
+_PAIR_FLAGS = ("source", "target", "depth", "mask")
+
+
+def _add_fit_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "fit",
+        help="estimate the scattering parameters from source/target image pairs",
+        description="Fit the screen-space SSS parameters that turn SOURCE into TARGET. "
+        "Repeat --source/--target/--depth/--mask (the same number of times, matched in "
+        "order) to fit one set of parameters to several pairs. Writes DIR/params.json "
+        "(the estimate, its standard errors and the fit report; written first), "
+        "DIR/fit.exr (the fitted prediction; fit_0.exr, fit_1.exr, ... for several "
+        "pairs) and DIR/report.png (images, residuals, convergence, parameters).",
+    )
+    parser.add_argument("--source", action="append", required=True,
+                        help="linear image without scattering (repeat for several pairs)")
+    parser.add_argument("--target", action="append", required=True,
+                        help="linear photograph to match, 1 or 3 channels (repeat)")
+    parser.add_argument("--depth", action="append", required=True,
+                        help="depth: float EXR, NPY or 16-bit PNG (repeat)")
+    parser.add_argument("--mask", action="append", required=True,
+                        help="skin mask, values in [0, 1] (repeat)")
+    parser.add_argument(
+        "--depth-scale",
+        type=float,
+        default=1.0,
+        help="multiplies every stored depth (unit conversion, e.g. 1000 for metres to mm)",
+    )
+    parser.add_argument("--model", choices=MODELS, default="sog", help="screen-space model (default: sog)")
+    parser.add_argument(
+        "--profile",
+        default="thesis-nir",
+        metavar="NAME|FILE.json",
+        help=f"sum-of-Gaussians profile ({', '.join(PROFILE_NAMES)}, or a JSON file); its "
+        "variances are fixed in the default gauge (default: thesis-nir)",
+    )
+    parser.add_argument(
+        "--gauge",
+        choices=GAUGES,
+        default="variances",
+        help="which side of the sss_level/variance-scale degeneracy is fixed: the "
+        "profile's variances (default), or sss_level (then give --fix sss_level=VALUE)",
+    )
+    parser.add_argument(
+        "--fix",
+        action="extend",
+        nargs="+",
+        default=[],
+        metavar="NAME=VALUE",
+        help="hold parameters at given values: sss_level, correction, maxdd take one "
+        "number, weights and variances a comma-separated list "
+        "(e.g. --fix maxdd=0.05 variances=0.5,2,8)",
+    )
+    parser.add_argument("--solver", choices=SOLVERS, default="lm", help="nonlinear solver (default: lm)")
+    parser.add_argument("--starts", type=int, default=4, metavar="N",
+                        help="starting points of the multi-start search (default: 4)")
+    parser.add_argument("--max-steps", type=int, default=200, metavar="N",
+                        help="solver steps per start and per refinement (default: 200)")
+    parser.add_argument("--out", required=True, metavar="DIR",
+                        help="output directory (created if missing)")
+    parser.set_defaults(func=_run_fit)
+
+
+def _parse_fix(items: list[str]) -> dict:
+    """``["maxdd=0.05", "variances=0.5,2"]`` -> ``{"maxdd": 0.05, "variances": [0.5, 2.0]}``."""
+    known = _FIX_SCALARS + _FIX_LISTS
+    fixed: dict = {}
+    for item in items:
+        name, equals, text = (part.strip() for part in item.partition("="))
+        if not equals or not name or not text:
+            raise InvalidInputError(
+                f"--fix {item!r}: expected NAME=VALUE, e.g. maxdd=0.05 or variances=0.5,2"
+            )
+        if name not in known:
+            raise InvalidInputError(
+                f"--fix {item!r}: unknown parameter {name!r}, expected one of {', '.join(known)}"
+            )
+        if name in fixed:
+            raise InvalidInputError(f"--fix {item!r}: {name} is given more than once")
+        try:
+            numbers = [float(t) for t in text.split(",")]
+        except ValueError:
+            raise InvalidInputError(
+                f"--fix {item!r}: expected "
+                + ("a number" if name in _FIX_SCALARS else "comma-separated numbers")
+            ) from None
+        if name in _FIX_SCALARS:
+            if len(numbers) != 1:
+                raise InvalidInputError(f"--fix {item!r}: {name} takes a single number")
+            fixed[name] = numbers[0]
+        else:
+            fixed[name] = numbers
+    return fixed
+
+
+def _check_pair_counts(args: argparse.Namespace) -> int:
+    counts = {flag: len(getattr(args, flag)) for flag in _PAIR_FLAGS}
+    if len(set(counts.values())) > 1:
+        given = ", ".join(f"{n} --{flag}" for flag, n in counts.items())
+        raise InvalidInputError(
+            f"--source/--target/--depth/--mask: expected the same number of each "
+            f"(one per pair), got {given}"
+        )
+    return counts["source"]
+
+
+def _check_output_dir(path: str) -> None:
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise InvalidInputError(f"{path}: --out must be a directory, but a file of that name exists")
+
+
+def _make_output_dir(path: str) -> None:
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as err:
+        raise InvalidInputError(f"{path}: cannot create the output directory ({err.strerror})") from None
+
+
+class _ProgressLine:
+    """The fit's progress on stderr.
+
+    On a terminal, one line rewritten in place (carriage return), at most ten
+    times a second; otherwise (a pipe, a log file) a plain line every few seconds,
+    so logs stay short.
+    """
+
+    def __init__(self, stream):
+        self._stream = stream
+        self._tty = bool(getattr(stream, "isatty", lambda: False)())
+        self._interval = 0.1 if self._tty else 5.0
+        self._last = -np.inf
+        self._width = 0
+
+    def show(self, text: str) -> None:
+        if self._tty:
+            self._stream.write("\r" + text.ljust(self._width))
+            self._width = len(text)
+        else:
+            self._stream.write(text + "\n")
+        self._stream.flush()
+
+    def __call__(self, iteration: int, loss: float) -> None:
+        now = time.monotonic()
+        if now - self._last < self._interval:
+            return
+        self._last = now
+        self.show(f"fit: iter {iteration}  loss {loss:.3e}")
+
+    def close(self) -> None:
+        """Erase the in-place line, so what follows starts on a clean line."""
+        if self._tty and self._width:
+            self._stream.write("\r" + " " * self._width + "\r")
+            self._stream.flush()
+            self._width = 0
+
+
+def _run_fit(args: argparse.Namespace) -> int:
+    _check_output_dir(args.out)
+    for flag, value in (("--starts", args.starts), ("--max-steps", args.max_steps)):
+        if value < 1:
+            raise InvalidInputError(f"{flag}: expected an integer >= 1, got {value}")
+    fix = _parse_fix(args.fix)
+    count = _check_pair_counts(args)
+    pairs = [
+        load_pair(s, t, d, m, depth_scale=args.depth_scale)
+        for s, t, d, m in zip(args.source, args.target, args.depth, args.mask)
+    ]
+    _make_output_dir(args.out)
+
+    options = dict(
+        model=args.model, profile=args.profile, fix=fix or None, gauge=args.gauge,
+        solver=args.solver, n_starts=args.starts, max_steps=args.max_steps,
+    )
+    progress = _ProgressLine(sys.stderr)
+    height, width, _ = pairs[0].source.shape
+    progress.show(f"fit: {count} pair(s), {width}x{height}, model {args.model}: searching starting points")
+    try:
+        if count == 1:
+            pair = pairs[0]
+            result = fit_pair(pair.source, pair.target, pair.depth, pair.mask, progress=progress, **options)
+        else:
+            result = fit_pairs(pairs, progress=progress, **options)
+    finally:
+        progress.close()
+    for message in result.warnings:
+        print(f"invsss: warning: {message}", file=sys.stderr)
+
+    # The parameters first: an interrupted report still leaves the result.
+    written = [os.path.join(args.out, "params.json")]
+    write_params(written[0], result.to_dict())
+    names = ["fit.exr"] if count == 1 else [f"fit_{k}.exr" for k in range(count)]
+    for name, image in zip(names, result.fitted):
+        written.append(os.path.join(args.out, name))
+        write_image(written[-1], np.asarray(image, dtype=np.float32))
+    # matplotlib is only needed here; `invsss render` should not pay for importing it.
+    from .report import plot_fit_report
+
+    written.append(os.path.join(args.out, "report.png"))
+    plot_fit_report(result, pairs, written[-1])
+
+    print(
+        f"fit: loss {result.loss:.4g}  PSNR {result.psnr:.2f} dB  SSIM {result.ssim:.4f}  "
+        f"{'converged' if result.converged else 'NOT converged'} ({result.iterations} iterations); "
+        f"wrote {', '.join(written)}"
+    )
+    return 0
 
 # ----------------------------------------------------------------- export (export helper)
-# _add_export_parser / _run_export go here.
+
+
+def _add_export_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "export",
+        help="write a params file's constants for a real-time shader (JSON or HLSL)",
+        description="Turn the parameters in PARAMS into the constants a real-time shader "
+        "uses (per-pass widths, tap offsets and weights, layer blend factors, or the "
+        "separable kernel) and print them, or write them to --out.",
+    )
+    parser.add_argument("params", help="params JSON file")
+    parser.add_argument(
+        "--format", choices=EXPORT_FORMATS, default="json", help="output format (default: json)"
+    )
+    _add_model_arguments(parser)
+    parser.add_argument("--taps", type=int, default=17,
+                        help="separable only: kernel taps, odd (default: 17)")
+    parser.add_argument("--strength", type=float, default=1.0,
+                        help="separable only: blend of the kernel with the identity (default: 1)")
+    parser.add_argument("--out", default=None, metavar="FILE",
+                        help="output file (default: standard output)")
+    parser.set_defaults(func=_run_export)
+
+
+def _run_export(args: argparse.Namespace) -> int:
+    text = export_params(
+        args.params, args.out, args.format, model=args.model, tap_weights=args.tap_weights,
+        taps=args.taps, strength=args.strength,
+    )
+    if args.out is None:
+        sys.stdout.write(text)
+    else:
+        print(f"wrote {args.out} ({args.format})")
+    return 0
 
 
 # ------------------------------------------------------------------------ main
@@ -131,8 +389,8 @@ def build_parser() -> argparse.ArgumentParser:
     subparsers = parser.add_subparsers(title="commands", metavar="COMMAND")
     # One registration line per subcommand, in the order `invsss --help` lists them.
     _add_render_parser(subparsers)
-    # _add_fit_parser(subparsers)
-    # _add_export_parser(subparsers)
+    _add_fit_parser(subparsers)
+    _add_export_parser(subparsers)
     return parser
 
 

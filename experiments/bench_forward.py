@@ -1,0 +1,229 @@
+"""Forward and gradient speed of the screen-space models: JAX against the PyTorch twin.
+
+For each model and image size the script times, on one device per framework:
+
+``forward``
+    one render of an (S, S, 3) float32 image (the pure model function; the
+    checked :func:`invsss.render` entry point adds NumPy validation on the host);
+``value+grad``
+    a scalar loss ``mean((render(p) - target)^2)`` and its gradient with respect
+    to every parameter (``sss_level``, ``correction``, ``maxdd``, the K weights
+    and the K variances): ``jax.value_and_grad`` against ``loss.backward()``;
+``compile``
+    for JAX, the time to lower and compile each function ahead of time (XLA);
+    PyTorch runs eagerly and has none.
+
+Times are medians over ``--repeats`` runs after a warm-up run, with
+``block_until_ready`` (JAX) and ``torch.cuda.synchronize`` (PyTorch on a GPU)
+so that asynchronous dispatch is not mistaken for speed. The profile is the
+thesis's five-Gaussian 940 nm fit (Table 5.1); the scene is a shaded bulge of
+about 100 mm of relief 500 mm from a camera whose focal length is the image
+width, so blur footprints grow with resolution as they would in a renderer.
+
+Usage::
+
+    python experiments/bench_forward.py [--sizes 256 512 1024] [--repeats 5]
+        [--models sog thesis separable] [--device auto|cpu|gpu] [--torch-threads N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import invsss
+
+# The thesis's 940 nm forearm fit (its Table 5.1, MODEL.md section 4).
+THESIS_VARIANCES = [8.749, 2.099, 0.549, 0.5574, 1.194]
+THESIS_WEIGHTS = [0.1478, 0.1323, 0.0004, 0.0527, 0.090]
+
+JAX_MODELS = {
+    "sog": invsss.render_sog,
+    "thesis": invsss.render_thesis,
+    "separable": invsss.render_separable,
+}
+
+
+def make_scene(size: int, seed: int = 0):
+    """Image (S, S, 3), target (S, S, 3), depth (S, S) in mm, mask (S, S); float32."""
+    rng = np.random.default_rng(seed)
+    y, x = (np.mgrid[0:size, 0:size] + 0.5) / size - 0.5
+    r2 = x**2 + y**2
+    depth = 500.0 - 100.0 * np.exp(-r2 / 0.08)
+    shade = 0.3 + 0.7 * np.exp(-r2 / 0.15)
+    texture = 1.0 + 0.2 * rng.standard_normal((size, size, 3))
+    image = shade[..., None] * texture * np.array([0.8, 0.55, 0.45])
+    target = image * 0.9 + 0.02
+    mask = np.clip((0.45 - np.sqrt(r2)) * 40.0, 0.0, 1.0)
+    return tuple(a.astype(np.float32) for a in (image, target, depth, mask))
+
+
+def scene_params(size: int) -> dict:
+    # sss_level: the focal length in pixels of a ~53 degree camera, so s = L / d px/mm.
+    return dict(sss_level=float(size), correction=20.0, maxdd=1.0,
+                weights=THESIS_WEIGHTS, variances=THESIS_VARIANCES)
+
+
+def median_time(run, repeats: int) -> float:
+    run()  # warm-up
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        run()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+# ---------------------------------------------------------------------- JAX
+
+
+def jax_device(kind: str):
+    if kind == "auto":
+        return jax.devices()[0]
+    try:
+        return jax.devices("gpu" if kind == "gpu" else "cpu")[0]
+    except RuntimeError as err:
+        raise SystemExit(f"bench_forward: no JAX {kind} device ({err})") from None
+
+
+def bench_jax(model: str, size: int, repeats: int, device) -> dict:
+    image, target, depth, mask = (jax.device_put(a, device) for a in make_scene(size))
+    params = jax.device_put(invsss.SSSParams(**scene_params(size)), device)
+    render_model = JAX_MODELS[model]
+
+    def forward(p):
+        return render_model(image, depth, mask, p)
+
+    def loss(p):
+        return jnp.mean((render_model(image, depth, mask, p) - target) ** 2)
+
+    row = {}
+    for name, fn in (("forward", forward), ("value+grad", jax.value_and_grad(loss))):
+        start = time.perf_counter()
+        compiled = jax.jit(fn).lower(params).compile()
+        row[f"{name} compile"] = time.perf_counter() - start
+        row[name] = median_time(lambda: jax.block_until_ready(compiled(params)), repeats)
+    return row
+
+
+# -------------------------------------------------------------------- PyTorch
+
+
+def torch_device(kind: str):
+    import torch
+
+    if kind == "cpu" or (kind == "auto" and not torch.cuda.is_available()):
+        return torch.device("cpu")
+    if not torch.cuda.is_available():
+        raise SystemExit("bench_forward: --device gpu, but torch has no CUDA device")
+    return torch.device("cuda")
+
+
+def bench_torch(model: str, size: int, repeats: int, device) -> dict:
+    import torch
+
+    import invsss.torch as itorch
+
+    models = {"sog": itorch.render_sog, "thesis": itorch.render_thesis, "separable": itorch.render_separable}
+    render_model = models[model]
+    image, target, depth, mask = (torch.as_tensor(a, device=device) for a in make_scene(size))
+    values = scene_params(size)
+
+    def leaf(v):
+        return torch.tensor(v, dtype=torch.float32, device=device, requires_grad=True)
+
+    def sync():
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+
+    fixed = itorch.SSSParams(**values).to(torch.float32, device)
+
+    def forward():
+        with torch.no_grad():
+            render_model(image, depth, mask, fixed)
+        sync()
+
+    def value_and_grad():
+        leaves = {k: leaf(v) for k, v in values.items()}
+        loss = torch.mean((render_model(image, depth, mask, itorch.SSSParams(**leaves)) - target) ** 2)
+        loss.backward()
+        _ = [leaves[k].grad for k in leaves]
+        sync()
+
+    return {
+        "forward": median_time(forward, repeats),
+        "value+grad": median_time(value_and_grad, repeats),
+    }
+
+
+# ---------------------------------------------------------------------- main
+
+
+def _ms(seconds) -> str:
+    return "-" if seconds is None else f"{1e3 * seconds:10.1f}"
+
+
+def _s(seconds) -> str:
+    return "-" if seconds is None else f"{seconds:8.2f}"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[256, 512, 1024],
+                        help="square image sizes in pixels (default: 256 512 1024)")
+    parser.add_argument("--repeats", type=int, default=5, help="timed runs per cell (default: 5)")
+    parser.add_argument("--models", nargs="+", choices=tuple(JAX_MODELS), default=["sog"],
+                        help="screen-space models (default: sog)")
+    parser.add_argument("--device", choices=("auto", "cpu", "gpu"), default="auto",
+                        help="auto: the GPU when both frameworks have one, else the CPU")
+    parser.add_argument("--torch-threads", type=int, default=None, metavar="N",
+                        help="torch.set_num_threads(N) for CPU runs (default: torch's choice); "
+                        "on a machine shared with other jobs, 1 avoids OpenMP threads "
+                        "spinning against each other")
+    args = parser.parse_args(argv)
+
+    jdev = jax_device(args.device)
+    try:
+        import torch
+
+        import invsss.torch  # noqa: F401
+
+        tdev = torch_device(args.device)
+        if args.torch_threads:
+            torch.set_num_threads(args.torch_threads)
+        torch_note = f"torch {torch.__version__}, device {tdev}, {torch.get_num_threads()} threads"
+    except ImportError as err:
+        tdev = None
+        torch_note = f"PyTorch rows skipped: invsss.torch is not importable ({err})"
+
+    print(f"bench_forward: {platform.node()} ({os.cpu_count()} CPUs), python {platform.python_version()}")
+    print(f"  jax {jax.__version__}, backend {jax.default_backend()}, device {jdev} ({jdev.device_kind})")
+    print(f"  {torch_note}")
+    print(f"  float32, 3 channels, {len(THESIS_VARIANCES)} Gaussians (thesis Table 5.1), "
+          f"median of {args.repeats} after a warm-up; compile = JAX ahead-of-time lower+compile")
+    print()
+    header = (f"{'model':<10} {'size':>5} {'framework':<8} {'forward ms':>10} {'v+grad ms':>10} "
+              f"{'fwd compile s':>13} {'v+g compile s':>13}")
+    print(header)
+    print("-" * len(header))
+    for model in args.models:
+        for size in args.sizes:
+            rows = [("jax", bench_jax(model, size, args.repeats, jdev))]
+            if tdev is not None:
+                rows.append(("torch", bench_torch(model, size, args.repeats, tdev)))
+            for framework, row in rows:
+                print(f"{model:<10} {size:>5} {framework:<8} {_ms(row['forward'])} "
+                      f"{_ms(row['value+grad'])} {_s(row.get('forward compile')):>13} "
+                      f"{_s(row.get('value+grad compile')):>13}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

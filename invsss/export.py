@@ -1,0 +1,347 @@
+"""Constants for a real-time shader: fitted parameters in the form a renderer uses.
+
+A fitted :class:`~invsss.params.SSSParams` describes the model; a shader needs
+the numbers derived from it: per-pass widths, the 7 tap offsets and weights,
+the running blend factors that accumulate the ``sog`` layers, or the N-tap
+kernel of the ``separable`` model. :func:`shader_constants` computes them,
+:func:`to_hlsl` and :func:`to_json` write them out, and :func:`export_params`
+does both for a params JSON file (``invsss export``).
+
+How a shader uses the constants (MODEL.md sections 2, 3 and 5):
+
+* stretch ``s = sssLevel / (depth + correction * min(|ddx(depth)|, maxdd))`` in
+  pixels per scene unit (``ddy`` for vertical passes);
+* a 7-tap pass with width ``passWidths[i]`` (scene units) has footprint
+  ``f = s * passWidths[i]`` pixels and samples at ``pixel + tapOffsets[k] * f``
+  with weight ``tapWeights[k]``;
+* ``sog``: pass pair ``i`` (horizontal, then vertical) blurs the previous
+  layer into layer ``i``; ``out = lerp(out, layer_i, blendFactors[i])`` after
+  each pair gives ``sum_i w_i B_i / sum_i w_i`` (Jimenez 2009's accumulation);
+* ``thesis``: all horizontal passes, then all vertical passes, chained; the
+  last pass is the output (Listing 4.1 is ``passWidths = {7}``);
+* ``separable``: one horizontal and one vertical pass of ``numTaps`` taps at
+  ``pixel + kernelOffsets[n] * sssLevel / depth`` weighted per channel by
+  ``kernelWeights[n]`` (no correction term in this model). ``kernel`` holds the
+  same numbers as iryoku/separable-sss's ``float4 kernel[]``: ``rgb`` weight and
+  ``a`` offset, centre tap first.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+
+import jax
+import numpy as np
+
+from .io import read_params
+from .params import SSSParams
+from .passes import TAP_OFFSETS, tap_spread
+from .passes import tap_weights as tap_weight_set
+from .screen_space import MODELS, separable_kernel
+from .validation import InvalidInputError
+
+__all__ = ["EXPORT_FORMATS", "shader_constants", "to_hlsl", "to_json", "export_params"]
+
+#: Output formats of :func:`export_params` and ``invsss export``.
+EXPORT_FORMATS = ("json", "hlsl")
+
+_UNITS = {
+    "sog": "depth and profile in scene units (mm recommended); sssLevel in pixels per scene unit "
+    "at unit depth; passWidths in scene units, footprint_px = s * passWidths[i]; "
+    "tapOffsets in footprints",
+    "thesis": "depth and profile in scene units (mm recommended); sssLevel in pixels per scene "
+    "unit at unit depth; passWidths in scene units, footprint_px = s * passWidths[i]; "
+    "tapOffsets in footprints",
+    "separable": "depth and profile in scene units (mm recommended); sssLevel in pixels per scene "
+    "unit at unit depth; kernelOffsets in scene units, tap at pixel + offset * sssLevel / depth "
+    "(correction and maxdd unused)",
+}
+
+
+def _floats(x) -> list:
+    """Nested lists of Python floats (what JSON and the HLSL writer take)."""
+    return np.asarray(x, dtype=np.float64).tolist()
+
+
+def _layer_weights(weights: np.ndarray, order: np.ndarray, name: str) -> np.ndarray:
+    """Weights sorted like the layers, normalised to sum 1 (per channel): (K,) or (K, 3)."""
+    w = weights[order]
+    if w.ndim == 2 and w.shape[1] == 1:
+        w = w[:, 0]
+    if w.ndim == 2 and w.shape[1] != 3:
+        raise InvalidInputError(
+            f"{name}: weights must have 1 or 3 columns (channels) to export, got shape {weights.shape}"
+        )
+    return w / w.sum(axis=0)
+
+
+def _blend_factors(w: np.ndarray) -> np.ndarray:
+    """``w_i / sum_{j<=i} w_j``: the lerp factor that folds layer ``i`` into the running mean.
+
+    Where no weight has arrived yet (the cumulative sum is 0) the factor is 1:
+    the accumulator then just holds the current layer, and the first layer with
+    a positive weight (factor 1 too) replaces it.
+    """
+    cumulative = np.cumsum(w, axis=0)
+    safe = np.where(cumulative > 0, cumulative, 1.0)
+    return np.where(cumulative > 0, w / safe, 1.0)
+
+
+def shader_constants(
+    params: SSSParams, model: str = "sog", tap_weights=None, taps: int = 17, strength: float = 1.0
+) -> dict:
+    """Everything a real-time shader needs to reproduce :func:`~invsss.render`.
+
+    Parameters
+    ----------
+    params : SSSParams
+        Weights of shape (K,), (K, 1) or (K, 3).
+    model : {"sog", "thesis", "separable"}
+    tap_weights : {"jimenez", "thesis"} or 7 numbers, optional
+        7-tap weight set of ``sog`` and ``thesis`` (default: "thesis" for
+        ``thesis``, "jimenez" otherwise). Not used by ``separable``.
+    taps : int
+        ``separable`` only: number of kernel taps (odd; 11, 17 or 25 in Jimenez's code).
+    strength : float
+        ``separable`` only: blend of the kernel with the identity.
+
+    Returns
+    -------
+    dict
+        JSON-ready (Python floats, ints, strings and lists). Always ``model``,
+        ``units``, ``sssLevel``, ``correction``, ``maxdd``. For ``sog`` and
+        ``thesis`` also ``numPasses`` (K), ``tapOffsets`` (7), ``tapWeights``
+        (7), ``tapSpread`` (``c_W``), ``variances`` (K, in pass order) and
+        ``passWidths`` (K, scene units): ``sqrt(v_i - v_{i-1}) / c_W`` over the
+        sorted variances for ``sog``, ``sqrt(v_i) / c_W`` in the given order for
+        ``thesis``. ``sog`` adds ``layerWeights`` and ``blendFactors``, (K,) or
+        (K, 3). ``separable`` gives ``numTaps``, ``strength``, ``kernelOffsets``
+        (N, scene units), ``kernelWeights`` (N, 3) and ``kernel`` (N, 4).
+
+    Raises
+    ------
+    InvalidInputError
+        Not an SSSParams, values that break its constraints, an unknown model or
+        tap weight set, weights with a channel count other than 1 or 3, an even
+        or too small ``taps``, a ``strength`` that is not one number.
+
+    Examples
+    --------
+    >>> import invsss
+    >>> p = invsss.SSSParams(900.0, 2.0, 0.5, [0.3, 0.7], [2.0, 0.5])
+    >>> c = shader_constants(p)
+    >>> [round(x, 4) for x in c["passWidths"]]
+    [2.0412, 3.5355]
+    >>> [round(x, 4) for x in c["blendFactors"]]
+    [1.0, 0.3]
+    """
+    if not isinstance(params, SSSParams):
+        raise InvalidInputError(f"params: expected invsss.SSSParams, got {type(params).__name__}")
+    params.check()
+    if model not in MODELS:
+        raise InvalidInputError(f"model: expected one of {', '.join(MODELS)}, got {model!r}")
+    weights = np.asarray(params.weights, dtype=np.float64)
+    variances = np.asarray(params.variances, dtype=np.float64)
+    constants = {
+        "model": model,
+        "units": _UNITS[model],
+        "sssLevel": float(params.sss_level),
+        "correction": float(params.correction),
+        "maxdd": float(params.maxdd),
+    }
+    if model == "separable":
+        constants.update(_separable_constants(weights, variances, taps, strength))
+        return constants
+
+    if tap_weights is None:
+        tap_weights = "thesis" if model == "thesis" else "jimenez"
+    # Derived numbers in float64 whatever the session's default: a shader gets
+    # them rounded once, to its own float32, not twice.
+    with jax.enable_x64(True):
+        try:
+            w_taps = tap_weight_set(tap_weights, np.float64)
+        except ValueError as err:
+            raise InvalidInputError(str(err)) from None
+        c_w = float(tap_spread(w_taps))
+    if model == "sog":
+        order = np.argsort(variances, kind="stable")
+        v = variances[order]
+        widths = np.sqrt(np.diff(v, prepend=0.0)) / c_w
+    else:
+        v = variances
+        widths = np.sqrt(v) / c_w
+    constants.update(
+        numPasses=int(v.size),
+        tapWeightSet=tap_weights if isinstance(tap_weights, str) else "custom",
+        tapOffsets=list(TAP_OFFSETS),
+        tapWeights=_floats(w_taps),
+        tapSpread=c_w,
+        variances=_floats(v),
+        passWidths=_floats(widths),
+    )
+    if model == "sog":
+        layer_weights = _layer_weights(weights, order, "params")
+        constants["layerWeights"] = _floats(layer_weights)
+        constants["blendFactors"] = _floats(_blend_factors(layer_weights))
+    return constants
+
+
+def _separable_constants(weights, variances, taps, strength) -> dict:
+    if not isinstance(taps, int) or isinstance(taps, bool):
+        raise InvalidInputError(f"taps: expected an odd integer >= 3, got {taps!r}")
+    if np.ndim(strength) != 0 or not math.isfinite(float(strength)):
+        raise InvalidInputError(f"strength: expected one finite number, got {strength!r}")
+    if weights.ndim == 2 and weights.shape[1] not in (1, 3):
+        raise InvalidInputError(
+            f"params: weights must have 1 or 3 columns (channels) to export, got shape {weights.shape}"
+        )
+    with jax.enable_x64(True):
+        offsets, kernel = separable_kernel(weights, variances, taps, float(strength))
+        offsets = np.asarray(offsets, dtype=np.float64)
+        kernel = np.asarray(kernel, dtype=np.float64)
+    kernel_rgb = np.broadcast_to(kernel, (taps, 3))
+    # iryoku/separable-sss's float4 kernel: rgb weight, a offset, centre tap first
+    # and then the others in increasing order.
+    centre = taps // 2
+    order = [centre] + [n for n in range(taps) if n != centre]
+    iryoku = np.concatenate([kernel_rgb, offsets[:, None]], axis=1)[order]
+    return {
+        "numTaps": int(taps),
+        "strength": float(strength),
+        "kernelOffsets": _floats(offsets),
+        "kernelWeights": _floats(kernel_rgb),
+        "kernel": _floats(iryoku),
+    }
+
+
+# ------------------------------------------------------------------ writers
+
+
+def _literal(x: float, name: str) -> str:
+    # repr is the shortest text that reads back to the same double; HLSL reads
+    # C-style literals ("0.5", "1e-05", "3.0") and rounds them to float.
+    if not math.isfinite(x):
+        raise InvalidInputError(f"{name}: cannot write the non-finite number {x!r} as an HLSL constant")
+    return repr(float(x))
+
+
+def _hlsl_vector(row, name: str) -> str:
+    return f"float{len(row)}(" + ", ".join(_literal(x, name) for x in row) + ")"
+
+
+def _hlsl_declaration(name: str, value) -> str:
+    if isinstance(value, bool):
+        raise InvalidInputError(f"{name}: booleans have no HLSL constant form here")
+    if isinstance(value, int):
+        return f"static const int {name} = {value};"
+    if isinstance(value, float):
+        return f"static const float {name} = {_literal(value, name)};"
+    if isinstance(value, (list, tuple)) and value:
+        if all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value):
+            body = ", ".join(_literal(x, name) for x in value)
+            return f"static const float {name}[{len(value)}] = {{ {body} }};"
+        widths = {len(row) if isinstance(row, (list, tuple)) else None for row in value}
+        if len(widths) == 1 and widths <= {2, 3, 4}:
+            (width,) = widths
+            body = ",\n    ".join(_hlsl_vector(row, name) for row in value)
+            return f"static const float{width} {name}[{len(value)}] = {{\n    {body}\n}};"
+    raise InvalidInputError(
+        f"{name}: expected a number, a list of numbers or a list of 2-4 vectors, got {value!r}"
+    )
+
+
+def to_hlsl(constants: dict, prefix: str = "") -> str:
+    """HLSL ``static const`` declarations for the constants of :func:`shader_constants`.
+
+    Numbers become ``float``, integer counts ``int``, lists ``float[N]`` and
+    lists of 3 (4) numbers ``float3[N]`` (``float4[N]``). String entries
+    (model, units, tap weight set) go into the comment header. ``prefix`` is
+    prepended to every name, to keep clear of a shader's own identifiers.
+
+    Examples
+    --------
+    >>> print(to_hlsl({"model": "sog", "sssLevel": 900.0, "passWidths": [1.5, 2.0]}))
+    // invsss shader constants
+    // model: sog
+    static const float sssLevel = 900.0;
+    static const float passWidths[2] = { 1.5, 2.0 };
+    <BLANKLINE>
+    """
+    lines = ["// invsss shader constants"]
+    for key, value in constants.items():
+        if isinstance(value, str):
+            lines.append(f"// {key}: {value}")
+    for key, value in constants.items():
+        if not isinstance(value, str):
+            lines.append(_hlsl_declaration(prefix + key, value))
+    return "\n".join(lines) + "\n"
+
+
+def to_json(constants: dict) -> str:
+    """The constants as an indented JSON object (numbers round-trip exactly)."""
+    return json.dumps(constants, indent=2) + "\n"
+
+
+def _write_text(path: str, text: str) -> None:
+    # Atomic, like the other writers: a temporary file in the same directory, then os.replace.
+    directory = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(directory):
+        raise InvalidInputError(f"{path}: cannot write, directory {directory} does not exist")
+    fd, temporary = tempfile.mkstemp(prefix=".invsss-", suffix=".tmp", dir=directory)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(temporary, path)
+    except BaseException:
+        if os.path.exists(temporary):
+            os.unlink(temporary)
+        raise
+
+
+def export_params(
+    params_json_path, out_path=None, format: str = "json", *, model: str | None = None,
+    tap_weights=None, taps: int = 17, strength: float = 1.0,
+) -> str:
+    """Read a params JSON file and export its shader constants.
+
+    Parameters
+    ----------
+    params_json_path : str or os.PathLike
+        A params file (:func:`invsss.io.read_params`); its ``model`` and
+        ``tap_weights`` entries are used unless given here.
+    out_path : str or os.PathLike, optional
+        Where to write (atomically); nothing is written when omitted.
+    format : {"json", "hlsl"}
+    model, tap_weights, taps, strength
+        As in :func:`shader_constants`; ``model`` and ``tap_weights`` override the file.
+
+    Returns
+    -------
+    str
+        The exported text.
+
+    Examples
+    --------
+    >>> import os, tempfile, invsss
+    >>> path = os.path.join(tempfile.mkdtemp(), "params.json")
+    >>> invsss.write_params(path, {"sss_level": 900.0, "correction": 0.0, "maxdd": 1.0,
+    ...                            "weights": [1.0], "variances": [2.0], "model": "thesis"})
+    >>> hlsl = export_params(path, format="hlsl")
+    >>> [line for line in hlsl.splitlines() if "passWidths" in line and "static" in line]
+    ['static const float passWidths[1] = { 2.318071425053519 };']
+    """
+    if format not in EXPORT_FORMATS:
+        raise InvalidInputError(f"format: expected one of {', '.join(EXPORT_FORMATS)}, got {format!r}")
+    # Read in float64 so the file's numbers reach the constants unrounded.
+    with jax.enable_x64(True):
+        params, extras = read_params(params_json_path)
+    model = model or extras.get("model", "sog")
+    tap_weights = tap_weights or extras.get("tap_weights")
+    constants = shader_constants(params, model, tap_weights=tap_weights, taps=taps, strength=strength)
+    text = to_json(constants) if format == "json" else to_hlsl(constants)
+    if out_path is not None:
+        _write_text(os.fspath(out_path), text)
+    return text
