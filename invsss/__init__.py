@@ -21,6 +21,7 @@ from .profiles import gaussian, sum_of_gaussians
 from .profiles import (
     DEON_SKIN_RGB,
     JENSEN_SKIN1,
+    JENSEN_SKIN1_SOG,
     PROFILE_NAMES,
     THESIS_NIR_940,
     SumOfGaussians,
@@ -31,7 +32,7 @@ from .profiles import (
     total_diffuse_reflectance,
 )
 from .profile_fit import ProfileFit, fit_sum_of_gaussians
-from .measure import MeasuredProfile, measure_profile
+from .measure import MeasuredProfile, column_average_gain, measure_profile
 from .screen_space import (
     MODELS,
     render,

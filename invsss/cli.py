@@ -274,12 +274,15 @@ class _ProgressLine:
             self._stream.write(text + "\n")
         self._stream.flush()
 
-    def __call__(self, iteration: int, loss: float) -> None:
+    def __call__(self, iteration: int, loss: float, stage: str | None = None) -> None:
+        """``progress(iteration, loss)`` as the estimator calls it; ``stage`` (e.g.
+        ``"start 2/4"``) is shown when given."""
         now = time.monotonic()
         if now - self._last < self._interval:
             return
         self._last = now
-        self.show(f"fit: iter {iteration}  loss {loss:.3e}")
+        where = f"{stage}  " if stage else ""
+        self.show(f"fit: {where}iter {iteration}  loss {loss:.3e}")
 
     def close(self) -> None:
         """Erase the in-place line, so what follows starts on a clean line."""

@@ -22,9 +22,11 @@ Two choices the thesis leaves open are explicit here:
   from the spot centre (one-pixel bins), which is an unbiased sample of a radially
   symmetric ``R(r)``. ``averaging="column"`` is the thesis's column average with the
   column's distance as ``r``: every column mixes radii ``sqrt(x^2 + y^2)`` over the
-  band's width, which for a 5 mm band lowers the samples near the spot by a large
-  factor (about 0.4 for a Gaussian of 0.55 mm^2) and reshapes the curve. Use it to
-  reproduce the thesis.
+  band's width. A Gaussian keeps its variance under this average but its weight is
+  multiplied by :func:`column_average_gain` (0.37 for 0.55 mm^2, 0.89 for 8.7 mm^2
+  in a 5 mm band), so narrow Gaussians lose weight against broad ones. Use it to
+  reproduce the thesis; a sum-of-Gaussians fit of column averages is corrected
+  exactly by dividing each weight by that gain.
 * The skin-to-Spectralon ratio is ``R(r) * spot area`` (the Spectralon shows the
   spot's irradiance, the skin the light scattered from the whole spot), so the
   diffusion profile in mm^-2 is the ratio divided by the spot's area. The thesis did
@@ -44,7 +46,7 @@ import numpy as np
 from .profile_fit import ProfileFit, fit_sum_of_gaussians
 from .validation import InvalidInputError, check_image
 
-__all__ = ["DIRECTIONS", "AVERAGINGS", "MeasuredProfile", "measure_profile"]
+__all__ = ["DIRECTIONS", "AVERAGINGS", "MeasuredProfile", "measure_profile", "column_average_gain"]
 
 #: Directions of the sample band from the spot centre (x is the column, y the row).
 DIRECTIONS = {"right": (0.0, 1.0), "left": (0.0, -1.0), "down": (1.0, 0.0), "up": (-1.0, 0.0)}
@@ -86,6 +88,40 @@ class MeasuredProfile(eqx.Module):
         """Sum-of-Gaussians fit of the samples (thesis 4.1.3); see :func:`fit_sum_of_gaussians`."""
         kwargs.setdefault("source", "measured profile")
         return fit_sum_of_gaussians(self.r_mm, self.reflectance, num_gaussians, **kwargs)
+
+
+def column_average_gain(variances, band_width_mm: float):
+    """What the thesis's column average does to each Gaussian of a profile.
+
+    Averaging ``w G(v, sqrt(x^2 + y^2))`` over ``|y| <= h`` (``h`` half the band width)
+    gives ``w * gain * G(v, x)`` with ``gain = sqrt(2 pi v) erf(h / sqrt(2 v)) / (2 h)``:
+    the same variance, a weight scaled by ``gain``. Divide the weights of a fit of
+    column averages by it to recover the profile. For a band of whole pixel rows,
+    ``band_width_mm`` is the rows' full extent (rows times the pixel pitch).
+
+    Parameters
+    ----------
+    variances : array, shape (K,)
+        mm^2.
+    band_width_mm : float
+        Full width of the band across its direction, mm.
+
+    Returns
+    -------
+    ndarray, shape (K,)
+
+    Examples
+    --------
+    >>> round(float(column_average_gain([0.549], 5.0)[0]), 3)
+    0.371
+    """
+    from scipy.special import erf
+
+    v = np.asarray(variances, dtype=np.float64)
+    half = 0.5 * _positive(band_width_mm, "band_width_mm")
+    if not np.all(np.isfinite(v)) or np.any(v <= 0):
+        raise InvalidInputError("variances: expected finite values > 0")
+    return np.sqrt(2.0 * np.pi * v) * erf(half / np.sqrt(2.0 * v)) / (2.0 * half)
 
 
 def _positive(value, name):

@@ -34,12 +34,14 @@ FIELDS = ("sss_level", "correction", "maxdd", "weights", "variances")
 # --------------------------------------------------------------------------- scenes
 
 
-def make_scene(seed, h=20, w=24, channels=3, per_channel=False):
+def make_scene(seed, h=20, w=24, channels=3, per_channel=False, degenerate=False):
     """Random image, smooth positive depth, partial fractional mask and random params.
 
     ``channels=None`` gives an (H, W) image. ``maxdd`` is a random quantile of the
     depth slopes, so the ``min(|dd|, maxdd)`` of the stretch factors is active on
-    some pixels and not on others.
+    some pixels and not on others. ``degenerate`` adds a zero variance and repeats
+    one: zero-width (identity) passes, whose footprint derivative both sides take
+    as 0 (the JAX ``_safe_sqrt``), and a tie that only a stable sort orders alike.
     """
     rng = np.random.default_rng(seed)
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
@@ -63,28 +65,12 @@ def make_scene(seed, h=20, w=24, channels=3, per_channel=False):
         "weights": weights,
         "variances": rng.uniform(0.05, 1.5, k),
     }
+    if degenerate:
+        v = params["variances"]
+        params["variances"] = np.concatenate([[v[0], 0.0, v[0]], v[1:]])
+        params["weights"] = np.concatenate([weights[:2], weights])
     probe = rng.normal(size=shape)  # the linear functional sum(probe * out)
     return {"image": image, "depth": depth, "mask": mask, "params": params, "probe": probe}
-
-
-def _jax_unchecked_render(image, depth, mask, p, model, extras):
-    """invsss.render without its boundary checks, for a traced image.
-
-    invsss.render cannot be traced in the image (validation.check_image calls
-    np.asarray on it, see test_jax_render_traces_in_image), so the image gradient
-    goes through the public render_* functions it dispatches to; the tests check
-    that this path gives render's output.
-    """
-    img = image if image.ndim == 3 else image[..., None]
-    if model == "separable":
-        out = invsss.render_separable(
-            img, depth, mask, p, extras.get("taps", 17), extras.get("strength", 1.0),
-            extras.get("follow_surface", 0.0),
-        )
-    else:
-        fn = invsss.render_sog if model == "sog" else invsss.render_thesis
-        out = fn(img, depth, mask, p, extras.get("tap_weights", "thesis" if model == "thesis" else "jimenez"))
-    return out if image.ndim == 3 else out[..., 0]
 
 
 def jax_render_and_grads(scene, model, extras):
@@ -100,18 +86,15 @@ def jax_render_and_grads(scene, model, extras):
         arrays = {k: jnp.asarray(v) for k, v in extras.items() if isinstance(v, np.ndarray)}
         fixed = {k: v for k, v in extras.items() if not isinstance(v, np.ndarray)}
 
-        def functional(p, arrays):
+        def functional(p, image, arrays, depth, mask, probe):
             out = invsss.render(image, depth, mask, p, model, **fixed, **arrays)
             return jnp.sum(probe * out), out
 
-        (gp, garrays), out = jax.grad(functional, argnums=(0, 1), has_aux=True)(p, arrays)
-
-        def image_functional(image):
-            out = _jax_unchecked_render(image, depth, mask, p, model, {**fixed, **arrays})
-            return jnp.sum(probe * out), out
-
-        gimage, out_unchecked = jax.grad(image_functional, has_aux=True)(image)
-        assert relative_error(np.asarray(out_unchecked), np.asarray(out)) <= 1e-14
+        # One compiled program per case (XLA's compile time dominates this file);
+        # the scene goes in as arguments, not as constants for XLA to fold. Tracing
+        # render in the image also guards the fixed check_image-on-tracers bug.
+        grad_fn = jax.jit(jax.grad(functional, argnums=(0, 1, 2), has_aux=True))
+        (gp, gimage, garrays), out = grad_fn(p, image, arrays, depth, mask, probe)
         result = {k: np.asarray(getattr(gp, k)) for k in FIELDS}
         result.update({k: np.asarray(v) for k, v in garrays.items()})
         result["image"] = np.asarray(gimage)
@@ -179,60 +162,48 @@ def assert_twins_agree(scene, model, extras=None):
 # --------------------------------------------------------------------------- cross-checks
 
 CASES = [
-    # (model, seed, channels, per-channel weights, render extras)
-    ("sog", 0, 1, False, {}),
-    ("sog", 1, 3, False, {}),
-    ("sog", 2, 3, True, {}),
-    ("sog", 3, None, False, {"tap_weights": "thesis"}),
-    ("thesis", 4, 1, False, {}),
-    ("thesis", 5, 3, True, {}),
-    ("thesis", 6, 3, False, {"tap_weights": "jimenez"}),
-    ("separable", 7, 1, False, {}),
-    ("separable", 8, 3, True, {"taps": 11}),
-    ("separable", 9, 3, False, {"strength": np.array(0.7), "follow_surface": np.array(0.15)}),
-    ("separable", 10, 3, True,
-     {"taps": 25, "strength": np.array([0.6, 0.8, 0.9]), "follow_surface": np.array(0.08)}),
-    ("separable", 11, None, False, {"strength": 0.5, "follow_surface": 0.1}),
+    # (model, seed, channels, per-channel weights, degenerate variances, render extras);
+    # channels None is an (H, W) image, i.e. one channel through render's squeeze.
+    ("sog", 1, 3, True, False, {"tap_weights": "thesis"}),
+    ("sog", 2, None, False, True, {}),
+    ("thesis", 3, 1, False, False, {}),
+    ("thesis", 4, 3, True, True, {"tap_weights": "jimenez"}),
+    ("separable", 5, 3, False, False, {}),
+    ("separable", 6, 3, True, False,
+     {"taps": 11, "strength": np.array([0.6, 0.8, 0.9]), "follow_surface": np.array(0.15)}),
+    ("separable", 7, None, False, False, {"taps": 13, "strength": np.array(0.7)}),
 ]
 
 
 @pytest.mark.parametrize(
-    "model, seed, channels, per_channel, extras", CASES,
+    "model, seed, channels, per_channel, degenerate, extras", CASES,
     ids=[f"{c[0]}-{c[1]}" for c in CASES],
 )
-def test_outputs_and_gradients_agree(model, seed, channels, per_channel, extras):
-    scene = make_scene(seed, channels=channels, per_channel=per_channel)
+def test_outputs_and_gradients_agree(model, seed, channels, per_channel, degenerate, extras):
+    scene = make_scene(seed, channels=channels, per_channel=per_channel, degenerate=degenerate)
     slopes = np.abs(np.stack(np.gradient(scene["depth"])))
     delta = scene["params"]["maxdd"]
     assert np.any(slopes > delta) and np.any(slopes < delta)
     assert np.any(scene["mask"] == 0) and np.any((scene["mask"] > 0) & (scene["mask"] < 1))
     grads = assert_twins_agree(scene, model, extras)
-    # The parameters each model uses really move its output.
+    # The parameters each model uses really move its output (in `thesis` a zero
+    # variance has zero derivative by the identity-pass convention).
     used = {"sog": FIELDS, "thesis": ("sss_level", "correction", "maxdd", "variances"),
             "separable": ("sss_level", "weights", "variances")}[model]
     for name in used:
-        assert np.all(grads[name] != 0), name
+        g = grads[name]
+        if name == "variances":
+            g = g[scene["params"]["variances"] != 0]
+        assert np.all(g != 0), name
     for name in set(FIELDS) - set(used):
         assert np.all(grads[name] == 0), name
-
-
-def test_zero_and_tied_variances_agree():
-    # v = 0 and a repeated variance give zero-width (identity) passes, whose
-    # footprint derivative both sides take as 0 (JAX _safe_sqrt), after a stable sort.
-    scene = make_scene(12, channels=3, per_channel=True)
-    v = scene["params"]["variances"]
-    scene["params"]["variances"] = np.concatenate([[v[0], 0.0, v[0]], v[1:]])
-    scene["params"]["weights"] = np.concatenate([scene["params"]["weights"][:1]] * 2 + [scene["params"]["weights"]])
-    for model in ("sog", "thesis"):
-        grads = assert_twins_agree(scene, model)
-        assert np.all(np.isfinite(grads["variances"]))
 
 
 def test_separable_kernel_agrees():
     rng = np.random.default_rng(13)
     weights, variances = rng.uniform(0.1, 1.0, (4, 3)), rng.uniform(0.05, 2.0, 4)
     strength = np.array([0.3, 0.9, 1.0])
-    for taps in (11, 17, 25):
+    for taps in (11, 25):
         with jax.enable_x64(True):
             oj, kj = invsss.separable_kernel(jnp.asarray(weights), jnp.asarray(variances), taps, jnp.asarray(strength))
             oj, kj = np.asarray(oj), np.asarray(kj)
@@ -285,8 +256,7 @@ def test_identity_for_empty_mask_region_and_shapes():
     out = itorch.render(image, scene["depth"], scene["mask"], p)
     assert out.shape == image.shape and out.dtype == torch.float64
     off = scene["mask"] == 0
-    # Every layer is I there; the weighted mean of equal layers is I up to rounding.
-    np.testing.assert_allclose(out[off].numpy(), image[off].numpy(), rtol=1e-14, atol=0)
+    assert torch.equal(out[off], image[off])
 
 
 def _message(fn):
@@ -351,8 +321,3 @@ def test_import_invsss_does_not_import_torch():
     code = "import sys, invsss; sys.exit(int('torch' in sys.modules or 'kornia' in sys.modules))"
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
-
-def test_jax_render_traces_in_image():
-    p = invsss.SSSParams(800.0, 0.0, 1.0, [1.0], [1.0])
-    depth, mask = jnp.full((8, 8), 500.0), jnp.ones((8, 8))
-    jax.grad(lambda im: invsss.render(im, depth, mask, p).sum())(jnp.ones((8, 8, 3)))

@@ -1,0 +1,263 @@
+"""Fit time and accuracy: invsss's jitted Levenberg-Marquardt against SciPy's TRF.
+
+One synthetic pair (a textured, shaded bulge with ripples, so depth slopes lie on
+both sides of ``maxdd``) is rendered with the ``sog`` model at known parameters,
+with gain, offset and 0.5 % noise. On that pair the script times:
+
+``invsss.fit_pair``
+    the whole estimator, one start, no robust reweighting: coarse grid search,
+    LM solve, active set, standard errors, PSNR/SSIM, misalignment check;
+``invsss LM``
+    only the solve: optimistix Levenberg-Marquardt stepped by
+    :func:`invsss.estimator.solve.run_solver` (jitted step, forward-mode Jacobian);
+``scipy trf 2-point``
+    ``scipy.optimize.least_squares(method="trf", jac="2-point")`` on the SAME
+    residual: the estimator's own :class:`~invsss.estimator.objective.Objective`
+    (same parametrisation, same variable projection of gains, offsets and weights),
+    called through a jitted function and NumPy, from the SAME starting point;
+``scipy trf jax-jac``
+    the same SciPy solver given the exact Jacobian (``jax.jacfwd``, jitted), to
+    separate the cost of finite differences from the cost of the algorithm.
+
+The problem is the estimator's own: ``fit_pair`` is run once while its first
+solve is recorded (the objective pytree and the starting point, the best point of
+its start grid), and every method is timed on that objective from that point.
+Times are medians over ``--repeats`` runs; compile times (first call minus the
+median) are a separate column. Errors are absolute differences from the truth;
+``weights`` is the largest over the Gaussians (weights normalised to sum 1). The
+last lines print how many LM steps reach the final loss (the rest are the
+termination tail) and the time ratios.
+
+The profile has three Gaussians, the distinct variances of the thesis profile
+(Table 5.1): its two Gaussians of nearly equal variance (0.549 and 0.557 mm^2)
+would make their weight split undetermined and measure that degeneracy instead of
+the solvers.
+
+Usage::
+
+    python experiments/bench_fit.py [--size 128] [--repeats 3] [--max-steps 200]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy.ndimage import gaussian_filter
+from scipy.optimize import least_squares
+
+import invsss
+from invsss.estimator import fit as fit_module
+from invsss.estimator import fit_pair
+from invsss.estimator.solve import make_solver, run_solver
+
+PROFILE = {"weights": [0.3, 0.45, 0.25], "variances": [0.549, 2.099, 8.749]}
+TRUTH = {"sss_level": 900.0, "correction": 300.0, "maxdd": 0.8,
+         "weights": [0.25, 0.45, 0.30], "variances": PROFILE["variances"]}
+GAIN, OFFSET, NOISE = 0.8, 0.02, 0.005
+
+
+def make_scene(size: int, seed: int = 0):
+    """(source, target, depth, mask): depth in mm, target = gain * render + offset + noise."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:size, 0:size].astype(np.float64)
+    c = (size - 1) / 2
+    r2 = ((x - c) / (0.47 * size)) ** 2 + ((y - c) / (0.49 * size)) ** 2
+    # Ripples scaled with the image, so the slope distribution does not depend on --size.
+    period = size / 16.0
+    depth = 600.0 - 0.9 * size * np.sqrt(np.clip(1.0 - r2, 0.0, None)) + 4.0 * np.sin(x / period)
+    mask = (r2 < 0.8).astype(np.float64)
+    fine = gaussian_filter(rng.standard_normal((size, size)), 0.7)
+    coarse = gaussian_filter(rng.standard_normal((size, size)), 3.0)
+    albedo = np.clip(0.55 + 0.2 * fine / fine.std() + 0.1 * coarse / coarse.std(), 0.05, None)
+    gy, gx = np.gradient(depth)
+    shading = np.clip((-0.4 * gx - 0.5 * gy + 0.77) / np.sqrt(gx**2 + gy**2 + 1.0), 0.05, None)
+    source = albedo * shading
+    with jax.enable_x64(True):
+        clean = np.asarray(invsss.render(source, depth, mask, invsss.SSSParams(**TRUTH)))
+    clean = GAIN * clean + OFFSET
+    target = clean + NOISE * float(np.mean(clean[mask > 0])) * rng.standard_normal(clean.shape)
+    return source, target, depth, mask
+
+
+def capture_problem(scene, max_steps: int):
+    """Run ``fit_pair`` once and record the objective and start of its first solve.
+
+    That first solve (one start, no robust reweighting) is the problem every method
+    below is timed on, so it is exactly the estimator's problem without copying its
+    set-up. Returns ``(objective, z0, result)``; call under x64.
+    """
+    seen = []
+    original = fit_module.run_solver
+
+    def recording(solver, objective, z0, *args, **kwargs):
+        if not seen:
+            seen.append((objective, np.asarray(z0)))
+        return original(solver, objective, z0, *args, **kwargs)
+
+    fit_module.run_solver = recording
+    try:
+        result = run_fit(scene, max_steps)
+    finally:
+        fit_module.run_solver = original
+    objective, z0 = seen[0]
+    return objective, z0, result
+
+
+def run_fit(scene, max_steps: int):
+    source, target, depth, mask = scene
+    return fit_pair(source, target, depth, mask, profile=PROFILE, n_starts=1, robust=None,
+                    max_steps=max_steps)
+
+
+@eqx.filter_jit
+def _residual(objective, z):
+    return objective(z)[0]
+
+
+@eqx.filter_jit
+def _jacobian(objective, z):
+    return jax.jacfwd(lambda u: objective(u)[0])(z)
+
+
+@eqx.filter_jit
+def _estimate(objective, z):
+    """Natural parameters, normalised weights and the loss at ``z``."""
+    natural, _, _, coef, _ = objective.linear(z)
+    weights = coef[:, 0] / jnp.sum(coef[:, 0])
+    return natural["sss_level"], natural["correction"], natural["maxdd"], weights, objective.loss(z)
+
+
+def errors(objective, z) -> dict:
+    level, correction, maxdd, weights, loss = (np.asarray(a) for a in _estimate(objective, jnp.asarray(z)))
+    truth_w = np.asarray(TRUTH["weights"]) / np.sum(TRUTH["weights"])
+    return {
+        "loss": float(loss),
+        "sss_level": abs(float(level) - TRUTH["sss_level"]),
+        "correction": abs(float(correction) - TRUTH["correction"]),
+        "maxdd": abs(float(maxdd) - TRUTH["maxdd"]),
+        "weights": float(np.max(np.abs(weights - truth_w))),
+    }
+
+
+def result_errors(result) -> dict:
+    """:func:`errors` for a :class:`~invsss.estimator.FitResult`."""
+    params = result.params
+    weights = np.asarray(params.weights) / np.sum(params.weights)
+    truth_w = np.asarray(TRUTH["weights"]) / np.sum(TRUTH["weights"])
+    return {
+        "loss": float(result.loss),
+        "sss_level": abs(float(params.sss_level) - TRUTH["sss_level"]),
+        "correction": abs(float(params.correction) - TRUTH["correction"]),
+        "maxdd": abs(float(params.maxdd) - TRUTH["maxdd"]),
+        "weights": float(np.max(np.abs(weights - truth_w))),
+    }
+
+
+def compile_time(call) -> float:
+    """First call's time minus the median of three more: the JIT compile."""
+    first, median, _ = timed(call, 3)
+    return first - median
+
+
+def timed(run, repeats: int):
+    """(first-call seconds, median seconds of ``repeats`` further calls, last output)."""
+    t0 = time.perf_counter()
+    out = run()
+    first = time.perf_counter() - t0
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = run()
+        times.append(time.perf_counter() - t0)
+    return first, float(np.median(times)), out
+
+
+def steps_to_final(history, tolerance=1e-6) -> int:
+    """The first step whose loss is within ``tolerance`` (relative) of the last."""
+    history = np.asarray(history)
+    close = np.abs(history - history[-1]) <= tolerance * abs(history[-1])
+    return int(np.argmax(close)) + 1
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--size", type=int, default=128, help="image side in pixels (default 128)")
+    parser.add_argument("--repeats", type=int, default=3, help="timed runs per method (default 3)")
+    parser.add_argument("--max-steps", type=int, default=200, help="solver step limit (default 200)")
+    args = parser.parse_args()
+
+    scene = make_scene(args.size)
+    rows = {}
+    with jax.enable_x64(True):
+        # The whole estimator; its first call compiles everything it uses, the LM step included.
+        t0 = time.perf_counter()
+        objective, z0, _ = capture_problem(scene, args.max_steps)
+        first = time.perf_counter() - t0
+        _, median, result = timed(lambda: run_fit(scene, args.max_steps), args.repeats)
+        rows["invsss.fit_pair"] = (median, f"{first - median:.2f}", result.iterations,
+                                   f"{result.iterations} (f+J)", result_errors(result))
+
+        # Only the LM solve, on the captured objective and start.
+        lm = make_solver("lm")
+        _, median, record = timed(lambda: run_solver(lm, objective, z0, args.max_steps), args.repeats)
+        rows["invsss LM"] = (median, "in fit", record.steps, f"{record.steps} (f+J)",
+                             errors(objective, record.z))
+
+        # SciPy TRF with a finite-difference Jacobian, on the same jitted residual.
+        calls = [0]
+
+        def fun(z):
+            calls[0] += 1
+            return np.asarray(_residual(objective, jnp.asarray(z)))
+
+        def jac(z):
+            return np.asarray(_jacobian(objective, jnp.asarray(z)))
+
+        compile_residual = compile_time(lambda: fun(z0))
+        compile_jacobian = compile_time(lambda: jac(z0))
+
+        def run_scipy(jacobian):
+            calls[0] = 0
+            return least_squares(fun, z0, jac=jacobian, method="trf")
+
+        _, median, sol = timed(lambda: run_scipy("2-point"), args.repeats)
+        rows["scipy trf 2-point"] = (median, f"{compile_residual:.2f}", sol.njev, f"{calls[0]} f",
+                                     errors(objective, sol.x))
+        # The same with the exact Jacobian: separates finite differences from the algorithm.
+        _, median, sol_j = timed(lambda: run_scipy(jac), args.repeats)
+        rows["scipy trf jax-jac"] = (median, f"{compile_jacobian:.2f}", sol_j.njev,
+                                     f"{calls[0]} f + {sol_j.njev} J", errors(objective, sol_j.x))
+
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"bench_fit: {args.size}x{args.size} sog, K=3, {len(z0)} nonlinear unknowns "
+          f"(sss_level, correction, maxdd; weights, gain, offset projected out), "
+          f"{args.repeats} repeats, {os.cpu_count()} CPUs, load average {load:.1f}")
+    print(f"truth: sss_level {TRUTH['sss_level']:g}, correction {TRUTH['correction']:g}, "
+          f"maxdd {TRUTH['maxdd']:g}, weights {TRUTH['weights']}")
+    header = (f"{'method':<19}{'time s':>9}{'compile s':>11}{'iters':>7}  {'evaluations':<15}"
+              f"{'final loss':>12}{'|dL|':>9}{'|dc|':>9}{'|d delta|':>11}{'|dw| max':>10}")
+    print(header)
+    print("-" * len(header))
+    for name, (seconds, compile_s, iters, evals, err) in rows.items():
+        print(f"{name:<19}{seconds:>9.3f}{compile_s:>11}{iters:>7}  {evals:<15}"
+              f"{err['loss']:>12.5e}{err['sss_level']:>9.3f}{err['correction']:>9.3f}"
+              f"{err['maxdd']:>11.5f}{err['weights']:>10.5f}")
+    print("time: median of the repeats; compile: first call minus that (fit_pair's includes the LM "
+          "step; the scipy rows compile the jitted residual / Jacobian)")
+    print(f"invsss LM is within 1e-6 of its final loss after step {steps_to_final(record.history)} "
+          f"of {record.steps}")
+    times = {name: row[0] for name, row in rows.items()}
+    print(f"scipy trf 2-point time / invsss LM time       = "
+          f"{times['scipy trf 2-point'] / times['invsss LM']:.2f}")
+    print(f"scipy trf 2-point time / invsss.fit_pair time = "
+          f"{times['scipy trf 2-point'] / times['invsss.fit_pair']:.2f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,56 @@
+"""The images a prediction is a linear combination of (the *basis* of the projection).
+
+The prediction of target channel ``j`` of pair ``p`` is
+
+    T_pj ~ r_pj * sum_i beta_ij * X_pi[..., j] + b_pj
+
+where the basis images ``X_pi`` depend nonlinearly on the free parameters and
+``beta``, ``b`` are eliminated by least squares (:mod:`.projection`). The basis is
+
+* ``sog`` with weights eliminated: the K blurred layers ``B_i`` (MODEL.md section 5)
+  in the profile's order, so ``beta_ij = a_j w_ij`` (gain times weight);
+* otherwise the model's output, so ``beta_j = a_j`` is the gain.
+
+An RGB source with a grey target is first reduced to grey with the mix weights:
+every pass treats the channels alike and is linear in the image, so mixing before
+blurring equals blurring then mixing, and costs a third.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ..params import SSSParams
+from ..screen_space import render_separable, render_sog, render_thesis, sog_layers
+from .inputs import PairData
+
+__all__ = ["basis_images", "model_source"]
+
+
+def model_source(pair: PairData, natural: dict) -> Float[Array, "H W Cb"]:
+    """The image the model blurs: the source, mixed to grey when a mix is solved."""
+    if "mix" in natural:
+        return jnp.einsum("hwc,c->hw", pair.source, natural["mix"])[..., None]
+    return pair.source
+
+
+def basis_images(
+    pair: PairData, natural: dict, model: str, tap_weights: Float[Array, "7"], linear_weights: bool
+) -> Float[Array, "nb H W Cb"]:
+    """The basis images of one pair for the natural parameter values ``natural``."""
+    image = model_source(pair, natural)
+    L, c, delta = natural["sss_level"], natural["correction"], natural["maxdd"]
+    variances = natural["variances"]
+    if model == "sog" and linear_weights:
+        layers, order = sog_layers(image, pair.depth, pair.mask, L, c, delta, variances, tap_weights)
+        # Back to the profile's order, so coefficient i belongs to Gaussian i.
+        return layers[jnp.argsort(order)]
+    params = SSSParams(L, c, delta, natural["weights"], variances)
+    if model == "sog":
+        out = render_sog(image, pair.depth, pair.mask, params, tap_weights)
+    elif model == "thesis":
+        out = render_thesis(image, pair.depth, pair.mask, params, tap_weights)
+    else:
+        out = render_separable(image, pair.depth, pair.mask, params)
+    return out[None]

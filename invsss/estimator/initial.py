@@ -1,0 +1,151 @@
+"""Reference scales from the data, and the starting points of a multi-start fit.
+
+The blur scale is the hard part of the fit: with the wrong one by a factor of a
+few, the loss is flat or has the wrong basin, and near the right one it is
+bumpy. So before any solver runs, the compiled loss (a forward model plus the
+small projection, about a millisecond at 64 x 64) is scanned along the blur
+scale, and the starts are its lowest local minima, each with the best
+correction and maxdd of a small grid (see :func:`choose_starts`).
+
+The blur scale is ``L`` in the default gauge and a common factor on all variances
+in the ``sss_level`` gauge; the grid spans a widest-Gaussian blur of 0.25 pixel
+to a quarter of the image.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from ..stretch import depth_slopes
+from .parametrisation import softplus_inverse
+
+__all__ = ["DataScales", "data_scales", "blur_reference", "choose_starts"]
+
+_BLUR_GRID = 40
+_CORRECTION_GRID = (0.01, 0.1, 0.5, 2.0)  # in units of the reference correction
+_MAXDD_PERCENTILES = (50.0, 85.0)
+
+
+class DataScales(eqx.Module):
+    """What the estimator needs to know about the masked depth (NumPy, not traced).
+
+    ``depths``, ``slopes_x`` and ``slopes_y`` hold every masked pixel of every pair.
+    """
+
+    depths: np.ndarray
+    slopes_x: np.ndarray
+    slopes_y: np.ndarray
+    size: int  # smallest image side
+
+    @property
+    def slopes(self) -> np.ndarray:
+        """All masked slopes, x then y."""
+        return np.concatenate([self.slopes_x, self.slopes_y])
+
+    @property
+    def depth(self) -> float:
+        """Median masked depth."""
+        return float(np.median(self.depths))
+
+    @property
+    def slope(self) -> float:
+        """Median positive masked slope (depth units per pixel); on flat depth, where
+        correction and maxdd have no effect, an arbitrary 1e-3 of the depth."""
+        positive = self.slopes[self.slopes > 0]
+        return float(np.median(positive)) if positive.size else 1e-3 * self.depth
+
+    @property
+    def correction(self) -> float:
+        """The correction at which ``c * slope`` equals the depth."""
+        return self.depth / self.slope
+
+    def max_stretch(self, sss_level, correction, maxdd) -> float:
+        """The largest stretch factor over the masked pixels (pixels per mm)."""
+        sx = sss_level / (self.depths + correction * np.minimum(self.slopes_x, maxdd))
+        sy = sss_level / (self.depths + correction * np.minimum(self.slopes_y, maxdd))
+        return float(max(sx.max(), sy.max()))
+
+
+def data_scales(pairs) -> DataScales:
+    depths, slopes_x, slopes_y = [], [], []
+    for p in pairs:
+        keep = np.asarray(p.mask) > 0
+        depths.append(np.asarray(p.depth)[keep])
+        sx, sy = depth_slopes(p.depth)
+        slopes_x.append(np.asarray(sx)[keep])
+        slopes_y.append(np.asarray(sy)[keep])
+    size = min(min(p.depth.shape) for p in pairs)
+    return DataScales(np.concatenate(depths), np.concatenate(slopes_x), np.concatenate(slopes_y), int(size))
+
+
+def blur_reference(scales: DataScales, variances) -> float:
+    """The ``L`` that blurs the widest Gaussian by 2 pixels at the median depth."""
+    return 2.0 * scales.depth / float(np.sqrt(np.max(variances)))
+
+
+def _with(param, z_base, **blocks):
+    """``z_base`` with the named scalar (or uniformly filled) blocks replaced."""
+    parts = param.split(jnp.asarray(z_base))
+    out = []
+    for name, shape in param.blocks:
+        u = np.array(parts[name], dtype=np.float64)
+        if name in blocks:
+            u[...] = blocks[name]
+        out.append(u.ravel())
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def choose_starts(loss, param, scales: DataScales, blur_at_zero: float | None, z_base, n_starts: int):
+    """Starting unknown vectors, best first.
+
+    Stage 1 scans the blur scale alone (correction at a tenth of its reference,
+    maxdd at the median slope) on a fine log grid: the loss is bumpy in the blur
+    scale (the 7 taps alias with the pixel grid, most on flat depth), so the starts
+    are the ``n_starts`` lowest *local minima* of that profile, topped up with
+    the best remaining points. Stage 2 picks, for each, the best correction and
+    maxdd on a small grid. ``loss(z)`` evaluates the objective.
+    """
+    blocks = dict(param.blocks)
+    fixed_c = {"correction": float(softplus_inverse(0.1))} if "correction" in blocks else {}
+    fixed_d = {"maxdd": 0.0} if "maxdd" in blocks else {}
+    if blur_at_zero is None:
+        starts = [_with(param, z_base, **fixed_c, **fixed_d)]
+    else:
+        sigmas = np.geomspace(0.25, max(scales.size / 4.0, 1.0), _BLUR_GRID)
+        blur = np.log(sigmas / blur_at_zero)
+
+        def at(b):
+            u = {"sss_level": b} if "sss_level" in blocks else {"variances": 2.0 * b}
+            return _with(param, z_base, **u, **fixed_c, **fixed_d)
+
+        profile = np.array([loss(at(b)) for b in blur])
+        profile = np.where(np.isfinite(profile), profile, np.inf)
+        padded = np.concatenate([[np.inf], profile, [np.inf]])
+        minima = [i for i in range(len(blur)) if padded[i + 1] <= min(padded[i], padded[i + 2])]
+        order = sorted(minima, key=lambda i: profile[i])
+        order += [i for i in np.argsort(profile) if i not in order]
+        starts = [at(blur[i]) for i in order[:n_starts]]
+    if not fixed_c and not fixed_d:
+        return starts
+    c_axis = list(softplus_inverse(np.asarray(_CORRECTION_GRID))) if fixed_c else [None]
+    d_axis = [None]
+    if fixed_d:
+        positive = scales.slopes[scales.slopes > 0]
+        values = np.percentile(positive, _MAXDD_PERCENTILES) if positive.size else np.array([scales.slope])
+        d_axis = list(np.log(np.unique(values) / scales.slope))
+    refined = []
+    for z in starts:
+        options = []
+        for c in c_axis:
+            for d in d_axis:
+                u = {}
+                if c is not None:
+                    u["correction"] = c
+                if d is not None:
+                    u["maxdd"] = d
+                options.append(_with(param, z, **u))
+        scores = [loss(o) for o in options]
+        refined.append(options[int(np.nanargmin(np.where(np.isfinite(scores), scores, np.nan)))])
+    return refined

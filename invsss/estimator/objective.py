@@ -1,0 +1,116 @@
+"""The residual the nonlinear solver sees, as one jit-friendly pytree.
+
+:class:`Objective` bundles the data, the parametrisation and the per-pixel weights;
+``objective(z, args)`` returns the weighted residual with the linear unknowns
+projected out, in the ``(residual, aux)`` form optimistix solvers call. All of
+its numbers are arrays, so a new start, new robust weights or a new active set
+reuse the compiled solver step; only the static layout (model, free blocks,
+image sizes) triggers a compile.
+
+Residual of pixel ``n``, channel ``j`` of pair ``p`` (``m`` the mask, ``u`` the
+robust weight, ``s`` the target's masked standard deviation):
+
+    rho = sqrt(m u) (T - pred) / s
+
+so that the loss the estimator reports, ``s^2 sum rho^2 / sum m`` per channel, is
+the (robustly weighted) mean squared error on the mask in the target's units.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from .basis import basis_images
+from .parametrisation import Parametrisation
+from .projection import combine, solve_linear
+
+__all__ = ["Objective"]
+
+
+class Objective(eqx.Module):
+    """Weighted, projected residual of a fit.
+
+    Attributes
+    ----------
+    param : Parametrisation
+    pairs : tuple of PairData
+    tap_weights : array, shape (7,)
+    robust : tuple of arrays, shape (H_p, W_p, C')
+        Robust weights per pixel and channel (1 for plain least squares).
+    active : array, shape (nb, C')
+        Basis images in use (see :func:`~invsss.estimator.projection.solve_linear`).
+    scale : array, shape ()
+        Residual unit (the target's masked standard deviation).
+    model : str, static
+    linear_weights : bool, static
+        Whether the ``sog`` weights are eliminated (basis = layers).
+    """
+
+    param: Parametrisation
+    pairs: tuple
+    tap_weights: Array
+    robust: tuple
+    active: Array
+    scale: Array
+    model: str = eqx.field(static=True)
+    linear_weights: bool = eqx.field(static=True)
+
+    @property
+    def num_basis(self) -> int:
+        return int(self.active.shape[0])
+
+    def ratios(self, natural: dict) -> Float[Array, "P C"]:
+        c = self.pairs[0].target.shape[-1]
+        one = jnp.ones((1, c), self.scale.dtype)
+        if "gain_ratio" in natural:
+            return jnp.concatenate([one, natural["gain_ratio"]], axis=0)
+        return one
+
+    def weights(self) -> tuple:
+        return tuple(p.mask[..., None] * u for p, u in zip(self.pairs, self.robust))
+
+    def bases(self, natural: dict) -> tuple:
+        return tuple(
+            basis_images(p, natural, self.model, self.tap_weights, self.linear_weights)
+            for p in self.pairs
+        )
+
+    def linear(self, z) -> tuple[dict, tuple, Array, Array, Array]:
+        """``(natural, bases, ratios, coef, offset)`` at ``z``."""
+        natural = self.param.natural(z)
+        bases = self.bases(natural)
+        ratios = self.ratios(natural)
+        coef, offset = solve_linear(
+            bases, tuple(p.target for p in self.pairs), self.weights(), ratios, self.active
+        )
+        return natural, bases, ratios, coef, offset
+
+    def _residual(self, bases, ratios, coef, offset) -> Float[Array, " N"]:
+        parts = []
+        for k, (pair, x, w) in enumerate(zip(self.pairs, bases, self.weights())):
+            pred = combine(x, ratios[k], coef, offset[k])
+            parts.append((jnp.sqrt(w) * (pair.target - pred)).ravel())
+        return jnp.concatenate(parts) / self.scale
+
+    def __call__(self, z, args=None):
+        _, bases, ratios, coef, offset = self.linear(z)
+        return self._residual(bases, ratios, coef, offset), None
+
+    def explicit_residual(self, z, coef, offset) -> Float[Array, " N"]:
+        """The residual with the linear unknowns given instead of projected out."""
+        natural = self.param.natural(z)
+        return self._residual(self.bases(natural), self.ratios(natural), coef, offset)
+
+    def predictions(self, z) -> tuple:
+        """``a * out + b`` for every pair, full images of the target's shape."""
+        _, bases, ratios, coef, offset = self.linear(z)
+        return tuple(combine(x, ratios[k], coef, offset[k]) for k, x in enumerate(bases))
+
+    def loss(self, z) -> Float[Array, ""]:
+        """Mask-weighted mean of ``u (T - pred)^2`` over pixels and channels."""
+        r, _ = self(z)
+        c = self.pairs[0].target.shape[-1]
+        total = sum(jnp.sum(p.mask) for p in self.pairs) * c
+        return jnp.sum(r**2) * self.scale**2 / total

@@ -1,0 +1,240 @@
+"""Which parameters are solved, fixed or eliminated, and the unconstrained unknowns.
+
+Every parameter of the model (MODEL.md section 6) gets one *role*:
+
+``"free"``
+    solved by the nonlinear solver through an unconstrained unknown ``z`` of
+    order one (constraints by reparametrisation, below);
+``"linear"``
+    eliminated by linear least squares inside the residual (the ``sog`` weights,
+    see :mod:`invsss.estimator.projection`);
+``"fixed"``
+    given by the user (``fix=``) or by the gauge;
+``"unused"``
+    the chosen model ignores it (the ``thesis`` chain has no weights, the
+    ``separable`` model no correction term), so the data cannot determine it.
+
+Reparametrisation (each unknown is 0 at its reference value ``ref``):
+
+=============  ====================================  ===============================
+parameter      natural value                         reference ``ref``
+=============  ====================================  ===============================
+sss_level      ``ref * exp(z)``                      blurs the widest Gaussian by
+                                                     ~2 px at the median depth
+correction     ``ref * softplus(z)``                 ``c * slope_ref = d_ref``: the
+                                                     correction halves the stretch
+                                                     at a typical slope
+maxdd          ``ref * exp(z)``                      median masked depth slope
+variances      ``ref_i * exp(z_i)``                  the profile's variances
+weights        ``softmax([0, z])`` per channel       (``separable`` only)
+mix            ``softmax([0, z_1, z_2])``            equal mix
+gain_ratio     ``exp(z)``                            1 (pair p's gain / pair 0's)
+=============  ====================================  ===============================
+
+``softplus`` keeps the correction non-negative while letting it approach 0
+smoothly (its floor is 0, reached only in the limit ``z -> -inf``); the logs make
+multiplicative uncertainty additive, which is what the solver's steps and the
+Gauss-Newton covariance assume.
+
+The gauge (MODEL.md section 6): scaling every variance by ``a^2`` and ``L`` by
+``1 / a`` gives the same image, so one of them must be fixed: ``gauge="variances"``
+takes the variances from a profile, ``gauge="sss_level"`` takes ``L`` from ``fix``.
+"""
+
+from __future__ import annotations
+
+import os
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ..profiles import SumOfGaussians, load_profile
+from ..validation import InvalidInputError
+
+__all__ = [
+    "PARAM_NAMES",
+    "GAUGES",
+    "resolve_profile",
+    "check_fix",
+    "assign_roles",
+    "Parametrisation",
+]
+
+PARAM_NAMES = ("sss_level", "correction", "maxdd", "weights", "variances")
+GAUGES = ("variances", "sss_level")
+_SCALARS = ("sss_level", "correction", "maxdd")
+
+
+def resolve_profile(profile) -> tuple[np.ndarray, np.ndarray]:
+    """``(weights, variances)`` from a profile name, JSON path, mapping or SumOfGaussians."""
+    if isinstance(profile, (str, os.PathLike)):
+        profile = load_profile(profile)
+    elif hasattr(profile, "keys"):
+        profile = SumOfGaussians.from_dict(profile, source="profile")
+    elif not isinstance(profile, SumOfGaussians):
+        raise InvalidInputError(
+            "profile: expected a profile name, a JSON path, a mapping with weights and "
+            f"variances, or an invsss SumOfGaussians, got {type(profile).__name__}"
+        )
+    profile.check("profile")
+    return np.asarray(profile.weights, np.float64), np.asarray(profile.variances, np.float64)
+
+
+def check_fix(fix) -> dict[str, np.ndarray]:
+    """Validate ``fix=`` (names and values) and return float64 arrays."""
+    if fix is None:
+        return {}
+    if not hasattr(fix, "items"):
+        raise InvalidInputError(f"fix: expected a mapping of parameter names to values, got {type(fix).__name__}")
+    unknown = sorted(set(fix) - set(PARAM_NAMES))
+    if unknown:
+        raise InvalidInputError(
+            f"fix: unknown parameter(s) {', '.join(map(repr, unknown))}; expected some of "
+            + ", ".join(PARAM_NAMES)
+        )
+    out = {}
+    for k, v in fix.items():
+        try:
+            a = np.asarray(v, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise InvalidInputError(f"fix[{k!r}]: expected numbers, got {v!r}") from None
+        if not np.all(np.isfinite(a)):
+            raise InvalidInputError(f"fix[{k!r}]: contains NaN or infinite values")
+        if k in _SCALARS and a.ndim != 0:
+            raise InvalidInputError(f"fix[{k!r}]: expected a single number, got shape {a.shape}")
+        if k in ("sss_level", "maxdd") and a <= 0:
+            raise InvalidInputError(f"fix[{k!r}]: expected a value > 0, got {float(a):g}")
+        if k == "correction" and a < 0:
+            raise InvalidInputError(f"fix['correction']: expected a value >= 0, got {float(a):g}")
+        if k == "variances" and (a.ndim != 1 or a.size == 0 or np.any(a <= 0)):
+            raise InvalidInputError("fix['variances']: expected a non-empty list of values > 0")
+        if k == "weights" and (a.ndim not in (1, 2) or np.any(a < 0) or np.any(a.sum(axis=0) <= 0)):
+            raise InvalidInputError("fix['weights']: expected a (K,) or (K, C) array >= 0 with a positive sum")
+        out[k] = a
+    if "weights" in out and "variances" in out and out["weights"].shape[0] != out["variances"].shape[0]:
+        raise InvalidInputError(
+            f"fix['weights']: expected {out['variances'].shape[0]} rows, one per fixed variance, "
+            f"got shape {out['weights'].shape}"
+        )
+    return out
+
+
+def assign_roles(model: str, gauge: str, fixed: dict) -> dict[str, str]:
+    """The role ("free", "linear", "fixed", "unused") of each parameter."""
+    if gauge not in GAUGES:
+        raise InvalidInputError(f"gauge: expected one of {', '.join(GAUGES)}, got {gauge!r}")
+    if gauge == "sss_level" and "sss_level" not in fixed:
+        raise InvalidInputError(
+            "gauge: 'sss_level' needs the value of sss_level in fix= (e.g. the focal length in pixels)"
+        )
+    roles = {}
+    roles["sss_level"] = "fixed" if "sss_level" in fixed else "free"
+    roles["variances"] = "fixed" if ("variances" in fixed or gauge == "variances") else "free"
+    for k in ("correction", "maxdd"):
+        roles[k] = "fixed" if k in fixed else ("unused" if model == "separable" else "free")
+    if "weights" in fixed:
+        roles["weights"] = "fixed"
+    else:
+        roles["weights"] = {"sog": "linear", "thesis": "unused", "separable": "free"}[model]
+    return roles
+
+
+def _softplus(z):
+    return jnp.logaddexp(z, 0.0)
+
+
+def softplus_inverse(x):
+    """``z`` with ``softplus(z) = x`` for ``x > 0`` (numerically stable for small x)."""
+    x = np.asarray(x, np.float64)
+    return x + np.log(-np.expm1(-x))
+
+
+def _simplex(z, axis=0):
+    """``softmax`` of ``[0, z]`` along ``axis``: a point of the simplex, no redundancy."""
+    pad = [(0, 0)] * z.ndim
+    pad[axis] = (1, 0)
+    return jax.nn.softmax(jnp.pad(z, pad), axis=axis)
+
+
+class Parametrisation(eqx.Module):
+    """Maps the unknown vector ``z`` to natural parameter values and back.
+
+    Attributes
+    ----------
+    blocks : tuple of (name, shape), static
+        The free blocks in the order they occupy ``z``.
+    reference : dict[str, array]
+        The reference scale of each free block (``ref`` above).
+    values : dict[str, array]
+        The value of every non-free parameter (fixed, or carried for unused ones).
+    """
+
+    blocks: tuple = eqx.field(static=True)
+    reference: dict
+    values: dict
+
+    @property
+    def size(self) -> int:
+        return sum(int(np.prod(shape)) for _, shape in self.blocks)
+
+    @property
+    def free(self) -> tuple[str, ...]:
+        return tuple(name for name, _ in self.blocks)
+
+    def split(self, z: Float[Array, " n"]) -> dict[str, Array]:
+        """The free blocks of ``z`` by name, reshaped."""
+        out, i = {}, 0
+        for name, shape in self.blocks:
+            n = int(np.prod(shape))
+            out[name] = z[i : i + n].reshape(shape)
+            i += n
+        return out
+
+    def natural(self, z: Float[Array, " n"]) -> dict[str, Array]:
+        """Every parameter's natural value (free ones from ``z``, the rest as given)."""
+        out = dict(self.values)
+        for name, u in self.split(z).items():
+            ref = self.reference[name]
+            if name in ("sss_level", "maxdd", "variances"):
+                out[name] = ref * jnp.exp(u)
+            elif name == "correction":
+                out[name] = ref * _softplus(u)
+            elif name in ("weights", "mix"):
+                out[name] = _simplex(u, axis=0)
+            elif name == "gain_ratio":
+                out[name] = jnp.exp(u)
+            else:  # pragma: no cover - blocks are built by this module
+                raise AssertionError(name)
+        return out
+
+    def unknowns(self, natural: dict) -> Float[Array, " n"]:
+        """The inverse of :meth:`natural` for the free blocks (values must be in range)."""
+        parts = []
+        for name, shape in self.blocks:
+            x = np.asarray(natural[name], np.float64)
+            ref = np.asarray(self.reference[name], np.float64)
+            if name in ("sss_level", "maxdd", "variances"):
+                u = np.log(x / ref)
+            elif name == "correction":
+                u = softplus_inverse(np.maximum(x / ref, 1e-12))
+            elif name in ("weights", "mix"):
+                logs = np.log(np.maximum(x, 1e-12))
+                u = (logs - logs[:1])[1:]
+            else:
+                u = np.log(x)
+            parts.append(np.broadcast_to(u, shape).ravel())
+        return jnp.asarray(np.concatenate(parts) if parts else np.zeros(0))
+
+    def elementwise_slope(self, z: Float[Array, " n"]) -> dict[str, Array]:
+        """``d natural / d z`` for the elementwise blocks (sss_level, correction, maxdd, variances)."""
+        out = {}
+        for name, u in self.split(z).items():
+            ref = self.reference[name]
+            if name in ("sss_level", "maxdd", "variances"):
+                out[name] = ref * jnp.exp(u)
+            elif name == "correction":
+                out[name] = ref * jax.nn.sigmoid(u)
+        return out

@@ -1,0 +1,139 @@
+"""What a fit returns: the estimate, its uncertainty and how it was obtained."""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import equinox as eqx
+import numpy as np
+
+from ..params import SSSParams
+
+__all__ = ["FitResult", "masked_list"]
+
+
+def _number(x):
+    """A JSON-ready float (None for NaN or infinity)."""
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def masked_list(values, undetermined):
+    """``values.tolist()`` with undetermined entries replaced by None."""
+    values, undetermined = np.asarray(values, np.float64), np.asarray(undetermined, bool)
+    if values.ndim == 0:
+        return None if undetermined else _number(values)
+    return [masked_list(v, u) for v, u in zip(values, np.broadcast_to(undetermined, values.shape))]
+
+
+class FitResult(eqx.Module):
+    """The result of :func:`invsss.fit_pair` / :func:`invsss.fit_pairs`.
+
+    Attributes
+    ----------
+    params : SSSParams
+        The estimate, as numbers (ready for :func:`invsss.render`). Entries listed
+        in ``undetermined`` carry no information (they are where the solver
+        stopped, or the profile's value for a parameter the model ignores); use
+        :meth:`to_dict`, which writes them as null.
+    stderr : dict
+        Standard error of each parameter (float, or a list for weights and
+        variances); None where the parameter is fixed (see ``fixed``) or
+        undetermined (see ``undetermined``).
+    undetermined : tuple of str
+        Parameters the data cannot determine: ``"maxdd"``, ``"weights[2]"``,
+        ``"weights[1,0]"`` (Gaussian 1, channel 0), ``"variances[3]"``...
+    fixed : dict
+        Parameters not estimated, with the values used (given by ``fix=`` or by the gauge).
+    gauge : str
+        ``"variances"`` or ``"sss_level"``: which side of the ``L``-variance
+        degeneracy was fixed.
+    loss : float
+        Final objective: the mask-weighted mean of ``u (T - pred)^2`` over pixels and
+        channels (``u`` the robust weights; about ``sigma^2`` for Gaussian noise).
+    sigma : float
+        Residual standard deviation (target units) used for the standard errors.
+    psnr, ssim : float
+        PSNR (dB) and SSIM of the prediction against the target on the mask.
+    converged : bool
+        Whether the last solve met its tolerances within ``max_steps``.
+    iterations : int
+        Solver steps on the path to the result (best start plus refinements).
+    history : numpy.ndarray
+        Loss after each of those steps (same units as ``loss``).
+    gain, offset : numpy.ndarray
+        Photometric fit ``pred = gain * out + offset`` per target channel: shape
+        (C',) for one pair, (P, C') for :func:`fit_pairs`.
+    mix : numpy.ndarray or None
+        Weights (3,) of the RGB -> grey mix (an RGB source and a grey target).
+    fitted : list of numpy.ndarray
+        The prediction ``gain * out + offset`` of each pair, shaped like its target.
+    warnings : tuple of str
+        Everything the user should know: undetermined parameters and why,
+        misalignment, non-convergence.
+    model : str
+    tap_weights : str or list
+    solver : str
+    """
+
+    params: SSSParams
+    stderr: dict
+    undetermined: tuple
+    fixed: dict
+    gauge: str
+    loss: float
+    sigma: float
+    psnr: float
+    ssim: float
+    converged: bool
+    iterations: int
+    history: np.ndarray
+    gain: np.ndarray
+    offset: np.ndarray
+    mix: np.ndarray | None
+    fitted: list
+    warnings: tuple
+    model: str
+    tap_weights: object
+    solver: str = "lm"
+    profile: str = ""
+
+    def is_undetermined(self, name: str) -> np.ndarray:
+        """Boolean array of parameter ``name``'s shape: True where undetermined."""
+        shape = np.shape(getattr(self.params, name))
+        flags = np.zeros(shape, bool)
+        for entry in self.undetermined:
+            if entry == name:
+                flags[...] = True
+            elif entry.startswith(name + "["):
+                idx = tuple(int(i) for i in entry[len(name) + 1 : -1].split(","))
+                flags[idx] = True
+        return flags
+
+    def to_dict(self) -> dict:
+        """JSON-ready mapping with the keys of a params file plus the fit report.
+
+        Undetermined parameters (and their standard errors) are None, never numbers.
+        """
+        out = {}
+        for name in ("sss_level", "correction", "maxdd", "weights", "variances"):
+            out[name] = masked_list(getattr(self.params, name), self.is_undetermined(name))
+        out["model"] = self.model
+        out["tap_weights"] = self.tap_weights
+        out["stderr"] = copy.deepcopy(dict(self.stderr))
+        out["undetermined"] = list(self.undetermined)
+        out["loss"] = _number(self.loss)
+        out["psnr"] = _number(self.psnr)
+        out["ssim"] = _number(self.ssim)
+        out["converged"] = bool(self.converged)
+        out["iterations"] = int(self.iterations)
+        out["fixed"] = {k: np.asarray(v).tolist() for k, v in self.fixed.items()}
+        out["gauge"] = self.gauge
+        out["gain"] = np.asarray(self.gain).tolist()
+        out["offset"] = np.asarray(self.offset).tolist()
+        if self.mix is not None:
+            out["channels_mix"] = np.asarray(self.mix).tolist()
+        if self.profile:
+            out["profile"] = self.profile
+        return out

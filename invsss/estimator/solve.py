@@ -1,0 +1,155 @@
+"""Running an optimistix solver one step at a time.
+
+The loop is written out (``solver.init``, a jitted ``solver.step``,
+``solver.terminate``) instead of calling ``optx.least_squares`` so that each
+iteration can report its loss to a progress callback and the loss history can be
+kept. The step is compiled once per problem layout: the objective is passed as an
+argument (its arrays are traced), so every start and every re-solve with new
+robust weights or a new active set reuses it.
+
+Solvers: ``"lm"`` (Levenberg-Marquardt, default), ``"gauss-newton"`` and
+``"bfgs"`` (which minimises ``0.5 * sum(residual^2)``).
+"""
+
+from __future__ import annotations
+
+from typing import Callable, NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from ..validation import InvalidInputError
+
+__all__ = ["SOLVERS", "make_solver", "SolveRecord", "run_solver"]
+
+SOLVERS = ("lm", "gauss-newton", "bfgs")
+
+# Tolerances on the O(1) unknowns and on the residual (in units of the target's
+# contrast): far below any statistically meaningful change.
+RTOL = 1e-7
+ATOL = 1e-7
+
+
+def make_solver(name: str):
+    """The optimistix solver called ``name`` (one of :data:`SOLVERS`)."""
+    if name == "lm":
+        return optx.LevenbergMarquardt(rtol=RTOL, atol=ATOL)
+    if name == "gauss-newton":
+        return optx.GaussNewton(rtol=RTOL, atol=ATOL)
+    if name == "bfgs":
+        return optx.BFGS(rtol=RTOL, atol=ATOL)
+    raise InvalidInputError(f"solver: expected one of {', '.join(SOLVERS)}, got {name!r}")
+
+
+@eqx.filter_custom_jvp
+def _residual(z, objective):
+    return objective(z)[0]
+
+
+@_residual.def_jvp
+def _residual_jvp(primals, tangents):
+    z, objective = primals
+    tz, _ = tangents  # the data are never differentiated
+    jac, r = jax.jacfwd(lambda u: (objective(u)[0],) * 2, has_aux=True)(z)
+    return r, (jnp.zeros_like(r) if tz is None else jac @ tz)
+
+
+class DenseJacobian(eqx.Module):
+    """The objective with a derivative rule that materialises the (N, n) Jacobian.
+
+    Forward mode over the n unknowns costs about n forward passes whichever way it
+    is done; materialising it once per point means the solver's linearisation
+    stores one small matrix instead of every intermediate of the blur passes, and
+    a transposed product (BFGS's gradient) is a matrix product instead of reverse
+    mode through gathers (scatters, slow on CPU). Measured: a Levenberg-Marquardt
+    step several times faster at 64 x 64.
+    """
+
+    objective: eqx.Module
+
+    def __call__(self, z, args=None):
+        return _residual(z, self.objective), None
+
+
+class _HalfSumOfSquares(eqx.Module):
+    """A least-squares residual as the scalar objective a minimiser needs."""
+
+    residual: eqx.Module
+
+    def __call__(self, z, args=None):
+        r, _ = self.residual(z, args)
+        return 0.5 * jnp.sum(r**2), None
+
+
+def _as_fn(solver, objective):
+    fn = DenseJacobian(objective)
+    return _HalfSumOfSquares(fn) if isinstance(solver, optx.AbstractMinimiser) else fn
+
+
+def _current_loss(state):
+    # Gauss-Newton family: the residual at the last accepted point; BFGS: its value.
+    info = state.f_info
+    if hasattr(info, "residual"):
+        return 0.5 * jnp.sum(info.residual**2)
+    return info.f
+
+
+_OPTIONS: dict = {}
+_TAGS = frozenset()
+
+
+@eqx.filter_jit
+def _init(solver, fn, z):
+    f_struct, aux_struct = jax.eval_shape(lambda: fn(z, None))
+    return solver.init(fn, z, None, _OPTIONS, f_struct, aux_struct, _TAGS)
+
+
+@eqx.filter_jit
+def _step(solver, fn, z, state):
+    z, state, _ = solver.step(fn, z, None, _OPTIONS, state, _TAGS)
+    done, result = solver.terminate(fn, z, None, _OPTIONS, state, _TAGS)
+    return z, state, _current_loss(state), done, result == optx.RESULTS.successful
+
+
+class SolveRecord(NamedTuple):
+    """Outcome of one solve: final unknowns, ``0.5 sum rho^2`` per step, status."""
+
+    z: jax.Array
+    history: np.ndarray
+    steps: int
+    converged: bool
+
+    @property
+    def final(self) -> float:
+        return float(self.history[-1]) if len(self.history) else np.inf
+
+
+def run_solver(
+    solver, objective, z0, max_steps: int, on_step: Callable[[float], None] | None = None
+) -> SolveRecord:
+    """Iterate ``solver`` from ``z0`` for at most ``max_steps`` steps.
+
+    ``on_step(half_sum_of_squares)`` is called after every step.
+    """
+    fn = _as_fn(solver, objective)
+    z = jnp.asarray(z0)
+    state = _init(solver, fn, z)
+    history = []
+    converged = False
+    for _ in range(max_steps):
+        z, state, loss, done, ok = _step(solver, fn, z, state)
+        loss = float(loss)
+        history.append(loss)
+        if on_step is not None:
+            on_step(loss)
+        if not bool(ok):
+            break
+        if bool(done):
+            converged = True
+            break
+        if not np.isfinite(loss):
+            break
+    return SolveRecord(z, np.asarray(history), len(history), converged)

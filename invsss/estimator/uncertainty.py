@@ -1,0 +1,227 @@
+"""Standard errors, and which parameters the data cannot determine.
+
+Covariance (Gauss-Newton, the linearised model at the optimum): with ``J`` the
+Jacobian of the weighted residual with respect to *all* unknowns -- the free
+nonlinear ones and the linear coefficients and offsets the projection eliminated
+(inactive coefficients included, so that a weight held at 0 still shows how well
+the data separate its Gaussian from the others) --
+
+    cov = sigma^2 (J^T J)^+,    sigma^2 = sum(rho^2) / (N - p),
+
+``N`` the number of weighted residuals, ``p`` the number of unknowns. Reported
+quantities (natural parameters, and weights ``w_i = beta_i / sum beta``) get their
+covariance by the delta method, ``G cov G^T`` with ``G`` their Jacobian.
+
+A parameter is reported *undetermined* (value null) when
+
+1. it lies along a null direction of ``J^T J`` scaled to unit diagonal (eigenvalue
+   below :data:`NULL_TOL` of the largest; a column of zeros -- no effect at all --
+   is such a direction), i.e. some change of it leaves the image unchanged; or
+2. its standard error is as large as the value itself could be: more than the
+   value for ``sss_level``, ``maxdd`` and the variances (a factor-of-e
+   uncertainty), more than ``max(c, c_ref)`` for the correction (``c_ref`` halves
+   the stretch at a typical slope), more than :data:`WEIGHT_VAGUE` for a weight (a
+   fraction of the profile); or
+3. one of the structural reasons of MODEL.md section 6 applies (see
+   :func:`structural_reasons`): flat depth, ``maxdd`` above every masked slope
+   or below all of them, a variance whose weight is ~0 (below
+   :data:`ZERO_WEIGHT`), a parameter the model does not use, or two Gaussians
+   whose layers differ by a blur narrower than :data:`COINCIDENT_PX` pixel even
+   at the largest stretch on the mask (their weights; the thesis's 940 nm
+   profile has such a pair, 0.549 and 0.5574 mm^2).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+__all__ = [
+    "NULL_TOL",
+    "WEIGHT_VAGUE",
+    "ZERO_WEIGHT",
+    "COINCIDENT_PX",
+    "Uncertainty",
+    "linearise",
+    "gauss_newton_uncertainty",
+    "structural_reasons",
+]
+
+NULL_TOL = 1e-10
+WEIGHT_VAGUE = 0.1
+ZERO_WEIGHT = 1e-3
+COINCIDENT_PX = 0.25
+
+
+class Uncertainty(NamedTuple):
+    """Standard errors (NaN where undetermined) and the undetermined entries.
+
+    ``stderr`` and ``undetermined`` map each reported parameter name to arrays of
+    its shape; ``sigma`` is the residual standard deviation in the target's units.
+    """
+
+    stderr: dict
+    undetermined: dict
+    sigma: float
+    dof: int
+
+
+def _reported(objective, linear_weights: bool, sizes, theta) -> dict:
+    n_z, n_coef = sizes
+    z = theta[:n_z]
+    coef = theta[n_z : n_z + n_coef].reshape(objective.num_basis, -1)
+    natural = objective.param.natural(z)
+    out = {k: natural[k] for k in ("sss_level", "correction", "maxdd", "variances") if k in objective.param.free}
+    if linear_weights:
+        w = coef / jnp.sum(coef, axis=0)
+        out["weights"] = w[:, 0] if w.shape[1] == 1 else w
+    elif "weights" in objective.param.free:
+        w = natural["weights"]
+        out["weights"] = w[:, 0] if w.ndim == 2 and w.shape[1] == 1 else w
+    return out
+
+
+def linearise(objective, z, coef, offset) -> dict:
+    """What the covariance needs at the optimum (pure; the caller jits it).
+
+    Returns the residual, its Jacobian with respect to ``theta = (z, coef, offset)``,
+    the reported quantities and their Jacobians with respect to ``theta``.
+    """
+    n_z, n_coef = z.size, coef.size
+    theta = jnp.concatenate([z, coef.ravel(), offset.ravel()])
+    linear_weights = objective.linear_weights and objective.num_basis > 1
+
+    def residual(t):
+        return objective.explicit_residual(
+            t[:n_z], t[n_z : n_z + n_coef].reshape(coef.shape), t[n_z + n_coef :].reshape(offset.shape)
+        )
+
+    def reported(t):
+        return _reported(objective, linear_weights, (n_z, n_coef), t)
+
+    return {
+        "residual": residual(theta),
+        "jacobian": jax.jacfwd(residual)(theta),
+        "values": reported(theta),
+        "value_jacobians": jax.jacfwd(reported)(theta),
+    }
+
+
+def gauss_newton_uncertainty(objective, lin: dict, correction_ref: float) -> Uncertainty:
+    """Standard errors and undetermined entries from :func:`linearise`'s output."""
+    jac = np.asarray(lin["jacobian"])
+    rho = np.asarray(lin["residual"])
+    values, jacs = lin["values"], lin["value_jacobians"]
+    weighted = np.concatenate([np.asarray(w).ravel() > 0 for w in objective.weights()])
+    n, p = int(weighted.sum()), jac.shape[1]
+    dof = max(n - p, 1)
+    sigma2 = float(np.sum(rho**2)) / dof
+
+    # Scale to unit diagonal; a column with no effect keeps scale 1 and becomes a
+    # zero eigenvalue, i.e. a null direction along its own axis.
+    a = jac.T @ jac
+    d = np.sqrt(np.diag(a))
+    dead = d <= 1e-9 * max(d.max(), 1e-300)
+    d = np.where(dead, 1.0, d)
+    c = a / np.outer(d, d)
+    lam, u = np.linalg.eigh(c)
+    null = lam <= NULL_TOL * max(lam.max(), 1e-300)
+    inv = (u[:, ~null] / lam[~null]) @ u[:, ~null].T
+    cov_theta = sigma2 * inv / np.outer(d, d)
+    null_dirs = u[:, null] / d[:, None]  # in theta units
+
+    stderr, undetermined = {}, {}
+    for name, value in values.items():
+        g = np.asarray(jacs[name]).reshape(-1, p)
+        val = np.asarray(value).ravel()
+        var = np.einsum("kp,pq,kq->k", g, cov_theta, g)
+        std = np.sqrt(np.maximum(var, 0.0))
+        # Sensitivity along null directions, relative to the output's own gradient.
+        along = np.abs(g @ null_dirs) if null_dirs.size else np.zeros((g.shape[0], 0))
+        size = np.linalg.norm(g / d, axis=1)
+        on_null = np.any(along > 1e-6 * np.maximum(size, 1e-300)[:, None], axis=1) if along.size else np.zeros(g.shape[0], bool)
+        if name == "weights":
+            vague = std > WEIGHT_VAGUE
+        elif name == "correction":
+            vague = std > np.maximum(np.abs(val), correction_ref)
+        else:
+            vague = std > np.abs(val)
+        bad = on_null | vague | ~np.isfinite(std)
+        shape = np.shape(value)
+        stderr[name] = np.where(bad, np.nan, std).reshape(shape)
+        undetermined[name] = bad.reshape(shape)
+    return Uncertainty(stderr, undetermined, float(np.sqrt(sigma2)) * float(objective.scale), dof)
+
+
+def _coinciding(natural, scales, flags, msgs, roles):
+    """Gaussians whose layers differ by a blur far below a pixel (MODEL.md 6: two
+    Gaussians with equal variance): only the sum of their weights is determined."""
+    v = np.asarray(natural["variances"], np.float64)
+    s_max = scales.max_stretch(float(natural["sss_level"]), float(natural["correction"]), float(natural["maxdd"]))
+    order = np.argsort(v)
+    w = np.asarray(natural["weights"])
+    for a, b in zip(order[:-1], order[1:]):
+        gap_px = s_max * np.sqrt(v[b] - v[a])
+        if gap_px < COINCIDENT_PX:
+            shape = w.shape
+            flag = flags.setdefault("weights", np.zeros(shape, bool))
+            flag[a] = flag[b] = True
+            if roles["variances"] == "free":
+                vflag = flags.setdefault("variances", np.zeros(v.shape, bool))
+                vflag[a] = vflag[b] = True
+            total = np.round(np.atleast_1d(w[a] + w[b]), 4).tolist()
+            msgs.append(
+                f"weights[{a}], weights[{b}]: variances {v[a]:.4g} and {v[b]:.4g} differ by a blur of "
+                f"{gap_px:.2f} px at most (below {COINCIDENT_PX} px), so only their sum "
+                f"{total if len(total) > 1 else total[0]} is determined"
+            )
+
+
+def structural_reasons(roles: dict, model: str, scales, natural: dict, weights, active) -> tuple[dict, list]:
+    """Undetermined entries for the reasons MODEL.md section 6 names, with messages.
+
+    Returns ``(flags, messages)``: ``flags[name]`` is a boolean array of the
+    parameter's shape (True = undetermined).
+    """
+    flags, msgs = {}, []
+    slopes = scales.slopes
+    for name, role in roles.items():
+        if role == "unused":
+            flags[name] = np.ones(np.shape(natural[name]), bool)
+            msgs.append(f"{name}: not used by the {model!r} model, so the data cannot determine it")
+    if roles["correction"] == "free" or roles["maxdd"] == "free":
+        delta = float(natural["maxdd"])
+        c = float(natural["correction"])
+        if np.all(slopes == 0):
+            for k in ("correction", "maxdd"):
+                if roles[k] == "free":
+                    flags[k] = np.ones((), bool)
+            msgs.append("correction, maxdd: the depth is flat on the mask, so they have no effect")
+        elif roles["maxdd"] == "free" and delta >= slopes.max():
+            flags["maxdd"] = np.ones((), bool)
+            msgs.append(
+                f"maxdd: no masked depth slope reaches it (the largest is {slopes.max():.4g}); "
+                "any value above that gives the same image"
+            )
+        elif roles["maxdd"] == "free" and delta <= slopes.min():
+            flags["maxdd"] = np.ones((), bool)
+            if roles["correction"] == "free":
+                flags["correction"] = np.ones((), bool)
+            msgs.append(
+                f"correction, maxdd: every masked depth slope exceeds maxdd, so only their "
+                f"product correction*maxdd = {c * delta:.4g} is determined"
+            )
+    if roles["weights"] in ("linear", "free"):
+        _coinciding(natural, scales, flags, msgs, roles)
+    if roles["variances"] == "free" and weights is not None:
+        w = np.asarray(weights)
+        w = w if w.ndim == 2 else w[:, None]
+        zero = np.all((w < ZERO_WEIGHT) | (np.asarray(active) == 0), axis=1)
+        if np.any(zero):
+            flags["variances"] = zero
+            idx = ", ".join(str(i) for i in np.flatnonzero(zero))
+            msgs.append(f"variances[{idx}]: the weight is ~0, so the variance has no effect")
+    return flags, msgs

@@ -1,0 +1,236 @@
+"""A one-page picture of a fit: what went in, what came out, and how well it matches.
+
+:func:`plot_fit_report` draws, for every pair, one row
+
+    source | fitted | target | residual (target - fitted, on the mask)
+
+and below them the solver's convergence curve and the fitted parameters with their
+standard errors. Images are stretched linearly between their 1st and 99th
+percentiles on the mask (the blur lowers contrast; a fixed white point would show
+a blurred target as flat grey), the fitted image and the target with the
+target's stretch, so a brightness or contrast mismatch stays visible; the mask's
+edge is outlined and the outside veiled. The residual (for RGB, the mean over channels) uses a
+diverging colour map with limits symmetric about zero and one scale for all
+pairs, so its sign reads directly (red: the target is brighter than the fit).
+
+Drawn with matplotlib's non-interactive Agg canvas: no display is needed and no
+global pyplot state is touched.
+"""
+
+from __future__ import annotations
+
+import os
+import textwrap
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
+
+from .estimator.diagnostics import masked_psnr, masked_ssim
+from .validation import InvalidInputError
+
+__all__ = ["plot_fit_report"]
+
+_PANEL_INCHES = 2.9
+_TEXT_WIDTH = 84  # characters per line in the parameter box
+_PARAM_ORDER = ("sss_level", "correction", "maxdd", "weights", "variances")
+
+
+def _hwc(x) -> np.ndarray:
+    x = np.asarray(x, dtype=np.float64)
+    return x[..., None] if x.ndim == 2 else x
+
+
+def _display_range(image, mask) -> tuple[float, float]:
+    """Black and white points: the 1st and 99th percentiles over the mask (all channels)."""
+    on = image[mask > 0]
+    lo, hi = (np.percentile(on, [1.0, 99.0]) if on.size else (np.min(image), np.max(image)))
+    return (float(lo), float(hi)) if hi > lo else (float(lo), float(lo) + 1.0)
+
+
+def _display(image, limits: tuple[float, float]) -> np.ndarray:
+    """(H, W, C) stretched linearly to [0, 1] between ``limits``, ready for imshow."""
+    lo, hi = limits
+    shown = np.clip((image - lo) / (hi - lo), 0.0, 1.0)
+    return shown[..., 0] if shown.shape[-1] == 1 else shown
+
+
+def _show(ax, image, title: str, mask) -> None:
+    ax.imshow(image, cmap="gray", vmin=0.0, vmax=1.0, interpolation="nearest")
+    _outline(ax, mask)
+    ax.set_title(title, fontsize=9)
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
+def _outline(ax, mask) -> None:
+    """Outline the mask and veil what lies outside it: only the inside was fitted."""
+    if 0 < np.count_nonzero(mask > 0.5) < mask.size:
+        veil = np.zeros((*mask.shape, 4))
+        veil[..., :3] = 1.0
+        veil[..., 3] = 0.6 * (mask <= 0.5)
+        ax.imshow(veil, interpolation="nearest")
+        ax.contour(mask, levels=[0.5], colors="#ff9f1c", linewidths=0.8)
+
+
+def _format_value(value, error=None, unknown=None) -> str:
+    """``902.2±3.3`` for a scalar, ``[a±e, b±f]`` (rows as tuples) for an array.
+
+    ``unknown`` (bool, the value's shape) marks entries the data did not
+    determine: they print as ``--``, as params.json writes them as null.
+    """
+    value = np.asarray(value, dtype=np.float64)
+    rows = value.reshape(value.shape[0], -1) if value.ndim else value.reshape(1, 1)
+    errors = np.full(rows.shape, np.nan)
+    if error is not None and np.shape(error) == value.shape:
+        errors = np.asarray(error, dtype=np.float64).reshape(rows.shape)  # None -> nan
+    flags = np.zeros(rows.shape, bool) if unknown is None else np.broadcast_to(unknown, value.shape).reshape(rows.shape)
+
+    def one(v, e, flag):
+        if flag:
+            return "--"
+        return f"{v:.4g}" if not np.isfinite(e) else f"{v:.4g}±{e:.2g}"
+
+    cells = [[one(v, e, f) for v, e, f in zip(*row)] for row in zip(rows, errors, flags)]
+    if value.ndim == 0:
+        return cells[0][0]
+    return "[" + ", ".join(c[0] if len(c) == 1 else "(" + ", ".join(c) + ")" for c in cells) + "]"
+
+
+def _parameter_lines(result) -> list[str]:
+    """One line per parameter: value ± standard error, and what is fixed or undetermined."""
+    params = result.params
+    stderr = dict(result.stderr or {})
+    fixed = dict(result.fixed or {})
+    lines = []
+    for name in _PARAM_ORDER:
+        unknown = np.asarray(result.is_undetermined(name))
+        flags = ["fixed"] if name in fixed else []
+        if unknown.all():
+            flags.append("undetermined")
+        elif unknown.any():
+            flags.append(f"{int(unknown.sum())} undetermined (--)")
+        value = _format_value(getattr(params, name), None if name in fixed else stderr.get(name), unknown)
+        lines.append(f"{name:<11} {value}" + (f"  [{', '.join(flags)}]" if flags else ""))
+    lines.append("")
+    lines.append(
+        f"model {result.model}   gauge {result.gauge}   "
+        f"{'converged' if result.converged else 'NOT converged'} in {result.iterations} iterations"
+    )
+    lines.append(f"loss {float(result.loss):.4g}   PSNR {float(result.psnr):.2f} dB   SSIM {float(result.ssim):.4f}")
+    lines.append(f"gain {_format_value(result.gain)}   offset {_format_value(result.offset)}")
+    if result.mix is not None:
+        lines.append(f"RGB -> grey mix {_format_value(result.mix)}")
+    for message in result.warnings:
+        lines.extend(textwrap.wrap("! " + message, width=_TEXT_WIDTH, subsequent_indent="  "))
+    return lines
+
+
+def _residual_limit(residuals) -> float:
+    on = np.concatenate([np.abs(r[np.isfinite(r)]).ravel() for r in residuals])
+    limit = float(np.percentile(on, 99.0)) if on.size else 0.0
+    return limit if limit > 0 else 1.0
+
+
+def plot_fit_report(result, pairs, path) -> None:
+    """Draw a fit's report page and save it as an image.
+
+    Parameters
+    ----------
+    result : FitResult
+        What :func:`invsss.fit_pair` or :func:`invsss.fit_pairs` returned for ``pairs``.
+    pairs : sequence of ImagePair or (source, target, depth, mask) tuples
+        The fitted pairs, in the order given to the fit. ``source`` (H, W, C),
+        ``target`` (H, W, C'), ``mask`` (H, W) or None (every pixel).
+    path : str or os.PathLike
+        Output file; the format follows the extension (``.png``, ``.pdf``, ``.svg``).
+
+    Raises
+    ------
+    InvalidInputError
+        ``pairs`` and ``result.fitted`` differ in number or image size.
+
+    Examples
+    --------
+    >>> import numpy as np, os, tempfile, invsss
+    >>> from invsss.report import plot_fit_report
+    >>> y, x = np.mgrid[0:24, 0:24]
+    >>> source = 0.5 + 0.3 * np.sin(x / 2.0) * np.cos(y / 3.0)
+    >>> depth, mask = 600.0 + 0.5 * x, np.ones((24, 24))
+    >>> truth = invsss.SSSParams(900.0, 0.0, 1.0, [1.0], [1.0])
+    >>> target = np.asarray(invsss.render(source, depth, mask, truth))
+    >>> fit = invsss.fit_pair(source, target, depth, mask, fix={"variances": [1.0]},
+    ...                       n_starts=1, max_steps=20)
+    >>> path = os.path.join(tempfile.mkdtemp(), "report.png")
+    >>> plot_fit_report(fit, [(source, target, depth, mask)], path)
+    >>> os.path.getsize(path) > 0
+    True
+    """
+    pairs = [
+        (p.source, p.target, p.depth, p.mask) if hasattr(p, "source") else tuple(p) for p in pairs
+    ]
+    fitted = list(result.fitted)
+    if len(fitted) != len(pairs):
+        raise InvalidInputError(
+            f"pairs: the result has {len(fitted)} fitted image(s) but {len(pairs)} pair(s) were given"
+        )
+    rows = len(pairs)
+    fig = Figure(figsize=(4 * _PANEL_INCHES + 0.6, rows * _PANEL_INCHES + 3.3), layout="constrained")
+    FigureCanvasAgg(fig)
+    grid = fig.add_gridspec(rows + 1, 4, height_ratios=[_PANEL_INCHES] * rows + [3.0])
+
+    residuals, residual_axes = [], []
+    for k, (source, target, _depth, mask) in enumerate(pairs):
+        source, target = _hwc(source), _hwc(target)
+        mask = np.ones(target.shape[:2]) if mask is None else np.asarray(mask, dtype=np.float64)
+        pred = _hwc(fitted[k])
+        if pred.shape != target.shape:
+            raise InvalidInputError(
+                f"pairs[{k}].target: shape {target.shape} differs from the fitted image's {pred.shape}"
+            )
+        limits = _display_range(target, mask)
+        psnr, ssim = masked_psnr(pred, target, mask), masked_ssim(pred, target, mask)
+        label = f"pair {k}: " if rows > 1 else ""
+        _show(fig.add_subplot(grid[k, 0]), _display(source, _display_range(source, mask)),
+              f"{label}source", mask)
+        _show(fig.add_subplot(grid[k, 1]), _display(pred, limits),
+              f"fitted  PSNR {psnr:.2f} dB  SSIM {ssim:.3f}", mask)
+        _show(fig.add_subplot(grid[k, 2]), _display(target, limits), "target", mask)
+        residual = np.mean(target - pred, axis=-1)
+        residual[mask <= 0] = np.nan
+        residuals.append(residual)
+        residual_axes.append(fig.add_subplot(grid[k, 3]))
+
+    # One colour scale for every residual panel, so the pairs compare.
+    limit = _residual_limit(residuals)
+    channel_note = " (channel mean)" if _hwc(pairs[0][1]).shape[-1] > 1 else ""
+    for ax, residual in zip(residual_axes, residuals):
+        image = ax.imshow(residual, cmap="RdBu_r", vmin=-limit, vmax=limit, interpolation="nearest")
+        ax.set_facecolor("0.85")  # outside the mask
+        ax.set_title(f"residual  target - fitted{channel_note}", fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+        fig.colorbar(image, ax=ax, shrink=0.85, format="%.2g")
+
+    curve = fig.add_subplot(grid[rows, 0:2])
+    history = np.asarray(result.history, dtype=np.float64).ravel()
+    shown = np.isfinite(history) & (history > 0)
+    if np.any(shown):
+        steps = np.arange(1, history.size + 1)
+        curve.semilogy(steps[shown], history[shown], color="C0", lw=1.5, marker=".", ms=3)
+    curve.xaxis.set_major_locator(MaxNLocator(integer=True))
+    curve.set_xlabel("iteration")
+    curve.set_ylabel("loss")
+    curve.set_title("convergence", fontsize=9)
+    curve.grid(True, which="major", alpha=0.3)
+
+    text = fig.add_subplot(grid[rows, 2:4])
+    text.axis("off")
+    box = text.text(
+        0.0, 1.0, "\n".join(_parameter_lines(result)), va="top", ha="left",
+        family="monospace", fontsize=8, transform=text.transAxes, wrap=True,
+        bbox={"boxstyle": "round", "facecolor": "0.96", "edgecolor": "0.7"},
+    )
+    box.set_in_layout(False)  # long lines must not squeeze the panels above
+    fig.savefig(os.fspath(path), dpi=110)
