@@ -45,7 +45,7 @@ from .parametrisation import (
     resolve_profile,
 )
 from .result import FitResult, masked_list
-from .robust import check_robust, robust_weights
+from .robust import check_robust, robust_scale, robust_weights
 from .solve import SOLVERS, make_solver, run_solver
 from .uncertainty import gauss_newton_uncertainty, linearise, structural_reasons
 
@@ -389,11 +389,13 @@ def _fit_checked(data, single, model, roles, fixed, profile, profile_w, profile_
         return record.z, np.concatenate([history, record.history]), record.converged
 
     # Robust reweighting rounds, warm-started.
+    delta = 0.0
     if robust is not None:
         for _ in range(_ROBUST_ROUNDS):
             preds = _evaluate(objective, z)["predictions"]
             residuals = [np.asarray(p.target) - np.asarray(q) for p, q in zip(data, preds)]
-            u = robust_weights(residuals, [np.asarray(p.mask) for p in data], robust)
+            delta = robust_scale(residuals, [np.asarray(p.mask) for p in data], robust)
+            u = robust_weights(residuals, delta, robust)
             objective = eqx.tree_at(lambda o: o.robust, objective, tuple(jnp.asarray(x) for x in u))
             z, history, converged = refine(objective, z, history)
 
@@ -436,7 +438,9 @@ def _fit_checked(data, single, model, roles, fixed, profile, profile_w, profile_
     fitted = [np.asarray(q) for q in final["predictions"]]
 
     # Uncertainty and undetermined parameters.
-    unc = gauss_newton_uncertainty(objective, final["linearisation"], scales.correction)
+    unc = gauss_newton_uncertainty(
+        objective, final["linearisation"], scales.correction, None if robust is None else (robust, delta)
+    )
     natural_all = dict(natural, weights=weights)
     active = np.asarray(objective.active) if linear_weights else np.ones((variances.shape[0], c_tgt))
     flags, reasons = structural_reasons(roles, model, scales, natural_all, weights, active)

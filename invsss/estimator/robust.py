@@ -26,7 +26,7 @@ import numpy as np
 
 from ..validation import InvalidInputError
 
-__all__ = ["ROBUST_LOSSES", "check_robust", "robust_weights"]
+__all__ = ["ROBUST_LOSSES", "check_robust", "robust_scale", "robust_weights", "psi_and_slope"]
 
 ROBUST_LOSSES = ("pseudo-huber", "cauchy")
 _K = {"pseudo-huber": 3.0, "cauchy": 2.385}
@@ -43,19 +43,32 @@ def check_robust(robust):
     return robust
 
 
-def robust_weights(residuals, masks, kind: str) -> list[np.ndarray]:
-    """Weights ``u`` in (0, 1] for each pair's residual image (H, W, C).
-
-    ``masks`` are the pairs' (H, W) masks: the scale is estimated from the masked
-    pixels only.
-    """
+def robust_scale(residuals, masks, kind: str) -> float:
+    """The loss's ``delta``: ``k`` times 1.4826 the median absolute masked residual
+    (0 when the residual vanishes)."""
     pooled = np.concatenate([np.abs(r[m > 0]).ravel() for r, m in zip(residuals, masks)])
     sigma = 1.4826 * float(np.median(pooled))
-    if not np.isfinite(sigma) or sigma <= 0:
+    return _K[kind] * sigma if np.isfinite(sigma) else 0.0
+
+
+def robust_weights(residuals, delta: float, kind: str) -> list[np.ndarray]:
+    """Weights ``u = psi(r) / r`` in (0, 1] for each pair's residual image (H, W, C)."""
+    if delta <= 0:
         return [np.ones_like(r) for r in residuals]
-    delta = _K[kind] * sigma
     out = []
     for r in residuals:
         x2 = (np.asarray(r) / delta) ** 2
         out.append(1.0 / np.sqrt(1.0 + x2) if kind == "pseudo-huber" else 1.0 / (1.0 + x2))
     return out
+
+
+def psi_and_slope(r, delta: float, kind: str) -> tuple[np.ndarray, np.ndarray]:
+    """``psi(r) = rho'(r)`` and ``psi'(r)``, for the robust covariance."""
+    if delta <= 0:
+        return r, np.ones_like(r)
+    x2 = (r / delta) ** 2
+    if kind == "pseudo-huber":
+        u = 1.0 / np.sqrt(1.0 + x2)
+        return u * r, u**3
+    u = 1.0 / (1.0 + x2)
+    return u * r, u * u * (1.0 - x2)

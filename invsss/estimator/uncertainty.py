@@ -8,7 +8,11 @@ the data separate its Gaussian from the others) --
 
     cov = sigma^2 (J^T J)^+,    sigma^2 = sum(rho^2) / (N - p),
 
-``N`` the number of weighted residuals, ``p`` the number of unknowns. Reported
+``N`` the number of weighted residuals, ``p`` the number of unknowns. After a
+robust fit the robust weights are taken out of ``J`` and ``sigma^2`` becomes
+Huber's ``sum(psi(r)^2) / (N - p) / mean(psi'(r))^2`` (Huber 1981, section 7.6):
+without it, down-weighting the noise's tails would shrink ``sigma`` and the
+errors would be underestimated. Reported
 quantities (natural parameters, and weights ``w_i = beta_i / sum beta``) get their
 covariance by the delta method, ``G cov G^T`` with ``G`` their Jacobian.
 
@@ -38,6 +42,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from .robust import psi_and_slope
 
 __all__ = [
     "NULL_TOL",
@@ -110,15 +116,30 @@ def linearise(objective, z, coef, offset) -> dict:
     }
 
 
-def gauss_newton_uncertainty(objective, lin: dict, correction_ref: float) -> Uncertainty:
-    """Standard errors and undetermined entries from :func:`linearise`'s output."""
+def gauss_newton_uncertainty(objective, lin: dict, correction_ref: float, robust=None) -> Uncertainty:
+    """Standard errors and undetermined entries from :func:`linearise`'s output.
+
+    ``robust`` is None for plain least squares, else ``(kind, delta)`` of the
+    robust loss (``delta`` in target units); see the module docs.
+    """
     jac = np.asarray(lin["jacobian"])
     rho = np.asarray(lin["residual"])
     values, jacs = lin["values"], lin["value_jacobians"]
     weighted = np.concatenate([np.asarray(w).ravel() > 0 for w in objective.weights()])
     n, p = int(weighted.sum()), jac.shape[1]
     dof = max(n - p, 1)
-    sigma2 = float(np.sum(rho**2)) / dof
+    if robust is None:
+        sigma2 = float(np.sum(rho**2)) / dof
+    else:
+        # Undo the robust weights u (rho = sqrt(u) r): Huber's covariance of an
+        # M-estimate uses the unweighted Jacobian and the scale
+        # sum(psi^2) / (N - p) / mean(psi')^2.
+        u = np.concatenate([np.asarray(x).ravel() for x in objective.robust])
+        root = np.sqrt(u)
+        jac = jac / root[:, None]
+        r = (rho / root)[weighted]
+        psi, dpsi = psi_and_slope(r, robust[1] / float(objective.scale), robust[0])
+        sigma2 = float(np.sum(psi**2)) / dof / float(np.mean(dpsi)) ** 2
 
     # Scale to unit diagonal; a column with no effect keeps scale 1 and becomes a
     # zero eigenvalue, i.e. a null direction along its own axis.
