@@ -69,17 +69,6 @@ class SSSParams(eqx.Module):
             values = {k: np.asarray(d[k], dtype=np.float64) for k in _FIELDS}
         except (TypeError, ValueError):
             raise InvalidInputError(f"{source}: parameter values must be numbers") from None
-        for k in ("sss_level", "correction", "maxdd"):
-            if values[k].ndim != 0:
-                raise InvalidInputError(f"{source}: {k} must be a single number")
-        w, v = values["weights"], values["variances"]
-        if v.ndim != 1 or v.size == 0:
-            raise InvalidInputError(f"{source}: variances must be a non-empty list")
-        if w.ndim not in (1, 2) or w.shape[0] != v.shape[0]:
-            raise InvalidInputError(
-                f"{source}: weights must have one entry (or one per channel) for each of "
-                f"the {v.shape[0]} variances, got shape {w.shape}"
-            )
         params = cls(**values)
         params.check(source)
         return params
@@ -92,6 +81,20 @@ class SSSParams(eqx.Module):
         """Raise :class:`InvalidInputError` if the values break the constraints."""
         from .validation import is_concrete
 
+        # Shapes are static, so they are checked under jit/vmap too.
+        for k in ("sss_level", "correction", "maxdd"):
+            if np.ndim(getattr(self, k)) != 0:
+                raise InvalidInputError(
+                    f"{name}: {k} must be a single number, got shape {np.shape(getattr(self, k))}"
+                )
+        v_shape, w_shape = np.shape(self.variances), np.shape(self.weights)
+        if len(v_shape) != 1 or v_shape[0] == 0:
+            raise InvalidInputError(f"{name}: variances must be a non-empty list, got shape {v_shape}")
+        if len(w_shape) not in (1, 2) or w_shape[0] != v_shape[0]:
+            raise InvalidInputError(
+                f"{name}: weights must have one entry (or one per channel) for each of "
+                f"the {v_shape[0]} variances, got shape {w_shape}"
+            )
         if not all(is_concrete(getattr(self, k)) for k in _FIELDS):
             return
         vals = {k: np.asarray(getattr(self, k)) for k in _FIELDS}

@@ -561,6 +561,9 @@ def _bad_inputs():
         ("weights", (image[..., :1], depth, mask, rgb_weights), {}),
         ("params", (image, depth, mask, {"sss_level": 1.0}), {}),
         ("tap_weights", (image, depth, mask, p), {"tap_weights": "gauss"}),
+        ("weights", (image, depth, mask, SSSParams(800.0, 0.0, 1.0, [0.3, 0.3, 0.4], [0.5, 1.0])), {}),
+        ("sss_level", (image, depth, mask, SSSParams([800.0, 1.0], 0.0, 1.0, [0.5, 0.5], [0.5, 1.0])), {}),
+        ("variances", (image, depth, mask, SSSParams(800.0, 0.0, 1.0, [0.5, 0.5], [[0.5, 1.0]])), {}),
     ]
 
 

@@ -321,3 +321,15 @@ def test_import_invsss_does_not_import_torch():
     code = "import sys, invsss; sys.exit(int('torch' in sys.modules or 'kornia' in sys.modules))"
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
+
+
+def test_params_shapes_checked_at_the_boundary():
+    # Stricter than the JAX SSSParams.check (which leaves shapes to from_dict):
+    # a weight without a variance is an error here, not silently dropped.
+    scene = make_scene(33)
+    bad = dict(scene["params"], weights=np.ones(len(scene["params"]["variances"]) + 1))
+    message = _message(lambda: itorch.render(
+        scene["image"], scene["depth"], scene["mask"], itorch.SSSParams(**bad)))
+    assert message.startswith("params: weights must have one entry (or one per channel) for each of")
+    bad = dict(scene["params"], sss_level=[800.0, 900.0])
+    assert _message(lambda: itorch.SSSParams(**bad).check()) == "params: sss_level must be a single number"

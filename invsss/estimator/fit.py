@@ -443,7 +443,10 @@ def _fit_checked(data, single, model, roles, fixed, profile, profile_w, profile_
     )
     natural_all = dict(natural, weights=weights)
     active = np.asarray(objective.active) if linear_weights else np.ones((variances.shape[0], c_tgt))
-    flags, reasons = structural_reasons(roles, model, scales, natural_all, weights, active)
+    c_err = unc.stderr.get("correction")
+    flags, reasons = structural_reasons(
+        roles, model, scales, natural_all, weights, active, None if c_err is None else float(c_err)
+    )
     messages.extend(reasons)
     undetermined, stderr, numeric_only = [], {}, []
     for name in _PARAMS:

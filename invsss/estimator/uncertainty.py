@@ -50,6 +50,7 @@ __all__ = [
     "WEIGHT_VAGUE",
     "ZERO_WEIGHT",
     "COINCIDENT_PX",
+    "FEW_SLOPES",
     "Uncertainty",
     "linearise",
     "gauss_newton_uncertainty",
@@ -60,6 +61,7 @@ NULL_TOL = 1e-10
 WEIGHT_VAGUE = 0.1
 ZERO_WEIGHT = 1e-3
 COINCIDENT_PX = 0.25
+FEW_SLOPES = 0.01
 
 
 class Uncertainty(NamedTuple):
@@ -201,8 +203,17 @@ def _coinciding(natural, scales, flags, msgs, roles):
             )
 
 
-def structural_reasons(roles: dict, model: str, scales, natural: dict, weights, active) -> tuple[dict, list]:
+def structural_reasons(
+    roles: dict, model: str, scales, natural: dict, weights, active, correction_stderr=None
+) -> tuple[dict, list]:
     """Undetermined entries for the reasons MODEL.md section 6 names, with messages.
+
+    ``maxdd`` acts through the kink of ``min(|dd|, maxdd)``: a Gauss-Newton standard
+    error only sees the pixels next to the kink, so the extremes are checked by
+    counting. With fewer than :data:`FEW_SLOPES` of the masked slopes above
+    ``maxdd`` it is only bounded below; with fewer below it, only
+    ``correction * maxdd`` is determined. A correction within two standard errors
+    of 0 makes ``maxdd`` unmeasurable too.
 
     Returns ``(flags, messages)``: ``flags[name]`` is a boolean array of the
     parameter's shape (True = undetermined).
@@ -216,24 +227,37 @@ def structural_reasons(roles: dict, model: str, scales, natural: dict, weights, 
     if roles["correction"] == "free" or roles["maxdd"] == "free":
         delta = float(natural["maxdd"])
         c = float(natural["correction"])
+        above = float(np.mean(slopes > delta))
+        below = float(np.mean(slopes < delta))
         if np.all(slopes == 0):
             for k in ("correction", "maxdd"):
                 if roles[k] == "free":
                     flags[k] = np.ones((), bool)
             msgs.append("correction, maxdd: the depth is flat on the mask, so they have no effect")
-        elif roles["maxdd"] == "free" and delta >= slopes.max():
+        elif roles["maxdd"] == "free" and above < FEW_SLOPES:
             flags["maxdd"] = np.ones((), bool)
             msgs.append(
-                f"maxdd: no masked depth slope reaches it (the largest is {slopes.max():.4g}); "
-                "any value above that gives the same image"
+                f"maxdd: {above:.1%} of the masked depth slopes reach it (the largest is "
+                f"{slopes.max():.4g}), so it is only bounded below; larger values give the same image"
             )
-        elif roles["maxdd"] == "free" and delta <= slopes.min():
+        elif roles["maxdd"] == "free" and below < FEW_SLOPES:
             flags["maxdd"] = np.ones((), bool)
             if roles["correction"] == "free":
                 flags["correction"] = np.ones((), bool)
             msgs.append(
-                f"correction, maxdd: every masked depth slope exceeds maxdd, so only their "
-                f"product correction*maxdd = {c * delta:.4g} is determined"
+                f"correction, maxdd: {1 - below:.1%} of the masked depth slopes exceed maxdd, so only "
+                f"their product correction*maxdd = {c * delta:.4g} is determined"
+            )
+        elif (
+            roles["maxdd"] == "free"
+            and correction_stderr is not None
+            and np.isfinite(correction_stderr)
+            and c < 2.0 * correction_stderr
+        ):
+            flags["maxdd"] = np.ones((), bool)
+            msgs.append(
+                f"maxdd: the correction ({c:.3g} +- {correction_stderr:.2g}) is consistent with 0, "
+                "so maxdd has no measurable effect"
             )
     if roles["weights"] in ("linear", "free"):
         _coinciding(natural, scales, flags, msgs, roles)
