@@ -14,6 +14,7 @@ from .io import (
     write_image,
     write_params,
 )
+from .estimator import FitResult, fit_pair, fit_pairs
 from .export import export_params, shader_constants, to_hlsl, to_json
 from .params import SSSParams
 from .passes import TAP_WEIGHTS, directional_pass, sample_along, tap_spread, tap_weights

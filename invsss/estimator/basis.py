@@ -11,9 +11,20 @@ where the basis images ``X_pi`` depend nonlinearly on the free parameters and
   in the profile's order, so ``beta_ij = a_j w_ij`` (gain times weight);
 * otherwise the model's output, so ``beta_j = a_j`` is the gain.
 
-An RGB source with a grey target is first reduced to grey with the mix weights:
-every pass treats the channels alike and is linear in the image, so mixing before
-blurring equals blurring then mixing, and costs a third.
+Bilinear cases, and how they are made linear:
+
+* Grey target, RGB source: the prediction ``sum_c g_c sum_i w_i B_ic`` (``g = a m``,
+  gain times mix) is bilinear in ``g`` and ``w``; eliminating the products
+  ``g_c w_i`` as 3K free numbers would fit a general matrix where the model has a
+  rank-one one. Every pass treats the channels alike and is linear in the image,
+  so blurring commutes with mixing: the source is mixed to grey first (the mix is
+  a nonlinear unknown on the simplex, two numbers, so it cannot go negative) and
+  the projection sees the layers of the grey image; ``beta = a w`` stays linear,
+  and the blur costs a third.
+* Several pairs with their own exposure: ``a_p w_i`` is bilinear across pairs.
+  The gain of pair p relative to pair 0, ``r_p``, is a nonlinear unknown (one per
+  pair and channel), ``beta = a_0 w`` is shared and linear, offsets stay per pair.
+* RGB target: one weight column per channel, ``beta_ij = a_j w_ij``, linear.
 """
 
 from __future__ import annotations

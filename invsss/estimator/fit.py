@@ -22,7 +22,9 @@ normal equations over strongly correlated layers need it.
 
 from __future__ import annotations
 
+import dataclasses
 import numbers
+import os
 
 import equinox as eqx
 import jax
@@ -192,11 +194,11 @@ def _check_options(model, gauge, solver, n_starts, max_steps, progress, robust):
     return check_robust(robust)
 
 
-def _tap_weights(spec, model):
+def _tap_weights(spec, model, dtype=None):
     if spec is None:
         spec = "thesis" if model == "thesis" else "jimenez"
     try:
-        taps = tap_weight_set(spec, jnp.float64)
+        taps = tap_weight_set(spec, dtype)
     except (ValueError, TypeError) as err:
         raise InvalidInputError(str(err)) from None
     return spec if isinstance(spec, str) else np.asarray(taps).tolist(), taps
@@ -277,7 +279,7 @@ def _build(pairs, roles, fixed, profile_w, profile_v, scales):
     return param, param.unknowns(natural0)
 
 
-def _blur_at_zero(roles, param, scales, fixed, variances):
+def _blur_at_zero(roles, scales, fixed, variances):
     if roles["sss_level"] == "free":
         return 2.0  # by construction of the reference (initial.blur_reference)
     if roles["variances"] == "free":
@@ -299,17 +301,26 @@ def _loss(objective, z):
 
 
 @eqx.filter_jit
-def _evaluate(objective, z):
+def _evaluate(objective, z, with_jacobian):
     """Everything needed after a solve, in one compiled function: the linear
-    unknowns, predictions, loss and the linearisation for the covariance."""
+    unknowns, predictions, loss and, if the traced flag ``with_jacobian`` is set,
+    the linearisation for the covariance (a ``lax.cond``: one compilation serves
+    the cheap calls of the refinement loops and the final one)."""
     _, _, ratios, coef, offset = objective.linear(z)
+
+    def full():
+        return linearise(objective, z, coef, offset)
+
+    def skipped():
+        return jax.tree_util.tree_map(jnp.zeros_like, jax.eval_shape(full))
+
     return {
         "ratios": ratios,
         "coef": coef,
         "offset": offset,
         "predictions": objective.predictions(z),
         "loss": objective.loss(z),
-        "linearisation": linearise(objective, z, coef, offset),
+        "linearisation": jax.lax.cond(with_jacobian, full, skipped),
     }
 
 
@@ -336,136 +347,149 @@ def _fit(pairs, single, model, profile, fix, gauge, solver, n_starts, max_steps,
     with jax.enable_x64(True):
         profile_w, profile_v = resolve_profile(profile)
         data = prepare_pairs(pairs)
-        _, taps = _tap_weights(tap_weights, model)
-        return _fit_checked(
-            data, single, model, roles, fixed, profile, profile_w, profile_v, gauge, solver,
-            n_starts, max_steps, taps, tap_label, progress, robust,
+        _, taps = _tap_weights(tap_weights, model, jnp.float64)
+        problem = _Problem(data, model, roles, fixed, profile_w, profile_v, taps)
+        result = _solve(problem, make_solver(solver), n_starts, max_steps, progress, robust)
+        result = _report(problem, result, single, gauge, robust, max_steps)
+    # Rebuild the parameters outside float64 mode: the caller gets arrays of their
+    # own default precision, ready for render().
+    params = SSSParams(*(result.values[k] for k in _PARAMS))
+    label = os.fspath(profile) if isinstance(profile, (str, os.PathLike)) else ""
+    return dataclasses.replace(result, params=params, solver=solver, profile=label, tap_weights=tap_label)
+
+
+class _Problem:
+    """The checked inputs, the parametrisation and the (initial) objective."""
+
+    def __init__(self, data, model, roles, fixed, profile_w, profile_v, taps):
+        self.data, self.model, self.roles, self.fixed = data, model, roles, fixed
+        self.scales = data_scales(data)
+        self.param, self.z_base = _build(data, roles, fixed, profile_w, profile_v, self.scales)
+        self.variances = np.asarray(fixed.get("variances", profile_v))
+        self.channels = data[0].channels[1]
+        self.linear_weights = roles["weights"] == "linear"
+        nb = self.variances.shape[0] if self.linear_weights else 1
+        on_mask = np.concatenate([np.asarray(p.target)[np.asarray(p.mask) > 0].ravel() for p in data])
+        scale = float(np.std(on_mask)) or 1.0
+        self.objective = Objective(
+            self.param,
+            tuple(data),
+            taps,
+            tuple(jnp.ones_like(p.target) for p in data),
+            jnp.ones((nb, self.channels)),
+            jnp.asarray(scale),
+            model,
+            self.linear_weights,
         )
+        total = float(sum(np.sum(np.asarray(p.mask)) for p in data)) * self.channels
+        # 0.5 * sum(rho^2) -> the reported loss (see objective.py).
+        self.to_loss = 2.0 * scale**2 / total
 
 
-def _fit_checked(data, single, model, roles, fixed, profile, profile_w, profile_v, gauge, solver_name,
-                 n_starts, max_steps, taps, tap_label, progress, robust):
-    scales = data_scales(data)
-    param, z_base = _build(data, roles, fixed, profile_w, profile_v, scales)
-    variances = np.asarray(fixed.get("variances", profile_v))
-    c_tgt = data[0].channels[1]
-    linear_weights = roles["weights"] == "linear"
-    nb = variances.shape[0] if linear_weights else 1
-    on_mask = np.concatenate([np.asarray(p.target)[np.asarray(p.mask) > 0].ravel() for p in data])
-    scale = float(np.std(on_mask)) or 1.0
-    objective = Objective(
-        param,
-        tuple(data),
-        taps,
-        tuple(jnp.ones_like(p.target) for p in data),
-        jnp.ones((nb, c_tgt)),
-        jnp.asarray(scale),
-        model,
-        linear_weights,
-    )
-    total = float(sum(np.sum(np.asarray(p.mask)) for p in data)) * c_tgt
-    counter = _Counter(progress, 2.0 * scale**2 / total)
-    solver = make_solver(solver_name)
-    messages: list[str] = []
+class _Path:
+    """The solve so far: objective (with its robust weights and active set), the
+    unknowns, the loss history along the way and the last solve's status."""
+
+    def __init__(self, objective, z):
+        self.objective, self.z = objective, z
+        self.history, self.converged, self.failure = np.zeros(0), True, ""
+        self.messages: list[str] = []
+        self.delta = 0.0
+
+    def extend(self, record):
+        self.z = record.z
+        self.history = np.concatenate([self.history, record.history])
+        self.converged, self.failure = record.converged, record.failure
+
+
+def _solve(problem, solver, n_starts, max_steps, progress, robust) -> _Path:
+    """Multi-start, robust reweighting and the active set (steps 2-4 above)."""
+    param = problem.param
+    counter = _Counter(progress, problem.to_loss)
+    path = _Path(problem.objective, problem.z_base)
+    if not param.size:
+        return path
 
     # Multi-start from the lowest local minima of the blur scan; keep the best.
-    history, converged, z = np.zeros(0), True, z_base
-    if param.size:
-        blur0 = _blur_at_zero(roles, param, scales, fixed, variances)
-        starts = choose_starts(
-            lambda u: float(_loss(objective, jnp.asarray(u))), param, scales, blur0, z_base, n_starts
-        )
-        best = None
-        for z0 in starts:
-            record = run_solver(solver, objective, z0, max_steps, counter)
-            if best is None or record.final < best.final:
-                best = record
-        z, history, converged = best.z, best.history, best.converged
-
-    def refine(obj, z, history):
-        if not param.size:
-            return z, history, True
-        record = run_solver(solver, obj, z, max_steps, counter)
-        return record.z, np.concatenate([history, record.history]), record.converged
+    blur0 = _blur_at_zero(problem.roles, problem.scales, problem.fixed, problem.variances)
+    starts = choose_starts(
+        lambda u: float(_loss(path.objective, jnp.asarray(u))),
+        param, problem.scales, blur0, problem.z_base, n_starts,
+    )
+    best = None
+    for z0 in starts:
+        record = run_solver(solver, path.objective, z0, max_steps, counter)
+        if best is None or record.final < best.final:
+            best = record
+    path.extend(best)
 
     # Robust reweighting rounds, warm-started.
-    delta = 0.0
     if robust is not None:
+        masks = [np.asarray(p.mask) for p in problem.data]
         for _ in range(_ROBUST_ROUNDS):
-            preds = _evaluate(objective, z)["predictions"]
-            residuals = [np.asarray(p.target) - np.asarray(q) for p, q in zip(data, preds)]
-            delta = robust_scale(residuals, [np.asarray(p.mask) for p in data], robust)
-            u = robust_weights(residuals, delta, robust)
-            objective = eqx.tree_at(lambda o: o.robust, objective, tuple(jnp.asarray(x) for x in u))
-            z, history, converged = refine(objective, z, history)
+            preds = _evaluate(path.objective, path.z, jnp.asarray(False))["predictions"]
+            residuals = [np.asarray(p.target) - np.asarray(q) for p, q in zip(problem.data, preds)]
+            path.delta = robust_scale(residuals, masks, robust)
+            u = tuple(jnp.asarray(x) for x in robust_weights(residuals, path.delta, robust))
+            path.objective = eqx.tree_at(lambda o: o.robust, path.objective, u)
+            path.extend(run_solver(solver, path.objective, path.z, max_steps, counter))
 
     # Active set: weights are ratios on the simplex; hold negative ones at 0.
-    if linear_weights and nb > 1:
+    nb = int(path.objective.active.shape[0])
+    if problem.linear_weights and nb > 1:
         for _ in range(nb):
-            coef = np.asarray(_evaluate(objective, z)["coef"])
-            gain = coef.sum(axis=0)
-            negative = (coef * np.sign(gain) < 0) & (np.asarray(objective.active) > 0)
+            coef = np.asarray(_evaluate(path.objective, path.z, jnp.asarray(False))["coef"])
+            active = np.asarray(path.objective.active)
+            negative = (coef * np.sign(coef.sum(axis=0)) < 0) & (active > 0)
             if not negative.any():
                 break
-            active = np.where(negative, 0.0, np.asarray(objective.active))
-            objective = eqx.tree_at(lambda o: o.active, objective, jnp.asarray(active))
-            z, history, converged = refine(objective, z, history)
-        held = np.asarray(objective.active) == 0
+            active = jnp.asarray(np.where(negative, 0.0, active))
+            path.objective = eqx.tree_at(lambda o: o.active, path.objective, active)
+            path.extend(run_solver(solver, path.objective, path.z, max_steps, counter))
+        held = np.asarray(path.objective.active) == 0
+        held = held[:, 0] if problem.channels == 1 else held
         if held.any():
-            held = held[:, 0] if c_tgt == 1 else held
             names = ", ".join(_entry("weights", i) for i in zip(*np.nonzero(held)))
-            messages.append(f"{names}: held at 0 (the unconstrained least squares made them negative)")
+            path.messages.append(f"{names}: held at 0 (the unconstrained least squares made them negative)")
+    return path
 
-    # The estimate.
-    final = _evaluate(objective, jnp.asarray(z))
+
+def _report(problem, path, single, gauge, robust, max_steps) -> FitResult:
+    """The estimate, its uncertainty and diagnostics (step 5 above)."""
+    param, roles, data, c_tgt = problem.param, problem.roles, problem.data, problem.channels
+    messages = list(path.messages)
+    final = _evaluate(path.objective, jnp.asarray(path.z), jnp.asarray(True))
     ratios, coef, offset = (np.asarray(final[k]) for k in ("ratios", "coef", "offset"))
-    natural = {k: np.asarray(v) for k, v in param.natural(jnp.asarray(z)).items()}
-    if linear_weights:
-        gain1 = coef.sum(axis=0)
-        weights = coef / gain1
+    natural = {k: np.asarray(v) for k, v in param.natural(jnp.asarray(path.z)).items()}
+    if problem.linear_weights:
+        gain0 = coef.sum(axis=0)
+        weights = coef / gain0
         weights = weights[:, 0] if c_tgt == 1 else weights
     else:
-        gain1 = coef[0]
+        gain0 = coef[0]
         weights = natural["weights"]
         if weights.ndim == 2 and weights.shape[1] == 1 and c_tgt == 1:
             weights = weights[:, 0]
-    gain = ratios * gain1
-    if np.any(gain1 <= 0):
+    if np.any(gain0 <= 0):
         messages.append("gain: not positive; the target does not look like a blur of the source")
-    loss = float(final["loss"])
-    if len(history):
-        history = history * counter.to_loss
-    fitted = [np.asarray(q) for q in final["predictions"]]
+    natural["weights"] = weights
 
     # Uncertainty and undetermined parameters.
     unc = gauss_newton_uncertainty(
-        objective, final["linearisation"], scales.correction, None if robust is None else (robust, delta)
+        path.objective, final["linearisation"], problem.scales.correction,
+        None if robust is None else (robust, path.delta),
     )
-    natural_all = dict(natural, weights=weights)
-    active = np.asarray(objective.active) if linear_weights else np.ones((variances.shape[0], c_tgt))
+    if problem.linear_weights:
+        active = np.asarray(path.objective.active)
+    else:
+        active = np.ones((problem.variances.shape[0], c_tgt))
     c_err = unc.stderr.get("correction")
     flags, reasons = structural_reasons(
-        roles, model, scales, natural_all, weights, active, None if c_err is None else float(c_err)
+        roles, problem.model, problem.scales, natural, weights, active,
+        None if c_err is None else float(c_err),
     )
     messages.extend(reasons)
-    undetermined, stderr, numeric_only = [], {}, []
-    for name in _PARAMS:
-        if roles[name] == "fixed":
-            stderr[name] = None
-            continue
-        shape = np.shape(natural_all[name])
-        struct = np.broadcast_to(flags.get(name, False), shape)
-        numeric = np.broadcast_to(unc.undetermined.get(name, False), shape)
-        flag = struct | numeric
-        stderr[name] = masked_list(unc.stderr[name], flag) if name in unc.stderr else None
-        if roles[name] == "unused" or shape == ():
-            undetermined.extend([name] if flag.all() else [])
-        else:
-            undetermined.extend(_entry(name, i) for i in zip(*np.nonzero(flag)))
-        if shape == ():
-            numeric_only.extend([name] if numeric & ~struct else [])
-        else:
-            numeric_only.extend(_entry(name, i) for i in zip(*np.nonzero(numeric & ~struct)))
+    stderr, undetermined, numeric_only = _combine_flags(roles, natural, unc, flags)
     if numeric_only:
         messages.append(
             f"{', '.join(numeric_only)}: not determined by the data (a degenerate direction "
@@ -473,11 +497,12 @@ def _fit_checked(data, single, model, roles, fixed, profile, profile_w, profile_
         )
 
     # Goodness of fit and alignment.
+    fitted = [np.asarray(q) for q in final["predictions"]]
     masks = [np.asarray(p.mask) for p in data]
     targets = [np.asarray(p.target) for p in data]
-    weights_px = np.array([m.sum() for m in masks])
-    psnr = float(np.average([masked_psnr(f, t, m) for f, t, m in zip(fitted, targets, masks)], weights=weights_px))
-    ssim = float(np.average([masked_ssim(f, t, m) for f, t, m in zip(fitted, targets, masks)], weights=weights_px))
+    size = np.array([m.sum() for m in masks])
+    psnr = float(np.average([masked_psnr(f, t, m) for f, t, m in zip(fitted, targets, masks)], weights=size))
+    ssim = float(np.average([masked_ssim(f, t, m) for f, t, m in zip(fitted, targets, masks)], weights=size))
     for i, (f, t, m) in enumerate(zip(fitted, targets, masks)):
         dy, dx = misalignment(f, t, m)
         if max(abs(dy), abs(dx)) > MISALIGNMENT_PX:
@@ -486,34 +511,51 @@ def _fit_checked(data, single, model, roles, fixed, profile, profile_w, profile_
                 f"{where}target appears shifted by ({dy:+.1f}, {dx:+.1f}) px (dy, dx) relative to "
                 "the source; align the images, the fitted parameters are unreliable"
             )
-    if not converged:
-        messages.append(f"solver: not converged within max_steps={max_steps}")
+    if not path.converged:
+        messages.append(f"solver: not converged ({path.failure or f'max_steps={max_steps} reached'})")
 
-    params = SSSParams(
-        natural["sss_level"], natural["correction"], natural["maxdd"], weights, natural["variances"]
-    )
-    fixed_out = {k: np.asarray(param.values[k]).tolist() for k in _PARAMS if roles[k] == "fixed"}
     squeeze = (lambda a: a[0]) if single else (lambda a: a)
     return FitResult(
-        params=params,
+        params=None,
+        values={k: np.asarray(natural[k], np.float64) for k in _PARAMS},
         stderr=stderr,
         undetermined=tuple(undetermined),
-        fixed=fixed_out,
+        fixed={k: np.asarray(param.values[k]).tolist() for k in _PARAMS if roles[k] == "fixed"},
         gauge=gauge,
-        loss=loss,
+        loss=float(final["loss"]),
         sigma=unc.sigma,
         psnr=psnr,
         ssim=ssim,
-        converged=bool(converged),
-        iterations=int(len(history)),
-        history=np.asarray(history),
-        gain=squeeze(gain),
+        converged=bool(path.converged),
+        iterations=int(len(path.history)),
+        history=path.history * problem.to_loss,
+        gain=squeeze(ratios * gain0),
         offset=squeeze(offset),
         mix=natural.get("mix"),
         fitted=[f[..., 0] if p.target_ndim == 2 else f for f, p in zip(fitted, data)],
         warnings=tuple(messages),
-        model=model,
-        tap_weights=tap_label,
-        solver=solver_name,
-        profile=profile if isinstance(profile, str) else "",
+        model=problem.model,
+        tap_weights=None,
     )
+
+
+def _combine_flags(roles, natural, unc, flags):
+    """Standard errors (None where fixed or undetermined), the undetermined entry
+    names, and those flagged by the numerical test alone."""
+    stderr, undetermined, numeric_only = {}, [], []
+    for name in _PARAMS:
+        if roles[name] == "fixed":
+            stderr[name] = None
+            continue
+        shape = np.shape(natural[name])
+        struct = np.broadcast_to(flags.get(name, False), shape)
+        numeric = np.broadcast_to(unc.undetermined.get(name, False), shape)
+        flag = struct | numeric
+        stderr[name] = masked_list(unc.stderr[name], flag) if name in unc.stderr else None
+        if roles[name] == "unused" or shape == ():
+            undetermined.extend([name] if flag.all() else [])
+            numeric_only.extend([name] if shape == () and numeric & ~struct else [])
+        else:
+            undetermined.extend(_entry(name, i) for i in zip(*np.nonzero(flag)))
+            numeric_only.extend(_entry(name, i) for i in zip(*np.nonzero(numeric & ~struct)))
+    return stderr, undetermined, numeric_only

@@ -25,7 +25,7 @@ __all__ = ["DataScales", "data_scales", "blur_reference", "choose_starts"]
 
 _BLUR_GRID = 40
 _CORRECTION_GRID = (0.01, 0.1, 0.5, 2.0)  # in units of the reference correction
-_MAXDD_PERCENTILES = (50.0, 85.0)
+_MAXDD_PERCENTILES = (15.0, 50.0, 85.0)
 
 
 class DataScales(eqx.Module):
@@ -104,21 +104,22 @@ def choose_starts(loss, param, scales: DataScales, blur_at_zero: float | None, z
     maxdd at the median slope) on a fine log grid: the loss is bumpy in the blur
     scale (the 7 taps alias with the pixel grid, most on flat depth), so the starts
     are the ``n_starts`` lowest *local minima* of that profile, topped up with
-    the best remaining points. Stage 2 picks, for each, the best correction and
-    maxdd on a small grid. ``loss(z)`` evaluates the objective.
+    the best remaining points. Stage 2 picks, for each, the best correction (0.01
+    to 2 times its reference) and maxdd (15th, 50th, 85th percentile of the masked
+    slopes) on a small grid. ``loss(z)`` evaluates the objective.
     """
     blocks = dict(param.blocks)
-    fixed_c = {"correction": float(softplus_inverse(0.1))} if "correction" in blocks else {}
-    fixed_d = {"maxdd": 0.0} if "maxdd" in blocks else {}
+    c_mid = {"correction": float(softplus_inverse(0.1))} if "correction" in blocks else {}
+    d_mid = {"maxdd": 0.0} if "maxdd" in blocks else {}
     if blur_at_zero is None:
-        starts = [_with(param, z_base, **fixed_c, **fixed_d)]
+        starts = [_with(param, z_base, **c_mid, **d_mid)]
     else:
         sigmas = np.geomspace(0.25, max(scales.size / 4.0, 1.0), _BLUR_GRID)
         blur = np.log(sigmas / blur_at_zero)
 
         def at(b):
             u = {"sss_level": b} if "sss_level" in blocks else {"variances": 2.0 * b}
-            return _with(param, z_base, **u, **fixed_c, **fixed_d)
+            return _with(param, z_base, **u, **c_mid, **d_mid)
 
         profile = np.array([loss(at(b)) for b in blur])
         profile = np.where(np.isfinite(profile), profile, np.inf)
@@ -127,11 +128,11 @@ def choose_starts(loss, param, scales: DataScales, blur_at_zero: float | None, z
         order = sorted(minima, key=lambda i: profile[i])
         order += [i for i in np.argsort(profile) if i not in order]
         starts = [at(blur[i]) for i in order[:n_starts]]
-    if not fixed_c and not fixed_d:
+    if not c_mid and not d_mid:
         return starts
-    c_axis = list(softplus_inverse(np.asarray(_CORRECTION_GRID))) if fixed_c else [None]
+    c_axis = list(softplus_inverse(np.asarray(_CORRECTION_GRID))) if c_mid else [None]
     d_axis = [None]
-    if fixed_d:
+    if d_mid:
         positive = scales.slopes[scales.slopes > 0]
         values = np.percentile(positive, _MAXDD_PERCENTILES) if positive.size else np.array([scales.slope])
         d_axis = list(np.log(np.unique(values) / scales.slope))
@@ -146,6 +147,6 @@ def choose_starts(loss, param, scales: DataScales, blur_at_zero: float | None, z
                 if d is not None:
                     u["maxdd"] = d
                 options.append(_with(param, z, **u))
-        scores = [loss(o) for o in options]
-        refined.append(options[int(np.nanargmin(np.where(np.isfinite(scores), scores, np.nan)))])
+        scores = np.array([loss(o) for o in options])
+        refined.append(options[int(np.argmin(np.where(np.isfinite(scores), scores, np.inf)))])
     return refined

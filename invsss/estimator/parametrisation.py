@@ -58,6 +58,7 @@ __all__ = [
     "PARAM_NAMES",
     "GAUGES",
     "resolve_profile",
+    "softplus_inverse",
     "check_fix",
     "assign_roles",
     "Parametrisation",
@@ -227,14 +228,3 @@ class Parametrisation(eqx.Module):
                 u = np.log(x)
             parts.append(np.broadcast_to(u, shape).ravel())
         return jnp.asarray(np.concatenate(parts) if parts else np.zeros(0))
-
-    def elementwise_slope(self, z: Float[Array, " n"]) -> dict[str, Array]:
-        """``d natural / d z`` for the elementwise blocks (sss_level, correction, maxdd, variances)."""
-        out = {}
-        for name, u in self.split(z).items():
-            ref = self.reference[name]
-            if name in ("sss_level", "maxdd", "variances"):
-                out[name] = ref * jnp.exp(u)
-            elif name == "correction":
-                out[name] = ref * jax.nn.sigmoid(u)
-        return out

@@ -33,10 +33,12 @@ class FitResult(eqx.Module):
     Attributes
     ----------
     params : SSSParams
-        The estimate, as numbers (ready for :func:`invsss.render`). Entries listed
-        in ``undetermined`` carry no information (they are where the solver
-        stopped, or the profile's value for a parameter the model ignores); use
-        :meth:`to_dict`, which writes them as null.
+        The estimate, as numbers (ready for :func:`invsss.render`, in JAX's default
+        precision). Entries listed in ``undetermined`` carry no information (they
+        are where the solver stopped, or the profile's value for a parameter the
+        model ignores); use :meth:`to_dict`, which writes them as null.
+    values : dict
+        The same estimate as float64 NumPy arrays (what :meth:`to_dict` writes).
     stderr : dict
         Standard error of each parameter (float, or a list for weights and
         variances); None where the parameter is fixed (see ``fixed``) or
@@ -78,6 +80,7 @@ class FitResult(eqx.Module):
     """
 
     params: SSSParams
+    values: dict
     stderr: dict
     undetermined: tuple
     fixed: dict
@@ -101,7 +104,7 @@ class FitResult(eqx.Module):
 
     def is_undetermined(self, name: str) -> np.ndarray:
         """Boolean array of parameter ``name``'s shape: True where undetermined."""
-        shape = np.shape(getattr(self.params, name))
+        shape = np.shape(self.values[name])
         flags = np.zeros(shape, bool)
         for entry in self.undetermined:
             if entry == name:
@@ -118,7 +121,7 @@ class FitResult(eqx.Module):
         """
         out = {}
         for name in ("sss_level", "correction", "maxdd", "weights", "variances"):
-            out[name] = masked_list(getattr(self.params, name), self.is_undetermined(name))
+            out[name] = masked_list(self.values[name], self.is_undetermined(name))
         out["model"] = self.model
         out["tap_weights"] = self.tap_weights
         out["stderr"] = copy.deepcopy(dict(self.stderr))

@@ -64,8 +64,9 @@ class DenseJacobian(eqx.Module):
     is done; materialising it once per point means the solver's linearisation
     stores one small matrix instead of every intermediate of the blur passes, and
     a transposed product (BFGS's gradient) is a matrix product instead of reverse
-    mode through gathers (scatters, slow on CPU). Measured: a Levenberg-Marquardt
-    step several times faster at 64 x 64.
+    mode through gathers (scatters, slow on CPU). Measured at 64 x 64 (K = 5, three
+    unknowns, a busy 2-core machine): 110 ms per Levenberg-Marquardt step before,
+    6 ms after.
     """
 
     objective: eqx.Module
@@ -115,12 +116,14 @@ def _step(solver, fn, z, state):
 
 
 class SolveRecord(NamedTuple):
-    """Outcome of one solve: final unknowns, ``0.5 sum rho^2`` per step, status."""
+    """Outcome of one solve: final unknowns, ``0.5 sum rho^2`` per step, status
+    (``failure`` says why a solve stopped unconverged before ``max_steps``)."""
 
     z: jax.Array
     history: np.ndarray
     steps: int
     converged: bool
+    failure: str = ""
 
     @property
     def final(self) -> float:
@@ -138,7 +141,7 @@ def run_solver(
     z = jnp.asarray(z0)
     state = _init(solver, fn, z)
     history = []
-    converged = False
+    converged, failure = False, ""
     for _ in range(max_steps):
         z, state, loss, done, ok = _step(solver, fn, z, state)
         loss = float(loss)
@@ -146,10 +149,12 @@ def run_solver(
         if on_step is not None:
             on_step(loss)
         if not bool(ok):
+            failure = "the solver's linear solve failed"
             break
         if bool(done):
             converged = True
             break
         if not np.isfinite(loss):
+            failure = "the loss is not finite"
             break
-    return SolveRecord(z, np.asarray(history), len(history), converged)
+    return SolveRecord(z, np.asarray(history), len(history), converged, failure)

@@ -1,0 +1,370 @@
+"""The estimator recovers known parameters, reports what it cannot, and rejects bad input.
+
+Scenes come from ``_estimator_scenes`` (generated here, no files): a target
+rendered with the ``sog`` model at known parameters plus Gaussian noise of 1 % of
+the mean masked signal. Tolerances are those the issue asks for (``sss_level`` and
+``correction`` within 2 %, weights within 0.02); the scenes are 96 x 96 so that the
+fit's own standard errors are a third of those tolerances or less (checked in
+``test_standard_errors_match_the_scatter``), i.e. a pass is not luck.
+
+Runs of one configuration (free parameters, image size) share one compilation,
+so most tests use the same 96 x 96 single-channel, three-Gaussian setup.
+"""
+
+from __future__ import annotations
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import invsss
+from invsss import InvalidInputError
+from invsss import FitResult, fit_pair, fit_pairs
+
+from _estimator_scenes import make_pair
+
+# A profile with well separated variances, so every weight is identifiable.
+PROFILE3 = {"weights": [0.3, 0.45, 0.25], "variances": [0.25, 1.2, 5.0]}
+TRUTH = invsss.SSSParams(700.0, 300.0, 2.0, PROFILE3["weights"], PROFILE3["variances"])
+SIZE = 96
+
+
+def scene(name="face", params=TRUTH, seed=0, **kw):
+    kw.setdefault("contrast", 3.0)
+    kw.setdefault("size", SIZE)
+    return make_pair(name, params, seed=seed, **kw)
+
+
+@pytest.fixture(scope="module")
+def recovered():
+    """Default-gauge fits of two different geometries, with progress recorded."""
+    out = {}
+    for name in ("face", "wave"):
+        source, target, depth, mask, clean = scene(name)
+        calls = []
+        result = fit_pair(source, target, depth, mask, profile=PROFILE3, progress=lambda i, l: calls.append((i, l)))
+        out[name] = (result, calls, target, 0.01 * float(np.mean(clean[mask > 0])))
+    return out
+
+
+# ----------------------------------------------------------------- recovery
+
+
+@pytest.mark.parametrize("name", ["face", "wave"])
+def test_recovers_known_parameters_in_default_gauge(recovered, name):
+    result, _, _, noise = recovered[name]
+    assert isinstance(result, FitResult)
+    assert result.converged
+    assert result.gauge == "variances" and result.fixed == {"variances": PROFILE3["variances"]}
+    assert abs(float(result.params.sss_level) / 700.0 - 1) < 0.02
+    assert abs(float(result.params.correction) / 300.0 - 1) < 0.02
+    np.testing.assert_allclose(np.asarray(result.params.weights), PROFILE3["weights"], atol=0.02)
+    assert abs(float(result.params.maxdd) / 2.0 - 1) < 0.05
+    assert result.undetermined == ()
+    np.testing.assert_allclose(result.gain, [0.8], rtol=0.02)
+    np.testing.assert_allclose(result.offset, [0.05], atol=0.005)
+    # What is left is the noise (1 % of the mean signal).
+    assert 0.8 < result.sigma / noise < 1.25
+
+
+def test_result_report_and_progress(recovered):
+    result, calls, target, _ = recovered["face"]
+    assert [i for i, _ in calls] == list(range(1, len(calls) + 1))
+    assert len(calls) >= result.iterations == len(result.history) > 0
+    assert np.all(np.isfinite(result.history)) and result.loss == pytest.approx(result.history[-1], rel=1e-6)
+    assert result.fitted[0].shape == target.shape
+    # The estimate renders directly (in the caller's default precision).
+    assert result.params.sss_level.dtype == jnp.result_type(float)
+    assert result.solver == "lm" and result.profile == ""
+    assert result.psnr > 40 and 0.95 < result.ssim <= 1.0
+    assert not any("shifted" in w for w in result.warnings)
+    d = json.loads(json.dumps(result.to_dict(), allow_nan=False))
+    for key in ("sss_level", "correction", "maxdd", "weights", "variances", "model", "tap_weights",
+                "stderr", "undetermined", "loss", "psnr", "ssim", "converged", "iterations", "fixed",
+                "gauge", "gain", "offset"):
+        assert key in d
+    assert d["model"] == "sog" and d["tap_weights"] == "jimenez" and d["undetermined"] == []
+    assert d["stderr"]["variances"] is None  # fixed by the gauge
+    assert all(isinstance(d["stderr"][k], float) and d["stderr"][k] > 0 for k in ("sss_level", "correction", "maxdd"))
+
+
+def test_standard_errors_match_the_scatter():
+    """Over a few noise seeds the error / stderr ratios look like unit normals."""
+    z = []
+    for seed in (1, 2, 3, 4):
+        source, target, depth, mask, _ = scene("face", seed=seed)
+        d = fit_pair(source, target, depth, mask, profile=PROFILE3).to_dict()
+        se = d["stderr"]
+        z += [(d["sss_level"] - 700.0) / se["sss_level"], (d["correction"] - 300.0) / se["correction"]]
+        z += list((np.array(d["weights"]) - PROFILE3["weights"]) / np.array(se["weights"]))
+        # The tolerances of the recovery tests are at least 2.5 standard errors.
+        assert se["sss_level"] < 0.02 * 700 / 2.5 and se["correction"] < 0.02 * 300 / 2.5
+        assert max(se["weights"]) < 0.02 / 2.5
+    z = np.array(z)
+    assert np.max(np.abs(z)) < 4.0
+    assert 0.4 < np.sqrt(np.mean(z**2)) < 2.0
+
+
+def test_thesis_profile_reports_coinciding_gaussians():
+    """The default profile (thesis Table 5.1) has two variances 1.5 % apart: the
+    split of weight between them is reported undetermined, not as numbers."""
+    w = np.array([0.1478, 0.1323, 0.0004, 0.0527, 0.090])
+    truth = invsss.SSSParams(700.0, 300.0, 2.0, w / w.sum(), [8.749, 2.099, 0.549, 0.5574, 1.194])
+    source, target, depth, mask, _ = scene("face", truth)
+    result = fit_pair(source, target, depth, mask)
+    assert abs(float(result.params.sss_level) / 700.0 - 1) < 0.02
+    assert abs(float(result.params.correction) / 300.0 - 1) < 0.02
+    assert set(result.undetermined) == {"weights[2]", "weights[3]"}
+    d = result.to_dict()
+    assert d["weights"][2] is None and d["weights"][3] is None
+    assert d["stderr"]["weights"][2] is None and d["stderr"]["weights"][3] is None
+    assert any("only their sum" in m for m in result.warnings)
+    for i in (0, 1, 4):
+        assert abs(d["weights"][i] - truth.weights[i]) < 4 * d["stderr"]["weights"][i]
+
+
+# ----------------------------------------------------------------- undetermined
+
+
+def test_flat_depth_reports_correction_and_maxdd_undetermined():
+    source, target, depth, mask, _ = scene("flat")
+    result = fit_pair(source, target, depth, mask, profile=PROFILE3)
+    assert {"correction", "maxdd"} <= set(result.undetermined)
+    d = result.to_dict()
+    assert d["correction"] is None and d["maxdd"] is None
+    assert d["stderr"]["correction"] is None and d["stderr"]["maxdd"] is None
+    assert any("flat" in m for m in result.warnings)
+    # What the data do determine is still recovered.
+    assert abs(d["sss_level"] / 700.0 - 1) < 0.02
+    np.testing.assert_allclose(d["weights"], PROFILE3["weights"], atol=0.02)
+
+
+def test_maxdd_above_every_slope_is_undetermined():
+    truth = invsss.SSSParams(700.0, 300.0, 50.0, PROFILE3["weights"], PROFILE3["variances"])
+    source, target, depth, mask, _ = scene("face", truth)
+    result = fit_pair(source, target, depth, mask, profile=PROFILE3)
+    assert "maxdd" in result.undetermined and result.to_dict()["maxdd"] is None
+    assert "correction" not in result.undetermined
+    assert abs(float(result.params.correction) / 300.0 - 1) < 0.02
+
+
+# ----------------------------------------------------------------- other setups
+
+
+def test_sss_level_gauge_recovers_variances():
+    source, target, depth, mask, _ = scene("wave", seed=4)
+    start = {"weights": [1.0, 1.0, 1.0], "variances": [0.5, 1.0, 2.0]}
+    result = fit_pair(source, target, depth, mask, profile=start, gauge="sss_level", fix={"sss_level": 700.0})
+    assert result.gauge == "sss_level" and result.fixed == {"sss_level": 700.0}
+    assert result.undetermined == ()
+    np.testing.assert_allclose(np.asarray(result.params.variances), PROFILE3["variances"], rtol=0.03)
+    np.testing.assert_allclose(np.asarray(result.params.weights), PROFILE3["weights"], atol=0.02)
+    assert abs(float(result.params.correction) / 300.0 - 1) < 0.02
+    assert result.stderr["sss_level"] is None and len(result.stderr["variances"]) == 3
+
+
+def test_several_pairs_share_parameters_with_their_own_exposure():
+    pairs = []
+    for k, name in enumerate(("face", "wave")):
+        source, target, depth, mask, _ = scene(name, seed=5 + k, size=64, gain=0.8 + 0.3 * k, offset=0.02 * k)
+        pairs.append((source, target, depth, mask))
+    result = fit_pairs(pairs, profile=PROFILE3)
+    assert abs(float(result.params.sss_level) / 700.0 - 1) < 0.02
+    assert abs(float(result.params.correction) / 300.0 - 1) < 0.02
+    np.testing.assert_allclose(np.asarray(result.params.weights), PROFILE3["weights"], atol=0.02)
+    np.testing.assert_allclose(result.gain, [[0.8], [1.1]], rtol=0.02)
+    np.testing.assert_allclose(result.offset, [[0.0], [0.02]], atol=0.005)
+    assert len(result.fitted) == 2 and result.fitted[1].shape == pairs[1][1].shape
+
+
+def test_grey_target_from_rgb_source_fits_the_mix():
+    source, target, depth, mask, _ = scene("face", seed=7, source_channels=3, target="grey", mix=(0.5, 0.3, 0.2))
+    target = target[..., 0]  # a plain (H, W) grey photograph
+    result = fit_pair(source, target, depth, mask, profile=PROFILE3)
+    np.testing.assert_allclose(result.mix, [0.5, 0.3, 0.2], atol=0.02)
+    np.testing.assert_allclose(np.asarray(result.params.weights), PROFILE3["weights"], atol=0.02)
+    assert abs(float(result.params.sss_level) / 700.0 - 1) < 0.02
+    assert abs(float(result.params.correction) - 300.0) < 3 * result.stderr["correction"]
+    assert result.fitted[0].shape == target.shape
+    assert result.to_dict()["channels_mix"] == pytest.approx([0.5, 0.3, 0.2], abs=0.02)
+
+
+def test_misaligned_target_is_reported():
+    source, target, depth, mask, _ = scene("face", seed=3, shift=(0, 2))
+    result = fit_pair(source, target, depth, mask, profile=PROFILE3)
+    shifted = [w for w in result.warnings if "shifted" in w]
+    assert len(shifted) == 1 and "2.0" in shifted[0]
+
+
+def test_robust_loss_resists_outliers():
+    source, target, depth, mask, _ = scene("wave", seed=9)
+    rng = np.random.default_rng(9)
+    spots = rng.random(target.shape) < 0.02  # specular glints / dust: 2 % of the pixels
+    target = np.where(spots, target + rng.uniform(0.3, 0.6, target.shape), target)
+    robust = fit_pair(source, target, depth, mask, profile=PROFILE3)
+    assert abs(float(robust.params.sss_level) / 700.0 - 1) < 0.02
+    assert abs(float(robust.params.correction) / 300.0 - 1) < 0.02
+    plain = fit_pair(source, target, depth, mask, profile=PROFILE3, robust=None)
+    plain_error = abs(float(plain.params.correction) / 300.0 - 1)
+    assert plain_error > 2 * abs(float(robust.params.correction) / 300.0 - 1)
+
+
+# ----------------------------------------------------------------- bad input
+
+
+def _good():
+    rng = np.random.default_rng(0)
+    return {
+        "source": rng.uniform(0.2, 1.0, (12, 12)),
+        "target": rng.uniform(0.2, 1.0, (12, 12)),
+        "depth": np.full((12, 12), 500.0),
+        "mask": np.ones((12, 12)),
+    }
+
+
+def _with(**changes):
+    args = _good()
+    args.update(changes)
+    return args
+
+
+BAD = [
+    (_with(target=np.ones((12, 10))), {}, "target"),
+    (_with(target=np.ones((12, 12, 2))), {}, "target"),
+    (_with(source=np.ones((12, 12)), target=np.ones((12, 12, 3))), {}, "target"),
+    (_with(source=np.ones((12, 12, 4))), {}, "source"),
+    (_with(depth=np.full((12, 12), np.nan)), {}, "depth"),
+    (_with(depth=np.zeros((12, 12))), {}, "depth"),
+    (_with(depth=np.ones((12, 11))), {}, "depth"),
+    (_with(mask=np.zeros((12, 12))), {}, "mask"),
+    (_with(mask=np.full((12, 12), 2.0)), {}, "mask"),
+    (_with(source=np.full((12, 12), np.inf)), {}, "source"),
+    (_good(), {"model": "gaussian"}, "model"),
+    (_good(), {"solver": "adam"}, "solver"),
+    (_good(), {"gauge": "none"}, "gauge"),
+    (_good(), {"gauge": "sss_level"}, "sss_level"),
+    (_good(), {"fix": {"sss": 3.0}}, "fix"),
+    (_good(), {"fix": {"maxdd": -1.0}}, "maxdd"),
+    (_good(), {"fix": {"weights": [0.5, 0.5]}}, "weights"),
+    (_good(), {"n_starts": 0}, "n_starts"),
+    (_good(), {"max_steps": 2.5}, "max_steps"),
+    (_good(), {"robust": "huber!"}, "robust"),
+    (_good(), {"progress": 3}, "progress"),
+    (_good(), {"tap_weights": [1.0, 2.0]}, "tap_weights"),
+    (_good(), {"profile": "no-such-profile"}, "profile"),
+]
+
+
+@pytest.mark.parametrize("args, options, name", BAD)
+def test_bad_input_is_a_one_line_error(args, options, name):
+    with pytest.raises(InvalidInputError) as err:
+        fit_pair(args["source"], args["target"], args["depth"], args["mask"], **options)
+    message = str(err.value)
+    assert name in message and "\n" not in message
+
+
+def test_bad_pairs_are_named():
+    good = _good()
+    pair = (good["source"], good["target"], good["depth"], good["mask"])
+    with pytest.raises(InvalidInputError, match="pairs"):
+        fit_pairs([])
+    with pytest.raises(InvalidInputError, match=r"pairs\[1\]\.depth"):
+        fit_pairs([pair, (good["source"], good["target"], -good["depth"], good["mask"])])
+    rgb = np.repeat(good["source"][..., None], 3, axis=2)
+    with pytest.raises(InvalidInputError, match="channel"):
+        fit_pairs([pair, (rgb, good["target"], good["depth"], good["mask"])])
+
+
+# ----------------------------------------------------------------- pieces
+
+
+def test_projection_is_weighted_least_squares():
+    from invsss.estimator.projection import solve_linear
+
+    rng = np.random.default_rng(1)
+    with jax.enable_x64(True):
+        bases = (rng.random((3, 5, 6, 2)), rng.random((3, 4, 4, 2)))
+        targets = (rng.random((5, 6, 2)), rng.random((4, 4, 2)))
+        weights = (rng.random((5, 6, 2)), rng.random((4, 4, 2)))
+        ratios = np.array([[1.0, 1.0], [0.7, 1.3]])
+        coef, offset = solve_linear(
+            tuple(map(jnp.asarray, bases)), tuple(map(jnp.asarray, targets)),
+            tuple(map(jnp.asarray, weights)), jnp.asarray(ratios), jnp.ones((3, 2)),
+        )
+        for c in range(2):
+            rows, rhs = [], []
+            for p in range(2):
+                x = bases[p][..., c].reshape(3, -1).T * ratios[p, c]
+                ind = np.zeros((x.shape[0], 2))
+                ind[:, p] = 1.0
+                sw = np.sqrt(weights[p][..., c].ravel())[:, None]
+                rows.append(sw * np.hstack([x, ind]))
+                rhs.append(sw[:, 0] * targets[p][..., c].ravel())
+            expected = np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)[0]
+            np.testing.assert_allclose(np.asarray(coef)[:, c], expected[:3], rtol=1e-7)
+            np.testing.assert_allclose(np.asarray(offset)[:, c], expected[3:], rtol=1e-7)
+        # An inactive basis image gets a zero coefficient; the rest is refitted.
+        coef0, _ = solve_linear(
+            tuple(map(jnp.asarray, bases)), tuple(map(jnp.asarray, targets)),
+            tuple(map(jnp.asarray, weights)), jnp.asarray(ratios), jnp.asarray([[1.0, 1.0], [0.0, 1.0], [1.0, 1.0]]),
+        )
+        assert float(coef0[1, 0]) == 0.0 and float(coef0[1, 1]) == pytest.approx(float(coef[1, 1]))
+
+
+class _Captured(Exception):
+    pass
+
+
+def test_projected_residual_jacobian_matches_finite_differences(monkeypatch):
+    """The solver's derivative (dense Jacobian through the projection) against
+    central differences of the projected residual, in float64."""
+    import equinox as eqx
+
+    from invsss.estimator import fit as fit_module
+    from invsss.estimator.solve import DenseJacobian
+
+    source, target, depth, mask, _ = scene("face", size=24, seed=11)
+    captured = {}
+
+    def spy(solver, objective, z0, max_steps, on_step=None):
+        captured["objective"], captured["z"] = objective, np.asarray(z0)
+        raise _Captured
+
+    monkeypatch.setattr(fit_module, "run_solver", spy)
+    with pytest.raises(_Captured):
+        fit_pair(source, target, depth, mask, profile=PROFILE3, n_starts=1)
+    with jax.enable_x64(True):
+        fn = DenseJacobian(captured["objective"])
+        z = jnp.asarray(captured["z"]) + jnp.asarray([0.05, -0.1, 0.07])  # L, correction, maxdd
+
+        @eqx.filter_jit
+        def residual(f, u):
+            return f(u)[0]
+
+        @eqx.filter_jit
+        def jacobian(f, u):
+            return jax.jacfwd(lambda v: f(v)[0])(u)
+
+        jac = np.asarray(jacobian(fn, z))
+        h = 1e-5
+        for k in range(z.size):
+            e = jnp.zeros_like(z).at[k].set(h)
+            fd = (np.asarray(residual(fn, z + e)) - np.asarray(residual(fn, z - e))) / (2 * h)
+            # Norm-wise: the model is piecewise smooth (linear interpolation, the
+            # min at maxdd), and a kink inside [z - h, z + h] spoils a single entry.
+            assert np.linalg.norm(fd) > 0
+            assert np.linalg.norm(jac[:, k] - fd) < 1e-4 * np.linalg.norm(fd)
+
+
+@pytest.mark.parametrize("solver", ["gauss-newton", "bfgs"])
+def test_other_solvers_reach_the_same_fit(solver):
+    source, target, depth, mask, _ = scene("face", size=32, seed=12)
+    kw = {"profile": PROFILE3, "fix": {"correction": 300.0, "maxdd": 2.0}, "n_starts": 1, "robust": None}
+    lm = fit_pair(source, target, depth, mask, **kw)
+    other = fit_pair(source, target, depth, mask, solver=solver, max_steps=400, **kw)
+    assert other.solver == solver
+    assert float(other.params.sss_level) == pytest.approx(float(lm.params.sss_level), rel=0.005)
+    assert other.loss == pytest.approx(lm.loss, rel=0.01)
