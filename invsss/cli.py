@@ -14,6 +14,7 @@ import argparse
 import os
 import sys
 import time
+import warnings
 
 import numpy as np
 
@@ -409,10 +410,17 @@ def main(argv: list[str] | None = None) -> int:
         print("invsss: error: a command is required", file=sys.stderr)
         return 2
     try:
-        return args.func(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            return args.func(args)
     except InvalidInputError as err:
         print(f"invsss: error: {err}", file=sys.stderr)
         return 2
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    # Library warnings reach a command-line user as one line, without a source location.
+    print(f"invsss: warning: {message}", file=sys.stderr)
 
 
 if __name__ == "__main__":

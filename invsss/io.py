@@ -39,6 +39,7 @@ import json
 import math
 import os
 import secrets
+import warnings
 from collections.abc import Mapping
 from pathlib import Path
 from typing import NamedTuple
@@ -92,6 +93,10 @@ PARAMS_OPTIONAL_KEYS = (
     "gain",
     "offset",
     "profile",
+    "estimate",
+    "sigma",
+    "solver",
+    "warnings",
 )
 
 # Bits written for each extension when write_image is not told (EXR/TIFF keep
@@ -614,6 +619,10 @@ def read_params(path) -> tuple[SSSParams, dict]:
     and optionally any of :data:`PARAMS_OPTIONAL_KEYS`. Any other key is an
     error, so a misspelt key never silently falls back to a default.
 
+    A fit's params file holds ``null`` where the data did not determine a
+    value, and its point estimate under ``estimate``; such nulls are filled
+    from ``estimate`` and listed in ``extras["filled_from_estimate"]``.
+
     Returns
     -------
     params : SSSParams
@@ -656,8 +665,32 @@ def read_params(path) -> tuple[SSSParams, dict]:
     _check_keys(content, name)
     extras = {k: v for k, v in content.items() if k not in PARAMS_KEYS}
     _check_model_choice(extras, name)
-    params = SSSParams.from_dict({k: content[k] for k in PARAMS_KEYS if k in content}, source=name)
+    values = {k: content[k] for k in PARAMS_KEYS if k in content}
+    nulls = [k for k, v in values.items() if _has_null(v)]
+    if nulls:
+        # A fit writes undetermined values as null, and beside them the point
+        # estimate that produced its fit.exr; a renderer needs numbers, so use
+        # those and say which ones the data did not determine.
+        estimate = extras.get("estimate")
+        if not isinstance(estimate, dict) or any(_has_null(estimate.get(k)) for k in nulls):
+            raise InvalidInputError(
+                f"{name}: {', '.join(nulls)} is null (undetermined by the fit); "
+                "give a number, or re-fit with --fix"
+            )
+        values.update({k: estimate[k] for k in nulls})
+        extras["filled_from_estimate"] = nulls
+        warnings.warn(
+            f"{name}: {', '.join(nulls)} not determined by the fit; using its point estimate",
+            stacklevel=2,
+        )
+    params = SSSParams.from_dict(values, source=name)
     return params, extras
+
+
+def _has_null(value) -> bool:
+    if isinstance(value, list):
+        return any(_has_null(v) for v in value)
+    return value is None
 
 
 def _to_json(value):

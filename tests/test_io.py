@@ -434,3 +434,49 @@ def test_bad_params_files_are_named(tmp_path, content, expected):
     path = tmp_path / "bad.json"
     path.write_text(content)
     assert expected in _raises(invsss.read_params, path, match_file=path)
+
+
+def _fitted_params_file(tmp_path, with_estimate):
+    content = {
+        "sss_level": 600.0, "correction": 800.0, "maxdd": None,
+        "weights": [0.6, None, None], "variances": [0.5, 1.0, 1.01],
+        "undetermined": ["maxdd", "weights[1]", "weights[2]"],
+    }
+    if with_estimate:
+        content["estimate"] = {
+            "sss_level": 600.0, "correction": 800.0, "maxdd": 0.25,
+            "weights": [0.6, 0.3, 0.1], "variances": [0.5, 1.0, 1.01],
+        }
+    path = tmp_path / "params.json"
+    path.write_text(json.dumps(content))
+    return path
+
+
+def test_undetermined_values_are_filled_from_the_fit_estimate_with_a_warning(tmp_path):
+    path = _fitted_params_file(tmp_path, with_estimate=True)
+    with pytest.warns(UserWarning, match=r"maxdd, weights not determined"):
+        params, extras = invsss.read_params(path)
+    assert float(params.maxdd) == 0.25
+    np.testing.assert_allclose(np.asarray(params.weights), [0.6, 0.3, 0.1], rtol=1e-6)
+    assert extras["filled_from_estimate"] == ["maxdd", "weights"]
+
+
+def test_undetermined_values_without_estimate_are_an_error(tmp_path):
+    path = _fitted_params_file(tmp_path, with_estimate=False)
+    with pytest.raises(InvalidInputError, match=r"params.json: maxdd, weights is null"):
+        invsss.read_params(path)
+
+
+def test_cli_render_warns_once_about_filled_values(tmp_path, capsys):
+    from invsss.cli import main
+
+    path = _fitted_params_file(tmp_path, with_estimate=True)
+    rng = np.random.default_rng(3)
+    invsss.write_image(tmp_path / "image.exr", rng.random((12, 10, 3)).astype(np.float32))
+    invsss.write_image(tmp_path / "depth.exr", np.full((12, 10), 500.0, np.float32))
+    invsss.write_image(tmp_path / "mask.exr", np.ones((12, 10), np.float32))
+    code = main(["render", "--image", str(tmp_path / "image.exr"), "--depth", str(tmp_path / "depth.exr"),
+                 "--mask", str(tmp_path / "mask.exr"), "--params", str(path), "--out", str(tmp_path / "o.exr")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 0
+    assert err == [f"invsss: warning: {path}: maxdd, weights not determined by the fit; using its point estimate"]

@@ -139,4 +139,14 @@ class FitResult(eqx.Module):
             out["channels_mix"] = np.asarray(self.mix).tolist()
         if self.profile:
             out["profile"] = self.profile
+        out["sigma"] = _number(self.sigma)
+        out["solver"] = self.solver
+        out["warnings"] = list(self.warnings)
+        if self.undetermined:
+            # The numbers that produced the fitted image, undetermined ones
+            # included: what a renderer uses when it needs a value anyway.
+            out["estimate"] = {
+                name: np.asarray(self.values[name]).tolist()
+                for name in ("sss_level", "correction", "maxdd", "weights", "variances")
+            }
         return out
