@@ -9,7 +9,7 @@ from jaxtyping import Array, Float
 
 from .validation import InvalidInputError
 
-__all__ = ["SSSParams"]
+__all__ = ["SSSParams", "check_parameter_values"]
 
 _FIELDS = ("sss_level", "correction", "maxdd", "weights", "variances")
 
@@ -78,36 +78,50 @@ class SSSParams(eqx.Module):
         return {k: np.asarray(getattr(self, k)).tolist() for k in _FIELDS}
 
     def check(self, name: str = "params") -> None:
-        """Raise :class:`InvalidInputError` if the values break the constraints."""
+        """Raise :class:`InvalidInputError` if the values break the constraints.
+
+        Shapes are static and are checked under ``jit``/``vmap`` too; values
+        only when they are concrete.
+        """
         from .validation import is_concrete
 
-        # Shapes are static, so they are checked under jit/vmap too.
-        for k in ("sss_level", "correction", "maxdd"):
-            if np.ndim(getattr(self, k)) != 0:
-                raise InvalidInputError(
-                    f"{name}: {k} must be a single number, got shape {np.shape(getattr(self, k))}"
-                )
-        v_shape, w_shape = np.shape(self.variances), np.shape(self.weights)
-        if len(v_shape) != 1 or v_shape[0] == 0:
-            raise InvalidInputError(f"{name}: variances must be a non-empty list, got shape {v_shape}")
-        if len(w_shape) not in (1, 2) or w_shape[0] != v_shape[0]:
+        concrete = all(is_concrete(getattr(self, k)) for k in _FIELDS)
+        check_parameter_values({k: getattr(self, k) for k in _FIELDS}, name, values=concrete)
+
+
+def check_parameter_values(params, name: str = "params", *, values: bool = True) -> None:
+    """Check a mapping of the five parameters: shapes always, values if ``values``.
+
+    Shared by :class:`SSSParams` and its PyTorch twin so both give the same
+    messages. Arrays may be anything ``numpy.asarray`` accepts (or, with
+    ``values=False``, anything with a shape, tracers included).
+    """
+    for k in ("sss_level", "correction", "maxdd"):
+        if np.ndim(params[k]) != 0:
             raise InvalidInputError(
-                f"{name}: weights must have one entry (or one per channel) for each of "
-                f"the {v_shape[0]} variances, got shape {w_shape}"
+                f"{name}: {k} must be a single number, got shape {np.shape(params[k])}"
             )
-        if not all(is_concrete(getattr(self, k)) for k in _FIELDS):
-            return
-        vals = {k: np.asarray(getattr(self, k)) for k in _FIELDS}
-        for k, v in vals.items():
-            if not np.all(np.isfinite(v)):
-                raise InvalidInputError(f"{name}: {k} contains NaN or infinite values")
-        if vals["sss_level"] <= 0:
-            raise InvalidInputError(f"{name}: sss_level must be > 0, got {float(vals['sss_level']):g}")
-        if vals["correction"] < 0:
-            raise InvalidInputError(f"{name}: correction must be >= 0, got {float(vals['correction']):g}")
-        if vals["maxdd"] <= 0:
-            raise InvalidInputError(f"{name}: maxdd must be > 0, got {float(vals['maxdd']):g}")
-        if np.any(vals["variances"] < 0):
-            raise InvalidInputError(f"{name}: variances must be >= 0")
-        if np.any(vals["weights"] < 0) or np.any(vals["weights"].sum(axis=0) <= 0):
-            raise InvalidInputError(f"{name}: weights must be >= 0 with a positive sum")
+    v_shape, w_shape = np.shape(params["variances"]), np.shape(params["weights"])
+    if len(v_shape) != 1 or v_shape[0] == 0:
+        raise InvalidInputError(f"{name}: variances must be a non-empty list, got shape {v_shape}")
+    if len(w_shape) not in (1, 2) or w_shape[0] != v_shape[0]:
+        raise InvalidInputError(
+            f"{name}: weights must have one entry (or one per channel) for each of "
+            f"the {v_shape[0]} variances, got shape {w_shape}"
+        )
+    if not values:
+        return
+    vals = {k: np.asarray(params[k]) for k in _FIELDS}
+    for k, v in vals.items():
+        if not np.all(np.isfinite(v)):
+            raise InvalidInputError(f"{name}: {k} contains NaN or infinite values")
+    if vals["sss_level"] <= 0:
+        raise InvalidInputError(f"{name}: sss_level must be > 0, got {float(vals['sss_level']):g}")
+    if vals["correction"] < 0:
+        raise InvalidInputError(f"{name}: correction must be >= 0, got {float(vals['correction']):g}")
+    if vals["maxdd"] <= 0:
+        raise InvalidInputError(f"{name}: maxdd must be > 0, got {float(vals['maxdd']):g}")
+    if np.any(vals["variances"] < 0):
+        raise InvalidInputError(f"{name}: variances must be >= 0")
+    if np.any(vals["weights"] < 0) or np.any(vals["weights"].sum(axis=0) <= 0):
+        raise InvalidInputError(f"{name}: weights must be >= 0 with a positive sum")

@@ -324,12 +324,18 @@ def test_import_invsss_does_not_import_torch():
 
 
 def test_params_shapes_checked_at_the_boundary():
-    # Stricter than the JAX SSSParams.check (which leaves shapes to from_dict):
-    # a weight without a variance is an error here, not silently dropped.
+    # A weight without a variance, or a list where a number belongs, is an error
+    # with the same one-line message in both implementations, not silently dropped.
     scene = make_scene(33)
-    bad = dict(scene["params"], weights=np.ones(len(scene["params"]["variances"]) + 1))
-    message = _message(lambda: itorch.render(
-        scene["image"], scene["depth"], scene["mask"], itorch.SSSParams(**bad)))
-    assert message.startswith("params: weights must have one entry (or one per channel) for each of")
-    bad = dict(scene["params"], sss_level=[800.0, 900.0])
-    assert _message(lambda: itorch.SSSParams(**bad).check()) == "params: sss_level must be a single number"
+    k = len(scene["params"]["variances"])
+    for bad in (
+        dict(scene["params"], weights=np.ones(k + 1)),
+        dict(scene["params"], sss_level=[800.0, 900.0]),
+        dict(scene["params"], variances=[scene["params"]["variances"]]),
+    ):
+        torch_message = _message(lambda: itorch.render(
+            scene["image"], scene["depth"], scene["mask"], itorch.SSSParams(**bad)))
+        jax_message = _message(lambda: invsss.render(
+            scene["image"], scene["depth"], scene["mask"], invsss.SSSParams(**bad)))
+        assert torch_message == jax_message
+        assert torch_message.startswith("params: ") and "\n" not in torch_message

@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 import torch
 
+from ..params import check_parameter_values
 from ..validation import InvalidInputError
 
 __all__ = ["SSSParams"]
@@ -93,27 +94,4 @@ class SSSParams:
 
         The same checks and messages as :meth:`invsss.SSSParams.check`.
         """
-        vals = {k: getattr(self, k).detach().cpu().numpy() for k in _FIELDS}
-        for k in ("sss_level", "correction", "maxdd"):
-            if vals[k].ndim != 0:
-                raise InvalidInputError(f"{name}: {k} must be a single number")
-        if vals["variances"].ndim != 1 or vals["variances"].size == 0:
-            raise InvalidInputError(f"{name}: variances must be a non-empty list")
-        if vals["weights"].ndim not in (1, 2) or vals["weights"].shape[0] != vals["variances"].shape[0]:
-            raise InvalidInputError(
-                f"{name}: weights must have one entry (or one per channel) for each of "
-                f"the {vals['variances'].shape[0]} variances, got shape {vals['weights'].shape}"
-            )
-        for k, v in vals.items():
-            if not np.all(np.isfinite(v)):
-                raise InvalidInputError(f"{name}: {k} contains NaN or infinite values")
-        if vals["sss_level"] <= 0:
-            raise InvalidInputError(f"{name}: sss_level must be > 0, got {float(vals['sss_level']):g}")
-        if vals["correction"] < 0:
-            raise InvalidInputError(f"{name}: correction must be >= 0, got {float(vals['correction']):g}")
-        if vals["maxdd"] <= 0:
-            raise InvalidInputError(f"{name}: maxdd must be > 0, got {float(vals['maxdd']):g}")
-        if np.any(vals["variances"] < 0):
-            raise InvalidInputError(f"{name}: variances must be >= 0")
-        if np.any(vals["weights"] < 0) or np.any(vals["weights"].sum(axis=0) <= 0):
-            raise InvalidInputError(f"{name}: weights must be >= 0 with a positive sum")
+        check_parameter_values({k: getattr(self, k).detach().cpu().numpy() for k in _FIELDS}, name)
