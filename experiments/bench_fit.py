@@ -5,7 +5,7 @@ both sides of ``maxdd``) is rendered with the ``sog`` model at known parameters,
 with gain, offset and 0.5 % noise. On that pair the script times:
 
 ``invsss.fit_pair``
-    the whole estimator, one start, no robust reweighting: coarse grid search,
+    the whole estimator, one start, no robust reweighting: scan of start points,
     LM solve, active set, standard errors, PSNR/SSIM, misalignment check;
 ``invsss LM``
     only the solve: optimistix Levenberg-Marquardt stepped by
