@@ -9,7 +9,7 @@ from jaxtyping import Array, Float
 
 from .validation import InvalidInputError
 
-__all__ = ["SSSParams", "check_parameter_values"]
+__all__ = ["SSSParams", "check_parameter_values", "parameter_arrays"]
 
 _FIELDS = ("sss_level", "correction", "maxdd", "weights", "variances")
 
@@ -62,14 +62,7 @@ class SSSParams(eqx.Module):
         :func:`invsss.read_params` is the place that rejects unknown keys in a
         params file.
         """
-        missing = [k for k in _FIELDS if k not in d]
-        if missing:
-            raise InvalidInputError(f"{source}: missing key(s) {', '.join(missing)}")
-        try:
-            values = {k: np.asarray(d[k], dtype=np.float64) for k in _FIELDS}
-        except (TypeError, ValueError):
-            raise InvalidInputError(f"{source}: parameter values must be numbers") from None
-        params = cls(**values)
+        params = cls(**parameter_arrays(d, source))
         params.check(source)
         return params
 
@@ -87,6 +80,17 @@ class SSSParams(eqx.Module):
 
         concrete = all(is_concrete(getattr(self, k)) for k in _FIELDS)
         check_parameter_values({k: getattr(self, k) for k in _FIELDS}, name, values=concrete)
+
+
+def parameter_arrays(d, source: str = "params") -> dict[str, np.ndarray]:
+    """The five parameters of mapping ``d`` as float64 NumPy arrays (shapes unchecked)."""
+    missing = [k for k in _FIELDS if k not in d]
+    if missing:
+        raise InvalidInputError(f"{source}: missing key(s) {', '.join(missing)}")
+    try:
+        return {k: np.asarray(d[k], dtype=np.float64) for k in _FIELDS}
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"{source}: parameter values must be numbers") from None
 
 
 def check_parameter_values(params, name: str = "params", *, values: bool = True) -> None:

@@ -20,9 +20,7 @@ from invsss import (
     InvalidInputError,
     SSSParams,
     render,
-    render_separable,
     render_sog,
-    render_thesis,
     separable_kernel,
     stretch_factors,
 )

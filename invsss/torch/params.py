@@ -7,8 +7,7 @@ import dataclasses
 import numpy as np
 import torch
 
-from ..params import check_parameter_values
-from ..validation import InvalidInputError
+from ..params import check_parameter_values, parameter_arrays
 
 __all__ = ["SSSParams"]
 
@@ -73,15 +72,8 @@ class SSSParams:
     @classmethod
     def from_dict(cls, d: dict, source: str = "params") -> "SSSParams":
         """Build from a params mapping (e.g. ``invsss.SSSParams.to_dict()`` or a JSON file)."""
-        missing = [k for k in _FIELDS if k not in d]
-        if missing:
-            raise InvalidInputError(f"{source}: missing key(s) {', '.join(missing)}")
-        try:
-            values = {k: np.asarray(d[k], dtype=np.float64) for k in _FIELDS}
-        except (TypeError, ValueError):
-            raise InvalidInputError(f"{source}: parameter values must be numbers") from None
         # check() covers the shapes and the constraints.
-        params = cls(**values)
+        params = cls(**parameter_arrays(d, source))
         params.check(source)
         return params
 
