@@ -30,13 +30,11 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 
 import jax
 import numpy as np
 
-from .io import read_params
+from .io import read_params, write_text_atomic
 from .params import SSSParams
 from .passes import TAP_OFFSETS, tap_spread
 from .passes import tap_weights as tap_weight_set
@@ -285,22 +283,6 @@ def to_json(constants: dict) -> str:
     return json.dumps(constants, indent=2) + "\n"
 
 
-def _write_text(path: str, text: str) -> None:
-    # Atomic, like the other writers: a temporary file in the same directory, then os.replace.
-    directory = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(directory):
-        raise InvalidInputError(f"{path}: cannot write, directory {directory} does not exist")
-    fd, temporary = tempfile.mkstemp(prefix=".invsss-", suffix=".tmp", dir=directory)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(temporary, path)
-    except BaseException:
-        if os.path.exists(temporary):
-            os.unlink(temporary)
-        raise
-
-
 def export_params(
     params_json_path, out_path=None, format: str = "json", *, model: str | None = None,
     tap_weights=None, taps: int = 17, strength: float = 1.0,
@@ -343,5 +325,5 @@ def export_params(
     constants = shader_constants(params, model, tap_weights=tap_weights, taps=taps, strength=strength)
     text = to_json(constants) if format == "json" else to_hlsl(constants)
     if out_path is not None:
-        _write_text(os.fspath(out_path), text)
+        write_text_atomic(out_path, text)
     return text

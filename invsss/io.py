@@ -493,6 +493,15 @@ def _atomic_target(path: str):
         raise
 
 
+def write_text_atomic(path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` so that an interrupted run leaves no half file."""
+    with _atomic_target(os.fspath(path)) as temporary:
+        with open(temporary, "x", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+
+
 def _encode(image: np.ndarray, bits: int, ext: str) -> tuple[np.ndarray, str, str | None]:
     """Pixels for the file, their OpenImageIO type and the colour space to declare."""
     if bits == 32:
@@ -728,8 +737,4 @@ def write_params(path, mapping) -> None:
         text = json.dumps(dict(mapping), indent=2, default=_to_json) + "\n"
     except (TypeError, ValueError) as err:
         raise InvalidInputError(f"{name}: cannot write params ({_one_line(err)})") from None
-    with _atomic_target(name) as temporary:
-        with open(temporary, "x", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
+    write_text_atomic(name, text)
