@@ -24,7 +24,7 @@ from .estimator.parametrisation import GAUGES
 from .estimator.solve import SOLVERS
 from .export import EXPORT_FORMATS, export_params
 from .io import (
-    IMAGE_EXTENSIONS,
+    image_extension,
     load_pair,
     read_depth,
     read_image,
@@ -63,12 +63,7 @@ def _add_model_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _check_output_path(path: str) -> None:
     """Fail before the work, not after it, when the output cannot be written."""
-    ext = os.path.splitext(path)[1].lower()
-    if ext not in IMAGE_EXTENSIONS:
-        raise InvalidInputError(
-            f"{path}: unsupported output extension {ext or '(none)'!r}, "
-            f"expected one of {', '.join(IMAGE_EXTENSIONS)}"
-        )
+    image_extension(path, "output")
     directory = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(directory):
         raise InvalidInputError(f"{path}: cannot write, directory {directory} does not exist")

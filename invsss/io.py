@@ -55,6 +55,7 @@ from .validation import InvalidInputError, check_image, check_same_size
 
 __all__ = [
     "IMAGE_EXTENSIONS",
+    "image_extension",
     "PARAMS_KEYS",
     "PARAMS_OPTIONAL_KEYS",
     "ImagePair",
@@ -154,8 +155,8 @@ def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
 
-def _checked_path(path, kind: str) -> tuple[str, str]:
-    """The path as a string and its lower-case extension, or a one-line error."""
+def image_extension(path, kind: str = "image") -> str:
+    """The lower-case extension of ``path`` if invsss reads and writes it, else a one-line error."""
     name = os.fspath(path)
     ext = os.path.splitext(name)[1].lower()
     if ext not in IMAGE_EXTENSIONS:
@@ -163,6 +164,13 @@ def _checked_path(path, kind: str) -> tuple[str, str]:
             f"{name}: unsupported {kind} file extension {ext or '(none)'!r}, "
             f"expected one of {', '.join(IMAGE_EXTENSIONS)}"
         )
+    return ext
+
+
+def _checked_path(path, kind: str) -> tuple[str, str]:
+    """The path as a string and its lower-case extension, or a one-line error."""
+    name = os.fspath(path)
+    ext = image_extension(name, kind)
     if not os.path.exists(name):
         raise InvalidInputError(f"{name}: {kind} file not found")
     if os.path.isdir(name):
@@ -545,12 +553,7 @@ def write_image(path, image, *, bits: int | None = None) -> None:
     0.25
     """
     name = os.fspath(path)
-    ext = os.path.splitext(name)[1].lower()
-    if ext not in IMAGE_EXTENSIONS:
-        raise InvalidInputError(
-            f"{name}: unsupported image file extension {ext or '(none)'!r}, "
-            f"expected one of {', '.join(IMAGE_EXTENSIONS)}"
-        )
+    ext = image_extension(name, "image")
     bits = _DEFAULT_BITS[ext] if bits is None else bits
     if bits not in _ALLOWED_BITS[ext]:
         raise InvalidInputError(
