@@ -9,9 +9,12 @@ from jaxtyping import Array, Float
 
 from .validation import InvalidInputError
 
-__all__ = ["SSSParams", "check_parameter_values", "parameter_arrays"]
+__all__ = ["PARAM_NAMES", "SSSParams", "check_parameter_values", "parameter_arrays"]
 
-_FIELDS = ("sss_level", "correction", "maxdd", "weights", "variances")
+#: The five parameters of the model, in the order of MODEL.md section 6. Every
+#: module that lists them (params files, the estimator, the report, the torch
+#: twin) uses this tuple.
+PARAM_NAMES = ("sss_level", "correction", "maxdd", "weights", "variances")
 
 
 def _as_float(x) -> Array:
@@ -68,7 +71,7 @@ class SSSParams(eqx.Module):
 
     def to_dict(self) -> dict:
         """Plain-Python mapping (lists and floats) suitable for JSON."""
-        return {k: np.asarray(getattr(self, k)).tolist() for k in _FIELDS}
+        return {k: np.asarray(getattr(self, k)).tolist() for k in PARAM_NAMES}
 
     def check(self, name: str = "params") -> None:
         """Raise :class:`InvalidInputError` if the values break the constraints.
@@ -78,17 +81,17 @@ class SSSParams(eqx.Module):
         """
         from .validation import is_concrete
 
-        concrete = all(is_concrete(getattr(self, k)) for k in _FIELDS)
-        check_parameter_values({k: getattr(self, k) for k in _FIELDS}, name, values=concrete)
+        concrete = all(is_concrete(getattr(self, k)) for k in PARAM_NAMES)
+        check_parameter_values({k: getattr(self, k) for k in PARAM_NAMES}, name, values=concrete)
 
 
 def parameter_arrays(d, source: str = "params") -> dict[str, np.ndarray]:
     """The five parameters of mapping ``d`` as float64 NumPy arrays (shapes unchecked)."""
-    missing = [k for k in _FIELDS if k not in d]
+    missing = [k for k in PARAM_NAMES if k not in d]
     if missing:
         raise InvalidInputError(f"{source}: missing key(s) {', '.join(missing)}")
     try:
-        return {k: np.asarray(d[k], dtype=np.float64) for k in _FIELDS}
+        return {k: np.asarray(d[k], dtype=np.float64) for k in PARAM_NAMES}
     except (TypeError, ValueError):
         raise InvalidInputError(f"{source}: parameter values must be numbers") from None
 
@@ -115,7 +118,7 @@ def check_parameter_values(params, name: str = "params", *, values: bool = True)
         )
     if not values:
         return
-    vals = {k: np.asarray(params[k]) for k in _FIELDS}
+    vals = {k: np.asarray(params[k]) for k in PARAM_NAMES}
     for k, v in vals.items():
         if not np.all(np.isfinite(v)):
             raise InvalidInputError(f"{name}: {k} contains NaN or infinite values")
