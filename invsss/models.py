@@ -1,0 +1,164 @@
+"""The table of screen-space models (MODEL.md section 5): one entry per model.
+
+Every place that behaves differently per model (the JAX and PyTorch renderers,
+the estimator's basis images and parameter roles, the shader-constant export)
+reads the entry here instead of comparing model names, so adding a model is
+adding one :class:`ScreenSpaceModel` to :data:`MODELS`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .params import PARAM_NAMES
+from .validation import InvalidInputError
+
+__all__ = [
+    "ScreenSpaceModel",
+    "MODELS",
+    "MODEL_NAMES",
+    "get_model",
+    "resolve_tap_weights",
+]
+
+#: How the estimator treats the weights of a model: ``"linear"`` (the image is
+#: linear in them, so variable projection eliminates them), ``"free"`` (an
+#: ordinary nonlinear parameter) or ``"unused"`` (they do not enter the image).
+WEIGHTS_ROLES = ("linear", "free", "unused")
+
+#: How a model arranges its 7-tap passes (see :mod:`invsss.pass_plan`):
+#: ``"layered"`` pass pairs of variance differences whose vertical passes are
+#: mixed by the weights, ``"chained"`` K horizontal then K vertical passes of
+#: the full variances, ``None`` no 7-tap passes at all.
+PASS_LAYOUTS = ("layered", "chained", None)
+
+
+@dataclass(frozen=True)
+class ScreenSpaceModel:
+    """What distinguishes one screen-space model from another.
+
+    Attributes
+    ----------
+    name : str
+        The name used by ``render(..., model=name)``, params files and the CLI.
+    summary : str
+        One line for help texts.
+    default_tap_weights : {"jimenez", "thesis"} or None
+        The 7-tap weight set used when the caller names none; ``None`` for a
+        model without 7-tap passes.
+    parameters : frozenset of str
+        The names from :data:`invsss.params.PARAM_NAMES` that change its image.
+    weights_role : {"linear", "free", "unused"}
+        How the estimator treats the weights (see :data:`WEIGHTS_ROLES`).
+    pass_layout : {"layered", "chained"} or None
+        How its 7-tap passes are arranged (see :data:`PASS_LAYOUTS`).
+
+    Examples
+    --------
+    >>> from invsss.models import get_model
+    >>> m = get_model("thesis")
+    >>> m.default_tap_weights, "weights" in m.parameters, m.weights_role
+    ('thesis', False, 'unused')
+    """
+
+    name: str
+    summary: str
+    default_tap_weights: str | None
+    parameters: frozenset
+    weights_role: str
+    pass_layout: str | None
+
+    def __post_init__(self):
+        # The table is written by hand; catch a typo when the module loads
+        # rather than as a silently ignored parameter later.
+        unknown = self.parameters - set(PARAM_NAMES)
+        if unknown:
+            raise ValueError(f"model {self.name}: unknown parameter(s) {sorted(unknown)}")
+        if self.weights_role not in WEIGHTS_ROLES:
+            raise ValueError(f"model {self.name}: weights_role {self.weights_role!r}")
+        if self.pass_layout not in PASS_LAYOUTS:
+            raise ValueError(f"model {self.name}: pass_layout {self.pass_layout!r}")
+        if (self.weights_role == "unused") == ("weights" in self.parameters):
+            raise ValueError(f"model {self.name}: weights_role disagrees with parameters")
+        if (self.default_tap_weights is None) != (self.pass_layout is None):
+            raise ValueError(f"model {self.name}: 7-tap passes need a default tap weight set")
+
+
+_ALL = frozenset(PARAM_NAMES)
+
+#: The models by name; the first one is the default.
+MODELS: dict[str, ScreenSpaceModel] = {
+    m.name: m
+    for m in (
+        ScreenSpaceModel(
+            name="sog",
+            summary="sum of Gaussians as blur layers mixed by the weights (d'Eon & Luebke)",
+            default_tap_weights="jimenez",
+            parameters=_ALL,
+            weights_role="linear",
+            pass_layout="layered",
+        ),
+        ScreenSpaceModel(
+            name="thesis",
+            summary="the thesis's chain of K horizontal then K vertical passes",
+            default_tap_weights="thesis",
+            parameters=_ALL - {"weights"},
+            weights_role="unused",
+            pass_layout="chained",
+        ),
+        ScreenSpaceModel(
+            name="separable",
+            summary="Jimenez 2015 separable SSS with a precomputed N-tap kernel",
+            default_tap_weights=None,
+            # Its taps land at x + o L / d: no slope correction.
+            parameters=frozenset({"sss_level", "weights", "variances"}),
+            weights_role="free",
+            pass_layout=None,
+        ),
+    )
+}
+
+#: The model names, default first.
+MODEL_NAMES: tuple[str, ...] = tuple(MODELS)
+
+
+def get_model(name) -> ScreenSpaceModel:
+    """The table entry of model ``name``.
+
+    Raises
+    ------
+    InvalidInputError
+        If ``name`` is not in :data:`MODEL_NAMES`.
+
+    Examples
+    --------
+    >>> get_model("sog").weights_role
+    'linear'
+    >>> get_model("blur")
+    Traceback (most recent call last):
+    ...
+    invsss.validation.InvalidInputError: model: expected one of sog, thesis, separable, got 'blur'
+    """
+    if isinstance(name, ScreenSpaceModel):
+        return name
+    if not isinstance(name, str) or name not in MODELS:
+        raise InvalidInputError(f"model: expected one of {', '.join(MODEL_NAMES)}, got {name!r}")
+    return MODELS[name]
+
+
+def resolve_tap_weights(model, spec=None):
+    """The 7-tap weights to use: ``spec`` if given, else the model's default.
+
+    Returns ``None`` for a model without 7-tap passes (``spec`` is ignored).
+
+    Examples
+    --------
+    >>> resolve_tap_weights("thesis"), resolve_tap_weights("sog", "thesis")
+    ('thesis', 'thesis')
+    >>> resolve_tap_weights("separable", "jimenez") is None
+    True
+    """
+    entry = get_model(model)
+    if entry.default_tap_weights is None:
+        return None
+    return entry.default_tap_weights if spec is None else spec
