@@ -1,25 +1,39 @@
 """The ``invsss`` command line.
 
 Each subcommand is two functions: ``_add_<name>_parser(subparsers)``, which
-declares its arguments and sets ``func=_run_<name>``, and ``_run_<name>(args)``,
+declares its arguments and sets ``func=_run_<name>``, and ``_run_<name>(args, stop)``,
 which does the work and returns an exit code. :func:`build_parser` registers
-them with one line each. Bad input surfaces as
-:class:`~invsss.validation.InvalidInputError` and is reported by :func:`main`
-as ``invsss: error: <message>`` with exit code 2 and no traceback.
+them with one line each.
+
+Exit codes, all without a traceback:
+
+* 0: done;
+* 1: the work was done but its output could not be written (the fit's estimate
+  is then saved elsewhere and the message says where);
+* 2: bad input, reported as ``invsss: error: <message>`` (an
+  :class:`~invsss.validation.InvalidInputError`), or an output directory that
+  already holds a result (``--overwrite``) or is in use by another run;
+* 130 / 143: interrupted by SIGINT (Ctrl-C) / SIGTERM (:mod:`invsss.interrupts`).
+  ``fit`` then writes the best estimate so far, marked ``"interrupted": true``,
+  when at least one solver step has finished.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import signal
 import sys
+import tempfile
 import time
 import warnings
 
 import numpy as np
 
 from . import __version__
-from .estimator import fit_pair, fit_pairs
+from .estimator import FitInterrupted, fit_pair, fit_pairs
+from .interrupts import Interrupted, StopSignals
 from .estimator.parametrisation import GAUGES
 from .estimator.solve import SOLVERS
 from .export import EXPORT_FORMATS, export_params
@@ -35,6 +49,7 @@ from .io import (
 )
 from .passes import TAP_WEIGHTS
 from .profiles import PROFILE_NAMES
+from .result_dir import ResultDir, ResultWriteError
 from .screen_space import MODELS, render
 from .validation import InvalidInputError, check_same_size
 
@@ -101,7 +116,7 @@ def _add_render_parser(subparsers) -> None:
     parser.set_defaults(func=_run_render)
 
 
-def _run_render(args: argparse.Namespace) -> int:
+def _run_render(args: argparse.Namespace, stop: StopSignals) -> int:
     _check_output_path(args.out)
     params, extras = read_params(args.params)
     model, tap_weights = _model_choice(args, extras)
@@ -188,7 +203,11 @@ def _add_fit_parser(subparsers) -> None:
     parser.add_argument("--max-steps", type=int, default=200, metavar="N",
                         help="solver steps per start and per refinement (default: 200)")
     parser.add_argument("--out", required=True, metavar="DIR",
-                        help="output directory (created if missing)")
+                        help="output directory (created if missing); a directory that "
+                        "already holds a result is refused unless --overwrite is given")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace the result already in DIR (its files only; other "
+                        "files in DIR are kept)")
     parser.set_defaults(func=_run_fit)
 
 
@@ -235,18 +254,6 @@ def _check_pair_counts(args: argparse.Namespace) -> int:
     return counts["source"]
 
 
-def _check_output_dir(path: str) -> None:
-    if os.path.exists(path) and not os.path.isdir(path):
-        raise InvalidInputError(f"{path}: --out must be a directory, but a file of that name exists")
-
-
-def _make_output_dir(path: str) -> None:
-    try:
-        os.makedirs(path, exist_ok=True)
-    except OSError as err:
-        raise InvalidInputError(f"{path}: cannot create the output directory ({err.strerror})") from None
-
-
 class _ProgressLine:
     """The fit's progress on stderr.
 
@@ -288,56 +295,113 @@ class _ProgressLine:
             self._width = 0
 
 
-def _run_fit(args: argparse.Namespace) -> int:
-    _check_output_dir(args.out)
+def _fit_file_names(count: int) -> list[str]:
+    images = ["fit.exr"] if count == 1 else [f"fit_{k}.exr" for k in range(count)]
+    return ["params.json", *images, "report.png"]
+
+
+def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
     for flag, value in (("--starts", args.starts), ("--max-steps", args.max_steps)):
         if value < 1:
             raise InvalidInputError(f"{flag}: expected an integer >= 1, got {value}")
     fix = _parse_fix(args.fix)
     count = _check_pair_counts(args)
-    pairs = [
-        load_pair(s, t, d, m, depth_scale=args.depth_scale)
-        for s, t, d, m in zip(args.source, args.target, args.depth, args.mask)
-    ]
-    _make_output_dir(args.out)
+    names = _fit_file_names(count)
+    # Lock and check the output directory before reading anything, so a rerun
+    # into a finished result or a busy directory is refused at once.
+    with ResultDir(args.out, overwrite=args.overwrite, names=names) as out:
+        pairs = [
+            load_pair(s, t, d, m, depth_scale=args.depth_scale)
+            for s, t, d, m in zip(args.source, args.target, args.depth, args.mask)
+        ]
+        options = dict(
+            model=args.model, profile=args.profile, fix=fix or None, gauge=args.gauge,
+            solver=args.solver, n_starts=args.starts, max_steps=args.max_steps,
+        )
+        progress = _ProgressLine(sys.stderr)
+        height, width, _ = pairs[0].source.shape
+        progress.show(f"fit: {count} pair(s), {width}x{height}, model {args.model}: searching starting points")
 
-    options = dict(
-        model=args.model, profile=args.profile, fix=fix or None, gauge=args.gauge,
-        solver=args.solver, n_starts=args.starts, max_steps=args.max_steps,
-    )
-    progress = _ProgressLine(sys.stderr)
-    height, width, _ = pairs[0].source.shape
-    progress.show(f"fit: {count} pair(s), {width}x{height}, model {args.model}: searching starting points")
-    try:
-        if count == 1:
-            pair = pairs[0]
-            result = fit_pair(pair.source, pair.target, pair.depth, pair.mask, progress=progress, **options)
-        else:
-            result = fit_pairs(pairs, progress=progress, **options)
-    finally:
-        progress.close()
-    for message in result.warnings:
-        print(f"invsss: warning: {message}", file=sys.stderr)
+        def stopping(signum):
+            progress.close()
+            print(
+                f"invsss: {signal.Signals(signum).name}: stopping after the current solver step "
+                "and saving the best estimate (send it again to quit without saving)",
+                file=sys.stderr, flush=True,
+            )
 
-    # The parameters first: an interrupted report still leaves the result.
-    written = [os.path.join(args.out, "params.json")]
-    write_params(written[0], result.to_dict())
-    names = ["fit.exr"] if count == 1 else [f"fit_{k}.exr" for k in range(count)]
-    for name, image in zip(names, result.fitted):
-        written.append(os.path.join(args.out, name))
-        write_image(written[-1], np.asarray(image, dtype=np.float32))
-    # matplotlib is only needed here; `invsss render` should not pay for importing it.
-    from .report import plot_fit_report
-
-    written.append(os.path.join(args.out, "report.png"))
-    plot_fit_report(result, pairs, written[-1])
-
+        # From here a first Ctrl-C or SIGTERM asks the fit to stop and the result
+        # is still written; a second one quits at once.
+        with stop.deferred(stopping):
+            try:
+                if count == 1:
+                    pair = pairs[0]
+                    result = fit_pair(
+                        pair.source, pair.target, pair.depth, pair.mask,
+                        progress=progress, stop=stop, **options,
+                    )
+                else:
+                    result = fit_pairs(pairs, progress=progress, stop=stop, **options)
+            except FitInterrupted:
+                progress.close()
+                print("invsss: interrupted before the first solver step; nothing written", file=sys.stderr)
+                return stop.exit_status or 130
+            finally:
+                progress.close()
+            for message in result.warnings:
+                print(f"invsss: warning: {message}", file=sys.stderr)
+            written = _write_fit(out, names, result, pairs)
+        if written is None:
+            return 1
+    if stop.exit_status is not None:
+        print(
+            f"invsss: interrupted after {result.iterations} iterations; wrote the best estimate "
+            f"so far (\"interrupted\": true) to {', '.join(written)}",
+            file=sys.stderr,
+        )
+        return stop.exit_status
     print(
         f"fit: loss {result.loss:.4g}  PSNR {result.psnr:.2f} dB  SSIM {result.ssim:.4f}  "
         f"{'converged' if result.converged else 'NOT converged'} ({result.iterations} iterations); "
         f"wrote {', '.join(written)}"
     )
     return 0
+
+
+def _write_fit(out: ResultDir, names: list[str], result, pairs) -> list[str] | None:
+    """Commit the fit's files to ``out``; on failure keep the estimate elsewhere and say where."""
+    # matplotlib is only needed here; `invsss render` should not pay for importing it.
+    from .report import plot_fit_report
+
+    content = result.to_dict()
+    writers = {"params.json": lambda path: write_params(path, content)}
+    for name, image in zip(names[1:-1], result.fitted):
+        writers[name] = lambda path, image=image: write_image(path, np.asarray(image, np.float32))
+    writers["report.png"] = lambda path: plot_fit_report(result, pairs, path)
+    info = {"command": "fit", "converged": bool(result.converged),
+            "interrupted": bool(content.get("interrupted", False))}
+    try:
+        return out.commit(writers, info)
+    except ResultWriteError as err:
+        print(f"invsss: error: {err}; {_save_elsewhere(content)}", file=sys.stderr)
+        return None
+
+
+def _save_elsewhere(content: dict) -> str:
+    """Keep a fit whose output directory failed: a file in the temp directory, else stdout."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    path = os.path.join(tempfile.gettempdir(), f"invsss-unsaved-{stamp}-{os.getpid()}.params.json")
+    try:
+        write_params(path, content)
+        return f"the estimate was saved to {path}"
+    except (OSError, InvalidInputError):
+        sys.stdout.write(json.dumps(content, indent=2, default=_jsonable) + "\n")
+        return "the estimate was printed on standard output"
+
+
+def _jsonable(value):
+    return value.tolist() if hasattr(value, "tolist") else str(value)
+
 
 # ----------------------------------------------------------------- export (export helper)
 
@@ -364,7 +428,7 @@ def _add_export_parser(subparsers) -> None:
     parser.set_defaults(func=_run_export)
 
 
-def _run_export(args: argparse.Namespace) -> int:
+def _run_export(args: argparse.Namespace, stop: StopSignals) -> int:
     text = export_params(
         args.params, args.out, args.format, model=args.model, tap_weights=args.tap_weights,
         taps=args.taps, strength=args.strength,
@@ -405,12 +469,16 @@ def main(argv: list[str] | None = None) -> int:
         print("invsss: error: a command is required", file=sys.stderr)
         return 2
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), StopSignals() as stop:
             warnings.showwarning = _show_warning
-            return args.func(args)
+            return args.func(args, stop)
     except InvalidInputError as err:
         print(f"invsss: error: {err}", file=sys.stderr)
         return 2
+    except Interrupted as interrupt:
+        # A signal outside the fit (reading, rendering): nothing to keep.
+        print(f"invsss: interrupted ({interrupt}); nothing written", file=sys.stderr)
+        return interrupt.exit_status
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
