@@ -2,23 +2,17 @@
 
 The forward model (:func:`render`, MODEL.md section 5) and its pieces are pure
 JAX functions; :mod:`invsss.torch` is the PyTorch twin used to cross-check them.
+
+Importing :mod:`invsss` loads only the forward model. The file readers
+(OpenImageIO), the estimator (optimistix, scikit-image) and the exporters are
+imported the first time one of their names is used (PEP 562), so a script that
+only renders arrays does not pay for them.
 """
 
-from .io import (
-    ImagePair,
-    load_pair,
-    read_depth,
-    read_image,
-    read_mask,
-    read_params,
-    write_image,
-    write_params,
-)
-from .estimator import FitResult, fit_pair, fit_pairs
-from .export import export_params, shader_constants, to_hlsl, to_json
+import importlib
+
 from .params import SSSParams
 from .passes import TAP_WEIGHTS, directional_pass, sample_along, tap_spread, tap_weights
-from .profiles import gaussian, sum_of_gaussians
 from .profiles import (
     DEON_SKIN_RGB,
     JENSEN_SKIN1,
@@ -27,13 +21,13 @@ from .profiles import (
     THESIS_NIR_940,
     SumOfGaussians,
     burley,
+    gaussian,
     jensen_dipole,
     jensen_dipole_total,
     load_profile,
+    sum_of_gaussians,
     total_diffuse_reflectance,
 )
-from .profile_fit import ProfileFit, fit_sum_of_gaussians
-from .measure import MeasuredProfile, column_average_gain, measure_profile
 from .screen_space import (
     MODELS,
     render,
@@ -44,6 +38,51 @@ from .screen_space import (
     sog_layers,
 )
 from .stretch import depth_slopes, stretch_factors
-from .validation import InvalidInputError
+from .validation import InputNotice, InvalidInputError
 
 __version__ = "0.1.0"
+
+# Public name -> the submodule that defines it, imported on first access.
+_LAZY = {
+    **dict.fromkeys(
+        (
+            "ImagePair",
+            "load_pair",
+            "read_depth",
+            "read_image",
+            "read_mask",
+            "read_params",
+            "write_image",
+            "write_params",
+        ),
+        ".io",
+    ),
+    **dict.fromkeys(("FitResult", "fit_pair", "fit_pairs"), ".estimator"),
+    **dict.fromkeys(("export_params", "shader_constants", "to_hlsl", "to_json"), ".export"),
+    **dict.fromkeys(("ProfileFit", "fit_sum_of_gaussians"), ".profile_fit"),
+    **dict.fromkeys(("MeasuredProfile", "column_average_gain", "measure_profile"), ".measure"),
+}
+
+# Submodules reachable as attributes (``invsss.io.PARAMS_KEYS``) without an import.
+_SUBMODULES = ("cli", "estimator", "export", "io", "measure", "profile_fit", "report", "torch")
+
+__all__ = [
+    name
+    for name, value in globals().items()
+    if not name.startswith("_") and not isinstance(value, type(importlib))
+] + sorted(_LAZY)
+
+
+def __getattr__(name: str):
+    if name in _SUBMODULES:
+        return importlib.import_module(f".{name}", __name__)
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'invsss' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY) | set(_SUBMODULES))

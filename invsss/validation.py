@@ -14,6 +14,7 @@ import jax
 import numpy as np
 
 __all__ = [
+    "InputNotice",
     "InvalidInputError",
     "check_image",
     "check_depth",
@@ -25,6 +26,14 @@ __all__ = [
 
 class InvalidInputError(ValueError):
     """An input (array, file or config) is not what invsss expects."""
+
+
+class InputNotice(UserWarning):
+    """A note about how an input was interpreted (decoded as sRGB, alpha dropped, ...).
+
+    Not an error: the input is used, but the user may have meant something else.
+    Filter it with ``warnings.simplefilter("ignore", invsss.InputNotice)``.
+    """
 
 
 def is_concrete(x) -> bool:

@@ -1,4 +1,4 @@
-"""Reading and writing images, depth, masks and parameter files.
+"""Reading and writing images, depth and masks.
 
 Pixels go through OpenImageIO (EXR, PNG, TIFF, JPEG) or NumPy (``.npy``). The
 model works on *linear* values (MODEL.md section 1), so every reader returns
@@ -29,76 +29,39 @@ colour-decoded. Every failure raises :class:`~invsss.validation.InvalidInputErro
 with one line that names the file and what was expected. Writers are atomic:
 they write a temporary file next to the target and ``os.replace`` it, so an
 interrupted run never leaves half a file behind.
+
+OpenImageIO is imported the first time a file goes through it, so importing
+:mod:`invsss` (or rendering arrays) does not pay for it.
 """
 
 from __future__ import annotations
 
 import contextlib
-import difflib
-import json
 import math
 import os
 import secrets
-import warnings
-from collections.abc import Mapping
-from pathlib import Path
 from typing import NamedTuple
 
 import equinox as eqx
 import numpy as np
-import OpenImageIO as oiio
 
-from .params import SSSParams
-from .passes import TAP_WEIGHTS
-from .screen_space import MODELS
-from .validation import InvalidInputError, check_image, check_same_size
+from ..validation import InvalidInputError, check_image, check_same_size
+from .colour import linear_to_srgb, srgb_to_linear
 
 __all__ = [
     "IMAGE_EXTENSIONS",
     "image_extension",
-    "PARAMS_KEYS",
-    "PARAMS_OPTIONAL_KEYS",
     "ImagePair",
     "load_pair",
     "read_depth",
     "read_image",
     "read_mask",
-    "read_params",
     "write_image",
-    "write_params",
-    "srgb_to_linear",
-    "linear_to_srgb",
+    "write_text_atomic",
 ]
 
 #: File extensions the readers and :func:`write_image` accept (case-insensitive).
 IMAGE_EXTENSIONS = (".exr", ".png", ".tif", ".tiff", ".jpg", ".jpeg", ".npy")
-
-#: The keys every params JSON file must have (the fields of :class:`SSSParams`).
-PARAMS_KEYS = ("sss_level", "correction", "maxdd", "weights", "variances")
-
-#: Keys a params JSON file may have besides :data:`PARAMS_KEYS`: the model
-#: choice, and the report the estimator writes next to the fitted values.
-PARAMS_OPTIONAL_KEYS = (
-    "model",
-    "tap_weights",
-    "stderr",
-    "undetermined",
-    "loss",
-    "psnr",
-    "ssim",
-    "converged",
-    "iterations",
-    "fixed",
-    "gauge",
-    "channels_mix",
-    "gain",
-    "offset",
-    "profile",
-    "estimate",
-    "sigma",
-    "solver",
-    "warnings",
-)
 
 # Bits written for each extension when write_image is not told (EXR/TIFF keep
 # full float precision, PNG/JPEG are 8-bit sRGB like any viewer expects).
@@ -115,37 +78,12 @@ _ALLOWED_BITS = {
 _DEPTH_FORMATS = "expected float EXR, NPY, or 16-bit PNG with a scale"
 
 
-# --------------------------------------------------------------------------- sRGB
+def _oiio():
+    # Imported on first use: OpenImageIO is a large extension module that
+    # rendering arrays never needs.
+    import OpenImageIO
 
-
-def srgb_to_linear(encoded):
-    """The sRGB EOTF (IEC 61966-2-1): encoded values in [0, 1] to linear light.
-
-    ``c / 12.92`` for ``c <= 0.04045``, else ``((c + 0.055) / 1.055) ** 2.4``.
-
-    Examples
-    --------
-    >>> from invsss.io import srgb_to_linear
-    >>> round(float(srgb_to_linear(0.5)), 6)
-    0.214041
-    """
-    c = np.asarray(encoded, dtype=np.float64)
-    return np.where(c <= 0.04045, c / 12.92, ((np.maximum(c, 0.04045) + 0.055) / 1.055) ** 2.4)
-
-
-def linear_to_srgb(linear):
-    """The inverse of :func:`srgb_to_linear`: linear light in [0, 1] to sRGB-encoded values.
-
-    Examples
-    --------
-    >>> from invsss.io import linear_to_srgb, srgb_to_linear
-    >>> round(float(linear_to_srgb(srgb_to_linear(0.5))), 6)
-    0.5
-    """
-    x = np.asarray(linear, dtype=np.float64)
-    return np.where(
-        x <= 0.0031308, 12.92 * x, 1.055 * np.maximum(x, 0.0031308) ** (1.0 / 2.4) - 0.055
-    )
+    return OpenImageIO
 
 
 # ----------------------------------------------------------------- reading pixels
@@ -178,8 +116,9 @@ def _checked_path(path, kind: str) -> tuple[str, str]:
     return name, ext
 
 
-def _declared_encoding(spec: oiio.ImageSpec) -> str | float | None:
+def _declared_encoding(spec) -> str | float | None:
     """The file's declared transfer function: "srgb", a gamma (1.0 = linear), or None."""
+    oiio = _oiio()
     name = spec.get_string_attribute("oiio:ColorSpace")
     if name:
         if oiio.equivalent_colorspace(name, "srgb_rec709_scene"):
@@ -217,6 +156,7 @@ def _read_raster(path, kind: str) -> tuple[str, _Raster]:
             )
         return name, _Raster(array, None, "npy")
 
+    oiio = _oiio()
     image_input = oiio.ImageInput.open(name)
     if image_input is None:
         raise InvalidInputError(
@@ -289,7 +229,7 @@ def read_image(path) -> np.ndarray:
     numpy.ndarray, shape (H, W, C), float32
         ``C`` is 1 or 3 (alpha and a ``Z`` depth channel are dropped). Integer files are decoded
         to linear [0, 1]: 8-bit as sRGB, 16-bit as linear, unless the file
-        declares otherwise (table in :mod:`invsss.io`). Float files are returned
+        declares otherwise (table in :mod:`invsss.io.images`). Float files are returned
         as stored.
 
     Raises
@@ -570,6 +510,7 @@ def write_image(path, image, *, bits: int | None = None) -> None:
             with open(temporary, "xb") as f:
                 np.save(f, pixels if pixels.shape[2] > 1 else pixels[..., 0])
             return
+        oiio = _oiio()
         height, width, channels = pixels.shape
         spec = oiio.ImageSpec(width, height, channels, pixel_type)
         if colour_space is not None:
@@ -586,158 +527,3 @@ def write_image(path, image, *, bits: int | None = None) -> None:
         ok = output.close() and ok
         if not ok:
             raise InvalidInputError(f"{name}: cannot write ({error or 'unknown error'})")
-
-
-# ----------------------------------------------------------------- params files
-
-
-def _check_keys(keys, name: str) -> None:
-    allowed = PARAMS_KEYS + PARAMS_OPTIONAL_KEYS
-    for key in keys:
-        if key not in allowed:
-            close = difflib.get_close_matches(str(key), allowed, n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
-            raise InvalidInputError(
-                f"{name}: unknown key {key!r}{hint}; expected {', '.join(PARAMS_KEYS)} "
-                f"and optionally {', '.join(PARAMS_OPTIONAL_KEYS)}"
-            )
-
-
-def _check_model_choice(extras: Mapping, name: str) -> None:
-    if "model" in extras and extras["model"] not in MODELS:
-        raise InvalidInputError(
-            f"{name}: model must be one of {', '.join(MODELS)}, got {extras['model']!r}"
-        )
-    if "tap_weights" in extras:
-        taps = extras["tap_weights"]
-        named = isinstance(taps, str) and taps in TAP_WEIGHTS
-        numbers = (
-            isinstance(taps, list)
-            and len(taps) == 7
-            and all(isinstance(t, (int, float)) and not isinstance(t, bool) for t in taps)
-        )
-        if not (named or numbers):
-            raise InvalidInputError(
-                f"{name}: tap_weights must be one of {', '.join(TAP_WEIGHTS)} or a list of "
-                f"7 numbers, got {taps!r}"
-            )
-
-
-def read_params(path) -> tuple[SSSParams, dict]:
-    """Read a params JSON file.
-
-    The file is one JSON object with the keys :data:`PARAMS_KEYS`
-    (``weights`` a list, or a list of per-channel lists; ``variances`` a list)
-    and optionally any of :data:`PARAMS_OPTIONAL_KEYS`. Any other key is an
-    error, so a misspelt key never silently falls back to a default.
-
-    A fit's params file holds ``null`` where the data did not determine a
-    value, and its point estimate under ``estimate``; such nulls are filled
-    from ``estimate`` and listed in ``extras["filled_from_estimate"]``.
-
-    Returns
-    -------
-    params : SSSParams
-    extras : dict
-        The optional keys present in the file (``model``, ``tap_weights``, the
-        estimator's report), as parsed.
-
-    Raises
-    ------
-    InvalidInputError
-        Missing file, invalid JSON, missing or unknown keys, values that break
-        the constraints of :meth:`SSSParams.check`, an unknown ``model`` or
-        ``tap_weights``.
-
-    Examples
-    --------
-    >>> import tempfile, os, invsss
-    >>> path = os.path.join(tempfile.mkdtemp(), "params.json")
-    >>> invsss.write_params(path, {"sss_level": 900.0, "correction": 0.0, "maxdd": 1.0,
-    ...                            "weights": [1.0], "variances": [2.0], "model": "sog"})
-    >>> params, extras = invsss.read_params(path)
-    >>> float(params.sss_level), extras
-    (900.0, {'model': 'sog'})
-    """
-    name = os.fspath(path)
-    try:
-        text = Path(name).read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InvalidInputError(f"{name}: params file not found") from None
-    except (OSError, UnicodeDecodeError) as err:
-        raise InvalidInputError(f"{name}: cannot read params file ({_one_line(err)})") from None
-    try:
-        content = json.loads(text)
-    except json.JSONDecodeError as err:
-        raise InvalidInputError(
-            f"{name}: invalid JSON at line {err.lineno} column {err.colno} ({err.msg})"
-        ) from None
-    if not isinstance(content, dict):
-        raise InvalidInputError(f"{name}: expected a JSON object with the parameter keys")
-    _check_keys(content, name)
-    extras = {k: v for k, v in content.items() if k not in PARAMS_KEYS}
-    _check_model_choice(extras, name)
-    values = {k: content[k] for k in PARAMS_KEYS if k in content}
-    nulls = [k for k, v in values.items() if _has_null(v)]
-    if nulls:
-        # A fit writes undetermined values as null, and beside them the point
-        # estimate that produced its fit.exr; a renderer needs numbers, so use
-        # those and say which ones the data did not determine.
-        estimate = extras.get("estimate")
-        if not isinstance(estimate, dict) or any(_has_null(estimate.get(k)) for k in nulls):
-            raise InvalidInputError(
-                f"{name}: {', '.join(nulls)} is null (undetermined by the fit); "
-                "give a number, or re-fit with --fix"
-            )
-        values.update({k: estimate[k] for k in nulls})
-        extras["filled_from_estimate"] = nulls
-        warnings.warn(
-            f"{name}: {', '.join(nulls)} not determined by the fit; using its point estimate",
-            stacklevel=2,
-        )
-    params = SSSParams.from_dict(values, source=name)
-    return params, extras
-
-
-def _has_null(value) -> bool:
-    if isinstance(value, list):
-        return any(_has_null(v) for v in value)
-    return value is None
-
-
-def _to_json(value):
-    # NumPy/JAX scalars and arrays, as found in an estimator's report.
-    if hasattr(value, "tolist"):
-        return value.tolist()
-    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
-
-
-def write_params(path, mapping) -> None:
-    """Write parameters (and optional report keys) as JSON, atomically.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-    mapping : Mapping or SSSParams
-        The keys :func:`read_params` accepts; arrays become lists. Keys that
-        :func:`read_params` would reject are rejected here, so every file this
-        writes can be read back.
-
-    Raises
-    ------
-    InvalidInputError
-        Unknown keys, values that are not JSON-serialisable, a missing directory.
-    """
-    name = os.fspath(path)
-    if isinstance(mapping, SSSParams):
-        mapping = mapping.to_dict()
-    if not isinstance(mapping, Mapping):
-        raise InvalidInputError(
-            f"{name}: expected a mapping or SSSParams to write, got {type(mapping).__name__}"
-        )
-    _check_keys(mapping, name)
-    try:
-        text = json.dumps(dict(mapping), indent=2, default=_to_json) + "\n"
-    except (TypeError, ValueError) as err:
-        raise InvalidInputError(f"{name}: cannot write params ({_one_line(err)})") from None
-    write_text_atomic(name, text)
