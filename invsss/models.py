@@ -11,9 +11,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .params import PARAM_NAMES
+from .pass_plan import LAYOUTS_WITH_PASSES, PassPlan, pass_plan
 from .validation import InvalidInputError
 
 __all__ = [
+    "LAYOUTS",
+    "WEIGHTS_ROLES",
     "ScreenSpaceModel",
     "MODELS",
     "MODEL_NAMES",
@@ -26,11 +29,14 @@ __all__ = [
 #: ordinary nonlinear parameter) or ``"unused"`` (they do not enter the image).
 WEIGHTS_ROLES = ("linear", "free", "unused")
 
-#: How a model arranges its 7-tap passes (see :mod:`invsss.pass_plan`):
-#: ``"layered"`` pass pairs of variance differences whose vertical passes are
-#: mixed by the weights, ``"chained"`` K horizontal then K vertical passes of
-#: the full variances, ``None`` no 7-tap passes at all.
-PASS_LAYOUTS = ("layered", "chained", None)
+#: How a model turns the profile into passes. The JAX renderer, the PyTorch
+#: twin and the export each implement a layout once; models share them.
+#: ``"layered"``: pass pairs of variance differences whose vertical passes are
+#: mixed by the weights; ``"chained"``: K horizontal then K vertical passes of
+#: the full variances, the last one the output (both 7-tap, planned by
+#: :func:`invsss.pass_plan.pass_plan`); ``"kernel"``: one pass pair with a
+#: precomputed N-tap kernel.
+LAYOUTS = ("layered", "chained", "kernel")
 
 
 @dataclass(frozen=True)
@@ -50,8 +56,8 @@ class ScreenSpaceModel:
         The names from :data:`invsss.params.PARAM_NAMES` that change its image.
     weights_role : {"linear", "free", "unused"}
         How the estimator treats the weights (see :data:`WEIGHTS_ROLES`).
-    pass_layout : {"layered", "chained"} or None
-        How its 7-tap passes are arranged (see :data:`PASS_LAYOUTS`).
+    layout : {"layered", "chained", "kernel"}
+        How it turns the profile into passes (see :data:`LAYOUTS`).
 
     Examples
     --------
@@ -66,7 +72,7 @@ class ScreenSpaceModel:
     default_tap_weights: str | None
     parameters: frozenset
     weights_role: str
-    pass_layout: str | None
+    layout: str
 
     def __post_init__(self):
         # The table is written by hand; catch a typo when the module loads
@@ -76,12 +82,25 @@ class ScreenSpaceModel:
             raise ValueError(f"model {self.name}: unknown parameter(s) {sorted(unknown)}")
         if self.weights_role not in WEIGHTS_ROLES:
             raise ValueError(f"model {self.name}: weights_role {self.weights_role!r}")
-        if self.pass_layout not in PASS_LAYOUTS:
-            raise ValueError(f"model {self.name}: pass_layout {self.pass_layout!r}")
+        if self.layout not in LAYOUTS:
+            raise ValueError(f"model {self.name}: layout {self.layout!r}")
         if (self.weights_role == "unused") == ("weights" in self.parameters):
             raise ValueError(f"model {self.name}: weights_role disagrees with parameters")
-        if (self.default_tap_weights is None) != (self.pass_layout is None):
+        if (self.default_tap_weights is None) != (self.layout not in LAYOUTS_WITH_PASSES):
             raise ValueError(f"model {self.name}: 7-tap passes need a default tap weight set")
+
+    def pass_plan(self, variances, spread, xp) -> PassPlan:
+        """Its 7-tap passes and their widths per unit stretch (:func:`invsss.pass_plan.pass_plan`).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> get_model("thesis").pass_plan(np.array([1.0]), 0.5, np).widths.tolist()
+        [2.0, 2.0]
+        """
+        if self.layout not in LAYOUTS_WITH_PASSES:
+            raise ValueError(f"model {self.name}: layout {self.layout!r} has no 7-tap passes")
+        return pass_plan(self.layout, variances, spread, xp)
 
 
 _ALL = frozenset(PARAM_NAMES)
@@ -96,7 +115,7 @@ MODELS: dict[str, ScreenSpaceModel] = {
             default_tap_weights="jimenez",
             parameters=_ALL,
             weights_role="linear",
-            pass_layout="layered",
+            layout="layered",
         ),
         ScreenSpaceModel(
             name="thesis",
@@ -104,7 +123,7 @@ MODELS: dict[str, ScreenSpaceModel] = {
             default_tap_weights="thesis",
             parameters=_ALL - {"weights"},
             weights_role="unused",
-            pass_layout="chained",
+            layout="chained",
         ),
         ScreenSpaceModel(
             name="separable",
@@ -113,7 +132,7 @@ MODELS: dict[str, ScreenSpaceModel] = {
             # Its taps land at x + o L / d: no slope correction.
             parameters=frozenset({"sss_level", "weights", "variances"}),
             weights_role="free",
-            pass_layout=None,
+            layout="kernel",
         ),
     )
 }
