@@ -10,6 +10,8 @@ responsible (the file readers in :mod:`invsss.io` always validate).
 
 from __future__ import annotations
 
+import warnings
+
 import jax
 import numpy as np
 
@@ -20,6 +22,10 @@ __all__ = [
     "check_depth",
     "check_mask",
     "check_same_size",
+    "check_same_frame",
+    "check_pair",
+    "check_target_channels",
+    "check_mask_background",
     "is_concrete",
 ]
 
@@ -110,3 +116,101 @@ def check_same_size(a_shape, b_shape, a_name: str, b_name: str) -> None:
             f"{b_name}: expected {a_shape[0]}x{a_shape[1]} pixels to match {a_name}, "
             f"got {b_shape[0]}x{b_shape[1]}"
         )
+
+
+def check_same_frame(named_arrays) -> None:
+    """Every ``(name, array)`` in ``named_arrays`` has the pixel size (H, W) of the first.
+
+    ``None`` arrays (an omitted mask) are skipped. The error names the odd one out
+    and the reference, e.g. ``depth.exr: expected 12x16 pixels to match image.exr``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> check_same_frame([("image", np.zeros((4, 6, 3))), ("depth", np.zeros((4, 5)))])
+    Traceback (most recent call last):
+    ...
+    invsss.validation.InvalidInputError: depth: expected 4x6 pixels to match image, got 4x5
+    """
+    (reference_name, reference), *others = named_arrays
+    for name, array in others:
+        if array is not None:
+            check_same_size(np.shape(reference), np.shape(array), reference_name, name)
+
+
+def check_target_channels(source_channels: int, target_channels: int, target_name: str) -> None:
+    """A target has the source's channel count, or 1 (grey) for an RGB source."""
+    if target_channels != source_channels and not (source_channels == 3 and target_channels == 1):
+        raise InvalidInputError(
+            f"{target_name}: expected {source_channels} channel(s) like the source "
+            f"(or 1 for a grey target of an RGB source), got {target_channels}"
+        )
+
+
+#: A mask with more of the frame than this is probably not just skin.
+MASK_WHOLE_FRAME = 0.98
+#: Pixels sharing the depth maximum, as a fraction of the frame, that make it a far plane.
+FAR_PLANE_SHARE = 0.01
+
+
+def check_mask_background(mask, depth, mask_name: str = "mask") -> None:
+    """Warn (:class:`InputNotice`) when a skin mask very likely includes background.
+
+    Two signs: the mask covers more than ``MASK_WHOLE_FRAME`` of the frame, or
+    it is > 0 on the depth's far plane (the maximum depth, shared by more than
+    ``FAR_PLANE_SHARE`` of the pixels, as a renderer's or depth camera's
+    background is). Background pixels pull the fit towards "no scattering".
+    Skipped for tracers.
+
+    Examples
+    --------
+    >>> import numpy as np, warnings
+    >>> depth = np.full((10, 10), 500.0); depth[:, 5:] = 1e4  # right half is far plane
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     check_mask_background(np.ones((10, 10)), depth, "mask.png")
+    >>> [str(w.message).split(";")[0] for w in caught]
+    ['mask.png: covers 100% of the frame']
+    """
+    if not (is_concrete(mask) and is_concrete(depth)):
+        return
+    m, d = np.asarray(mask) > 0, np.asarray(depth)
+    coverage = float(m.mean())
+    if coverage > MASK_WHOLE_FRAME:
+        warnings.warn(
+            f"{mask_name}: covers {coverage:.0%} of the frame; it likely includes background "
+            "(the mask should select skin only)",
+            InputNotice,
+            stacklevel=3,
+        )
+        return
+    far = d == d.max()
+    on_far_plane = int(np.count_nonzero(m & far))
+    if far.mean() > FAR_PLANE_SHARE and on_far_plane:
+        warnings.warn(
+            f"{mask_name}: {on_far_plane} masked pixel(s) lie on the depth's far plane "
+            f"({float(d.max()):g}); the mask likely includes background",
+            InputNotice,
+            stacklevel=3,
+        )
+
+
+def check_pair(source, target, depth, mask, names) -> None:
+    """Check one ``(source, target, depth, mask)`` example; ``names`` names each input.
+
+    The one place that checks an example's shapes, sizes and channel layout, for
+    arrays and for files alike: ``names`` maps ``"source"``, ``"target"``,
+    ``"depth"``, ``"mask"`` to what the messages call them (file paths, or
+    ``pairs[1].target``). ``mask=None`` means every pixel and is not checked.
+    """
+    check_image(source, names["source"])
+    check_image(target, names["target"])
+    arrays = {"source": source, "target": target, "depth": depth, "mask": mask}
+    check_same_frame([(names[key], array) for key, array in arrays.items()])
+    hw = tuple(np.shape(source)[:2])
+    check_depth(depth, hw, names["depth"])
+    channels = lambda x: int(np.shape(x)[-1]) if np.ndim(x) == 3 else 1  # noqa: E731
+    check_target_channels(channels(source), channels(target), names["target"])
+    if mask is not None:
+        check_mask(mask, hw, names["mask"])
+        check_mask_background(mask, depth, names["mask"])

@@ -42,10 +42,10 @@ import os
 import secrets
 from typing import NamedTuple
 
-import equinox as eqx
 import numpy as np
 
-from ..validation import InvalidInputError, check_image, check_same_size
+from ..pair import ImagePair
+from ..validation import InvalidInputError, check_image, check_pair
 from .colour import linear_to_srgb, srgb_to_linear
 
 __all__ = [
@@ -358,25 +358,6 @@ def read_mask(path) -> np.ndarray:
     return mask
 
 
-class ImagePair(eqx.Module):
-    """One training example for the fit: ``(source, depth, mask) -> target``.
-
-    Attributes
-    ----------
-    source : numpy.ndarray, shape (H, W, C), float32
-        Linear image without scattering, C in {1, 3}.
-    target : numpy.ndarray, shape (H, W, C'), float32
-        Linear photograph to match, C' in {1, 3}.
-    depth : numpy.ndarray, shape (H, W), float32
-    mask : numpy.ndarray, shape (H, W), float32
-    """
-
-    source: np.ndarray
-    target: np.ndarray
-    depth: np.ndarray
-    mask: np.ndarray
-
-
 def load_pair(source, target, depth, mask, depth_scale: float = 1.0) -> ImagePair:
     """Read and cross-check the four files of one example.
 
@@ -396,7 +377,14 @@ def load_pair(source, target, depth, mask, depth_scale: float = 1.0) -> ImagePai
     Raises
     ------
     InvalidInputError
-        Anything the readers reject, or a file whose size differs from the source's.
+        Anything the readers reject, a file whose size differs from the source's,
+        or a target whose channels do not fit the source's (1 or the same count).
+
+    Warns
+    -----
+    InputNotice
+        The mask likely includes background (see
+        :func:`invsss.validation.check_mask_background`).
 
     Examples
     --------
@@ -404,7 +392,7 @@ def load_pair(source, target, depth, mask, depth_scale: float = 1.0) -> ImagePai
     >>> d = tempfile.mkdtemp(); p = lambda n: os.path.join(d, n)
     >>> invsss.write_image(p("s.exr"), np.ones((4, 6, 3), np.float32))
     >>> invsss.write_image(p("t.exr"), np.ones((4, 6), np.float32))
-    >>> np.save(p("d.npy"), np.full((4, 6), 500.0)); np.save(p("m.npy"), np.ones((4, 6)))
+    >>> np.save(p("d.npy"), np.full((4, 6), 500.0)); np.save(p("m.npy"), np.eye(4, 6))
     >>> pair = invsss.load_pair(p("s.exr"), p("t.exr"), p("d.npy"), p("m.npy"))
     >>> pair.source.shape, pair.target.shape, pair.depth.shape
     ((4, 6, 3), (4, 6, 1), (4, 6))
@@ -413,9 +401,9 @@ def load_pair(source, target, depth, mask, depth_scale: float = 1.0) -> ImagePai
     target_image = read_image(target)
     depth_map = read_depth(depth, scale=depth_scale)
     mask_map = read_mask(mask)
-    reference = os.fspath(source)
-    for other, array in ((target, target_image), (depth, depth_map), (mask, mask_map)):
-        check_same_size(source_image.shape, array.shape, reference, os.fspath(other))
+    names = {"source": source, "target": target, "depth": depth, "mask": mask}
+    names = {k: os.fspath(v) for k, v in names.items()}
+    check_pair(source_image, target_image, depth_map, mask_map, names)
     return ImagePair(source_image, target_image, depth_map, mask_map)
 
 

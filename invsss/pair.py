@@ -1,0 +1,75 @@
+"""One training example of the estimator: ``(source, depth, mask) -> target``.
+
+:func:`invsss.load_pair` returns it from files, :func:`invsss.fit_pairs` accepts it
+(or plain tuples), and the estimator works on its float64 form
+(:meth:`ImagePair.as_float64`). One type for all three, so an attribute added for
+the estimator is there for a pair read from disk too.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+__all__ = ["ImagePair"]
+
+
+def _as_hwc64(x) -> Array:
+    x = np.asarray(x, dtype=np.float64)
+    return jnp.asarray(x[..., None] if x.ndim == 2 else x)
+
+
+class ImagePair(eqx.Module):
+    """One example for the fit: ``(source, depth, mask) -> target``.
+
+    The constructor stores the arrays as given; :func:`invsss.load_pair` and
+    :func:`invsss.estimator.inputs.prepare_pair` are the places that check them.
+
+    Attributes
+    ----------
+    source : array, shape (H, W, C), C in {1, 3}
+        Linear image without scattering.
+    target : array, shape (H, W, C') or (H, W)
+        Linear photograph to match; C' = C, or 1 (grey) for an RGB source.
+    depth : array, shape (H, W), > 0
+    mask : array, shape (H, W), in [0, 1], not all zero
+    target_ndim : int, static
+        2 when the target was given as (H, W): a fit returns its prediction so.
+
+    Examples
+    --------
+    >>> import numpy as np, invsss
+    >>> pair = invsss.ImagePair(np.ones((4, 6, 3)), np.ones((4, 6)), np.full((4, 6), 500.0),
+    ...                         np.ones((4, 6)))
+    >>> data = pair.as_float64()  # under jax.enable_x64 to keep float64
+    >>> data.target.shape, data.target_ndim, data.channels
+    ((4, 6, 1), 2, (3, 1))
+    """
+
+    source: Float[Array, "H W C"]
+    target: Float[Array, "H W Ct"]
+    depth: Float[Array, "H W"]
+    mask: Float[Array, "H W"]
+    target_ndim: int = eqx.field(static=True, default=3)
+
+    @property
+    def channels(self) -> tuple[int, int]:
+        """(source channels, target channels); a (H, W) array counts as 1 channel."""
+        count = lambda x: int(np.shape(x)[-1]) if np.ndim(x) == 3 else 1  # noqa: E731
+        return count(self.source), count(self.target)
+
+    def as_float64(self) -> "ImagePair":
+        """The same pair as JAX float64 arrays with a channel axis on source and target.
+
+        Call it under ``jax.enable_x64``; outside it JAX keeps float32.
+        """
+        target_ndim = 2 if np.ndim(self.target) == 2 else self.target_ndim
+        return ImagePair(
+            _as_hwc64(self.source),
+            _as_hwc64(self.target),
+            jnp.asarray(np.asarray(self.depth, dtype=np.float64)),
+            jnp.asarray(np.asarray(self.mask, dtype=np.float64)),
+            target_ndim,
+        )
