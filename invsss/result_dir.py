@@ -191,7 +191,7 @@ class ResultDir:
     >>> import os, tempfile
     >>> out = os.path.join(tempfile.mkdtemp(), "run")
     >>> with ResultDir(out, names=["a.txt"]) as rd:
-    ...     rd.commit({"a.txt": lambda p: open(p, "w").write("hello")})
+    ...     written = rd.commit({"a.txt": lambda p: open(p, "w").write("hello")})
     >>> sorted(os.listdir(out)), result_state(out)
     (['a.txt', 'invsss-manifest.json'], 'complete')
     """
