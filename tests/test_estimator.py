@@ -23,6 +23,7 @@ import pytest
 import invsss
 from invsss import InvalidInputError
 from invsss import FitResult, fit_pair, fit_pairs
+from invsss.estimator import FitInterrupted, FitOptions
 
 from _estimator_scenes import make_pair
 
@@ -255,6 +256,9 @@ BAD = [
     (_good(), {"progress": 3}, "progress"),
     (_good(), {"tap_weights": [1.0, 2.0]}, "tap_weights"),
     (_good(), {"profile": "no-such-profile"}, "profile"),
+    (_good(), {"stop": True}, "stop"),
+    (_good(), {"options": {"n_starts": 2}}, "options"),
+    (_good(), {"options": FitOptions(), "n_starts": 2}, "options"),
 ]
 
 
@@ -314,28 +318,17 @@ def test_projection_is_weighted_least_squares():
         assert float(coef0[1, 0]) == 0.0 and float(coef0[1, 1]) == pytest.approx(float(coef[1, 1]))
 
 
-class _Captured(Exception):
-    pass
-
-
-def test_projected_residual_jacobian_matches_finite_differences(monkeypatch):
+def test_projected_residual_jacobian_matches_finite_differences():
     """The solver's derivative (dense Jacobian through the projection) against
     central differences of the projected residual, in float64."""
     import equinox as eqx
 
-    from invsss.estimator import fit as fit_module
+    from invsss.estimator import FitOptions, build_problem
     from invsss.estimator.solve import DenseJacobian
 
     source, target, depth, mask, _ = scene("face", size=24, seed=11)
-    captured = {}
-
-    def spy(solver, objective, z0, max_steps, on_step=None):
-        captured["objective"], captured["z"] = objective, np.asarray(z0)
-        raise _Captured
-
-    monkeypatch.setattr(fit_module, "run_solver", spy)
-    with pytest.raises(_Captured):
-        fit_pair(source, target, depth, mask, profile=PROFILE3, n_starts=1)
+    problem = build_problem([(source, target, depth, mask)], FitOptions(profile=PROFILE3, n_starts=1))
+    captured = {"objective": problem.objective, "z": np.asarray(problem.z0)}
     with jax.enable_x64(True):
         fn = DenseJacobian(captured["objective"])
         z = jnp.asarray(captured["z"]) + jnp.asarray([0.05, -0.1, 0.07])  # L, correction, maxdd
@@ -368,3 +361,69 @@ def test_other_solvers_reach_the_same_fit(solver):
     assert other.solver == solver
     assert float(other.params.sss_level) == pytest.approx(float(lm.params.sss_level), rel=0.005)
     assert other.loss == pytest.approx(lm.loss, rel=0.01)
+
+
+# ----------------------------------------------------------------- options and interruption
+
+
+def test_options_object_gives_the_same_fit_as_keywords():
+    source, target, depth, mask, _ = scene("face", size=32, seed=12)
+    kw = {"profile": PROFILE3, "fix": {"correction": 300.0, "maxdd": 2.0}, "n_starts": 2, "robust": None}
+    by_keywords = fit_pair(source, target, depth, mask, **kw)
+    by_options = fit_pair(source, target, depth, mask, options=FitOptions(**kw))
+    assert float(by_options.params.sss_level) == float(by_keywords.params.sss_level)
+    assert by_options.iterations == by_keywords.iterations
+    assert by_options.to_dict() == by_keywords.to_dict()
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [("model", "gaussian"), ("n_starts", True), ("max_steps", 0), ("robust", "l1"),
+     ("tap_weights", "box"), ("fix", {"maxdd": 0.0}), ("gauge", "sss_level")],
+)
+def test_fit_options_are_checked_at_construction(field, value):
+    with pytest.raises(InvalidInputError) as err:
+        FitOptions(**{field: value})
+    assert ("sss_level" if field == "gauge" else field) in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_stop_interrupts_and_reports_the_best_point_so_far():
+    source, target, depth, mask, _ = scene("face", size=32, seed=12)
+    kw = {"profile": PROFILE3, "n_starts": 3}
+    full = fit_pair(source, target, depth, mask, **kw)
+    assert not full.interrupted and full.to_dict()["interrupted"] is False
+    polls, steps = [], []
+
+    def stop():
+        polls.append(len(steps))
+        return len(polls) > 5  # the first poll comes before any step, then one per step
+
+    result = fit_pair(source, target, depth, mask, progress=lambda i, l: steps.append(l), stop=stop, **kw)
+    assert result.interrupted and not result.converged
+    assert result.iterations == len(steps) == 5 < full.iterations
+    np.testing.assert_array_equal(result.history, full.history[:5])
+    assert [label for label, _, _ in result.stages] == ["start 1"]
+    assert result.loss == pytest.approx(result.history[-1], rel=1e-6)
+    assert any("interrupted" in w for w in result.warnings)
+    d = json.loads(json.dumps(result.to_dict(), allow_nan=False))
+    assert d["interrupted"] is True and d["converged"] is False and d["iterations"] == 5
+    assert d["estimate"]["sss_level"] == pytest.approx(float(result.values["sss_level"]))
+
+
+def test_stop_before_the_first_step_raises():
+    source, target, depth, mask, _ = scene("face", size=32, seed=12)
+    with pytest.raises(FitInterrupted):
+        fit_pair(source, target, depth, mask, profile=PROFILE3, n_starts=1, stop=lambda: True)
+
+
+def test_history_holds_every_start_and_round(recovered):
+    result, calls, _, _ = recovered["face"]
+    assert result.iterations == len(calls) == len(result.history)
+    np.testing.assert_allclose(result.history, [l for _, l in calls])
+    labels = [label for label, _, _ in result.stages]
+    assert labels[:4] == ["start 1", "start 2", "start 3", "start 4"] and labels[4:6] == ["robust 1", "robust 2"]
+    bounds = [(first, stop) for _, first, stop in result.stages]
+    assert bounds[0][0] == 0 and bounds[-1][1] == result.iterations
+    assert all(a[1] == b[0] for a, b in zip(bounds, bounds[1:]))
+    assert all(len(v) > 0 for v in result.history_by_stage().values())

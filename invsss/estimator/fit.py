@@ -2,11 +2,11 @@
 
 The fit, step by step (each step its own module):
 
-1. check the inputs (:mod:`.inputs`) and the options; decide each parameter's role
-   and the unknowns (:mod:`.parametrisation`);
+1. check the options (:class:`FitOptions`) and the inputs (:mod:`.inputs`);
+   decide each parameter's role and the unknowns (:mod:`.parametrisation`);
 2. scan the loss along the blur scale and start from its ``n_starts`` lowest
    local minima, each with the best correction and maxdd of a small grid
-   (:mod:`.initial`);
+   (:mod:`.initial`). Steps 1 and 2 are :func:`build_problem`, public;
 3. from each start, run the solver (:mod:`.solve`) on the residual with the linear
    unknowns projected out (:mod:`.objective`, :mod:`.projection`); keep the best;
 4. refine from the best: robust reweighting rounds (:mod:`.robust`), and an
@@ -16,6 +16,9 @@ The fit, step by step (each step its own module):
 5. standard errors and undetermined parameters (:mod:`.uncertainty`), PSNR, SSIM
    and a misalignment check (:mod:`.diagnostics`), all in a :class:`FitResult`.
 
+A ``stop`` callable, polled between solver steps, ends the fit early: the best
+point reached so far is reported as usual, flagged ``interrupted``.
+
 Everything runs in float64 (``jax.enable_x64`` inside the call): the projection's
 normal equations over strongly correlated layers need it.
 """
@@ -23,38 +26,25 @@ normal equations over strongly correlated layers need it.
 from __future__ import annotations
 
 import dataclasses
-import numbers
-import os
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..params import SSSParams
-from ..passes import tap_weights as tap_weight_set
-from ..screen_space import MODELS
+from ..params import PARAM_NAMES, SSSParams
 from ..validation import InvalidInputError
 from .diagnostics import MISALIGNMENT_PX, masked_psnr, masked_ssim, misalignment
-from .initial import blur_reference, choose_starts, data_scales
-from .inputs import prepare_pairs
-from .objective import Objective
-from .parametrisation import (
-    GAUGES,
-    Parametrisation,
-    assign_roles,
-    check_fix,
-    resolve_profile,
-)
+from .options import FitOptions
+from .problem import build_problem
 from .result import FitResult, masked_list
-from .robust import check_robust, robust_scale, robust_weights
-from .solve import SOLVERS, make_solver, run_solver
+from .robust import robust_scale, robust_weights
+from .solve import FitInterrupted, make_solver, run_solver
 from .uncertainty import gauss_newton_uncertainty, linearise, structural_reasons
 
 __all__ = ["fit_pair", "fit_pairs"]
 
 _ROBUST_ROUNDS = 2
-_PARAMS = ("sss_level", "correction", "maxdd", "weights", "variances")
 
 
 def fit_pair(
@@ -73,6 +63,8 @@ def fit_pair(
     tap_weights=None,
     progress=None,
     robust: str | None = "pseudo-huber",
+    options: FitOptions | None = None,
+    stop=None,
 ) -> FitResult:
     """Estimate the screen-space SSS parameters that turn ``source`` into ``target``.
 
@@ -117,6 +109,14 @@ def fit_pair(
         refinements) from 1, ``loss`` is in the units of :attr:`FitResult.loss`.
     robust : {"pseudo-huber", "cauchy"} or None
         Robust loss by iterative reweighting (see :mod:`invsss.estimator.robust`).
+    options : FitOptions, optional
+        All of the above options (``model`` to ``robust``) in one checked value;
+        then leave those keywords at their defaults.
+    stop : callable, optional
+        ``stop() -> bool``, polled after every solver step (and once before the
+        first): True ends the fit there, skipping the remaining starts and
+        refinements, and the best point reached is reported with
+        ``interrupted=True`` and ``converged=False``.
 
     Returns
     -------
@@ -128,6 +128,8 @@ def fit_pair(
         Bad shapes, NaN values, non-positive depth, empty mask, unknown model, solver,
         gauge or robust loss, a ``fix`` entry with an unknown name or a bad value,
         ``gauge="sss_level"`` without ``fix["sss_level"]``.
+    FitInterrupted
+        ``stop()`` returned True before any solver step finished.
 
     Examples
     --------
@@ -142,10 +144,9 @@ def fit_pair(
     >>> round(float(fit.params.sss_level))
     600
     """
-    return _fit(
-        [(source, target, depth, mask)], True, model, profile, fix, gauge, solver, n_starts,
-        max_steps, tap_weights, progress, robust,
-    )
+    given = dict(model=model, profile=profile, fix=fix, gauge=gauge, solver=solver, n_starts=n_starts,
+                 max_steps=max_steps, tap_weights=tap_weights, robust=robust)
+    return _fit([(source, target, depth, mask)], True, _options(options, given), progress, stop)
 
 
 def fit_pairs(
@@ -161,6 +162,8 @@ def fit_pairs(
     tap_weights=None,
     progress=None,
     robust: str | None = "pseudo-huber",
+    options: FitOptions | None = None,
+    stop=None,
 ) -> FitResult:
     """Fit one set of parameters to several pairs (see :func:`fit_pair`).
 
@@ -168,136 +171,15 @@ def fit_pairs(
     :class:`invsss.ImagePair` objects, all with the same channel layout (sizes may
     differ). The SSS parameters, weights and the RGB -> grey mix are shared; each
     pair has its own offset and gain (the exposure may differ), per target channel.
-    ``FitResult.gain`` and ``offset`` then have shape (P, C').
+    ``FitResult.gain`` and ``offset`` then have shape (P, C'). ``options`` and
+    ``stop`` as for :func:`fit_pair`.
     """
-    return _fit(
-        pairs, False, model, profile, fix, gauge, solver, n_starts, max_steps, tap_weights,
-        progress, robust,
-    )
-
-
-# ----------------------------------------------------------------- options
-
-
-def _check_options(model, gauge, solver, n_starts, max_steps, progress, robust):
-    if model not in MODELS:
-        raise InvalidInputError(f"model: expected one of {', '.join(MODELS)}, got {model!r}")
-    if gauge not in GAUGES:
-        raise InvalidInputError(f"gauge: expected one of {', '.join(GAUGES)}, got {gauge!r}")
-    if solver not in SOLVERS:
-        raise InvalidInputError(f"solver: expected one of {', '.join(SOLVERS)}, got {solver!r}")
-    for name, value in (("n_starts", n_starts), ("max_steps", max_steps)):
-        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
-            raise InvalidInputError(f"{name}: expected an integer >= 1, got {value!r}")
-    if progress is not None and not callable(progress):
-        raise InvalidInputError(f"progress: expected a callable or None, got {type(progress).__name__}")
-    return check_robust(robust)
-
-
-def _tap_weights(spec, model, dtype=None):
-    if spec is None:
-        spec = "thesis" if model == "thesis" else "jimenez"
-    try:
-        taps = tap_weight_set(spec, dtype)
-    except (ValueError, TypeError) as err:
-        raise InvalidInputError(str(err)) from None
-    return spec if isinstance(spec, str) else np.asarray(taps).tolist(), taps
-
-
-# ----------------------------------------------------------------- setup
-
-
-def _initial_weights(profile_weights, k, channels):
-    """Starting (or carried) weights of shape (K,) or (K, C') from the profile."""
-    w = np.asarray(profile_weights, np.float64)
-    if w.shape[0] != k:
-        w = np.ones(k)
-    if w.ndim == 2 and (channels == 1 or w.shape[1] != channels):
-        w = w.mean(axis=1)
-    if w.ndim == 1 and channels > 1:
-        w = np.repeat(w[:, None], channels, axis=1)
-    w = np.maximum(w, 1e-6)
-    return w / w.sum(axis=0)
-
-
-def _build(pairs, roles, fixed, profile_w, profile_v, scales):
-    """The parametrisation and the natural starting values of the free blocks."""
-    c_src, c_tgt = pairs[0].channels
-    variances = fixed.get("variances", profile_v)
-    k = variances.shape[0]
-    w0 = _initial_weights(profile_w, k, c_tgt)
-    if "weights" in fixed:
-        w = fixed["weights"]
-        if w.ndim == 2 and w.shape[1] not in (1, c_tgt):
-            raise InvalidInputError(
-                f"fix['weights']: expected one column per target channel ({c_tgt}), got shape {w.shape}"
-            )
-        if w.shape[0] != k:
-            raise InvalidInputError(
-                f"fix['weights']: expected {k} rows, one per Gaussian of the profile, got shape {w.shape}"
-            )
-    carried = {"sss_level": 1.0, "correction": 0.0, "maxdd": scales.slope, "weights": w0, "variances": variances}
-    values, reference, start, blocks = {}, {}, {}, []
-    for name in _PARAMS:
-        role = roles[name]
-        if role == "fixed":
-            values[name] = jnp.asarray(fixed.get(name, variances if name == "variances" else None))
-        elif role in ("unused", "linear"):
-            values[name] = jnp.asarray(carried[name])
-    if roles["sss_level"] == "free":
-        reference["sss_level"] = blur_reference(scales, variances)
-        blocks.append(("sss_level", ()))
-    if roles["correction"] == "free":
-        reference["correction"] = scales.correction
-        start["correction"] = 0.1 * scales.correction
-        blocks.append(("correction", ()))
-    if roles["maxdd"] == "free":
-        reference["maxdd"] = scales.slope
-        blocks.append(("maxdd", ()))
-    if roles["variances"] == "free":
-        reference["variances"] = np.asarray(variances)
-        blocks.append(("variances", (k,)))
-    if roles["weights"] == "free":
-        if k == 1:
-            values["weights"] = jnp.ones((1,) if c_tgt == 1 else (1, c_tgt))
-        else:
-            blocks.append(("weights", (k - 1,) if c_tgt == 1 else (k - 1, c_tgt)))
-            start["weights"] = w0
-            reference["weights"] = 1.0
-    if c_src == 3 and c_tgt == 1:
-        blocks.append(("mix", (2,)))
-        start["mix"] = np.full(3, 1.0 / 3.0)
-        reference["mix"] = 1.0
-    if len(pairs) > 1:
-        blocks.append(("gain_ratio", (len(pairs) - 1, c_tgt)))
-        start["gain_ratio"] = np.ones((len(pairs) - 1, c_tgt))
-        reference["gain_ratio"] = 1.0
-    param = Parametrisation(
-        tuple(blocks), {k_: jnp.asarray(v) for k_, v in reference.items()}, values
-    )
-    natural0 = {name: start.get(name, reference[name]) for name, _ in blocks}
-    return param, param.unknowns(natural0)
-
-
-def _blur_at_zero(roles, scales, fixed, variances):
-    if roles["sss_level"] == "free":
-        return 2.0  # by construction of the reference (initial.blur_reference)
-    if roles["variances"] == "free":
-        return float(fixed["sss_level"]) * float(np.sqrt(np.max(variances))) / scales.depth
-    return None
-
-
-def _entry(name, index) -> str:
-    """``"weights[2]"`` or ``"weights[2,0]"`` for an entry of an array parameter."""
-    return f"{name}[{','.join(str(int(i)) for i in index)}]"
+    given = dict(model=model, profile=profile, fix=fix, gauge=gauge, solver=solver, n_starts=n_starts,
+                 max_steps=max_steps, tap_weights=tap_weights, robust=robust)
+    return _fit(pairs, False, _options(options, given), progress, stop)
 
 
 # ----------------------------------------------------------------- jitted pieces
-
-
-@eqx.filter_jit
-def _loss(objective, z):
-    return objective.loss(z)
 
 
 @eqx.filter_jit
@@ -327,117 +209,135 @@ def _evaluate(objective, z, with_jacobian):
 # ----------------------------------------------------------------- the fit
 
 
-class _Counter:
-    """Global step count and the progress callback, in loss units."""
+class _Steps:
+    """Every solver step of the fit, in the order taken: the loss history, the
+    stage each step belongs to, the progress callback and the stop poll."""
 
-    def __init__(self, progress, to_loss):
-        self.progress, self.to_loss, self.count = progress, to_loss, 0
+    def __init__(self, progress, stop, to_loss):
+        self.progress, self.stop, self.to_loss = progress, stop, to_loss
+        self.losses: list[float] = []
+        self.stages: list[tuple[str, int, int]] = []
 
-    def __call__(self, half_sum_squares):
-        self.count += 1
+    def begin(self, label: str) -> None:
+        self.stages.append((label, len(self.losses), len(self.losses)))
+
+    def __call__(self, half_sum_squares: float) -> None:
+        self.losses.append(half_sum_squares * self.to_loss)
+        label, first, _ = self.stages[-1]
+        self.stages[-1] = (label, first, len(self.losses))
         if self.progress is not None:
-            self.progress(self.count, half_sum_squares * self.to_loss)
+            self.progress(len(self.losses), self.losses[-1])
+
+    def stop_requested(self) -> bool:
+        return self.stop is not None and bool(self.stop())
 
 
-def _fit(pairs, single, model, profile, fix, gauge, solver, n_starts, max_steps, tap_weights, progress, robust):
-    robust = _check_options(model, gauge, solver, n_starts, max_steps, progress, robust)
-    tap_label, _ = _tap_weights(tap_weights, model)
-    fixed = check_fix(fix)
-    roles = assign_roles(model, gauge, fixed)
+def _check_callback(name, value):
+    if value is not None and not callable(value):
+        raise InvalidInputError(f"{name}: expected a callable or None, got {type(value).__name__}")
+
+
+def _options(options, given):
+    """``options`` if given (then the keywords must be left at their defaults),
+    else a FitOptions from the keywords."""
+    if options is None:
+        return FitOptions(**given)
+    if not isinstance(options, FitOptions):
+        raise InvalidInputError(f"options: expected a FitOptions, got {type(options).__name__}")
+    defaults = FitOptions.__dataclass_fields__
+    changed = [
+        name for name, value in given.items()
+        if value is not defaults[name].default
+        and not (isinstance(value, (str, int)) and value == defaults[name].default)
+    ]
+    if changed:
+        raise InvalidInputError(
+            f"options: give either options= or keyword options, not both (got {', '.join(changed)})"
+        )
+    return options
+
+
+def _fit(pairs, single, options, progress, stop) -> FitResult:
+    _check_callback("progress", progress)
+    _check_callback("stop", stop)
+    problem = build_problem(pairs, options)
     with jax.enable_x64(True):
-        profile_w, profile_v = resolve_profile(profile)
-        data = prepare_pairs(pairs)
-        _, taps = _tap_weights(tap_weights, model, jnp.float64)
-        problem = _Problem(data, model, roles, fixed, profile_w, profile_v, taps)
-        result = _solve(problem, make_solver(solver), n_starts, max_steps, progress, robust)
-        result = _report(problem, result, single, gauge, robust, max_steps)
+        steps = _Steps(progress, stop, problem.to_loss)
+        path = _solve(problem, make_solver(options.solver), options, steps)
+        result = _report(problem, path, single, steps)
     # Rebuild the parameters outside float64 mode: the caller gets arrays of their
     # own default precision, ready for render().
-    params = SSSParams(*(result.values[k] for k in _PARAMS))
-    label = os.fspath(profile) if isinstance(profile, (str, os.PathLike)) else ""
-    return dataclasses.replace(result, params=params, solver=solver, profile=label, tap_weights=tap_label)
-
-
-class _Problem:
-    """The checked inputs, the parametrisation and the (initial) objective."""
-
-    def __init__(self, data, model, roles, fixed, profile_w, profile_v, taps):
-        self.data, self.model, self.roles, self.fixed = data, model, roles, fixed
-        self.scales = data_scales(data)
-        self.param, self.z_base = _build(data, roles, fixed, profile_w, profile_v, self.scales)
-        self.variances = np.asarray(fixed.get("variances", profile_v))
-        self.channels = data[0].channels[1]
-        self.linear_weights = roles["weights"] == "linear"
-        nb = self.variances.shape[0] if self.linear_weights else 1
-        on_mask = np.concatenate([np.asarray(p.target)[np.asarray(p.mask) > 0].ravel() for p in data])
-        scale = float(np.std(on_mask)) or 1.0
-        self.objective = Objective(
-            self.param,
-            tuple(data),
-            taps,
-            tuple(jnp.ones_like(p.target) for p in data),
-            jnp.ones((nb, self.channels)),
-            jnp.asarray(scale),
-            model,
-            self.linear_weights,
-        )
-        total = float(sum(np.sum(np.asarray(p.mask)) for p in data)) * self.channels
-        # 0.5 * sum(rho^2) -> the reported loss (see objective.py).
-        self.to_loss = 2.0 * scale**2 / total
+    params = SSSParams(*(result.values[k] for k in PARAM_NAMES))
+    return dataclasses.replace(
+        result, params=params, solver=options.solver, profile=options.profile_label,
+        tap_weights=options.tap_label,
+    )
 
 
 class _Path:
     """The solve so far: objective (with its robust weights and active set), the
-    unknowns, the loss history along the way and the last solve's status."""
+    unknowns and the last solve's status."""
 
     def __init__(self, objective, z):
         self.objective, self.z = objective, z
-        self.history, self.converged, self.failure = np.zeros(0), True, ""
+        self.converged, self.failure, self.interrupted = True, "", False
         self.messages: list[str] = []
         self.delta = 0.0
 
     def extend(self, record):
         self.z = record.z
-        self.history = np.concatenate([self.history, record.history])
         self.converged, self.failure = record.converged, record.failure
+        self.interrupted = record.interrupted
 
 
-def _solve(problem, solver, n_starts, max_steps, progress, robust) -> _Path:
-    """Multi-start, robust reweighting and the active set (steps 2-4 above)."""
-    param = problem.param
-    counter = _Counter(progress, problem.to_loss)
+def _solve(problem, solver, options, steps) -> _Path:
+    """Multi-start, robust reweighting and the active set (steps 2-4 above).
+
+    Stops early, keeping the best point so far, when ``steps.stop`` asks.
+    """
     path = _Path(problem.objective, problem.z_base)
-    if not param.size:
+    if not problem.param.size:
         return path
+    # One poll before the first step: the start search can take a while, and
+    # there is nothing to report yet.
+    if steps.stop_requested():
+        raise FitInterrupted("stop: the fit was interrupted before its first solver step")
+
+    def run(label, z0):
+        steps.begin(label)
+        return run_solver(solver, path.objective, z0, options.max_steps, steps, steps.stop_requested)
 
     # Multi-start from the lowest local minima of the blur scan; keep the best.
-    blur0 = _blur_at_zero(problem.roles, problem.scales, problem.fixed, problem.variances)
-    starts = choose_starts(
-        lambda u: float(_loss(path.objective, jnp.asarray(u))),
-        param, problem.scales, blur0, problem.z_base, n_starts,
-    )
     best = None
-    for z0 in starts:
-        record = run_solver(solver, path.objective, z0, max_steps, counter)
+    for i, z0 in enumerate(problem.starts):
+        record = run(f"start {i + 1}", z0)
         if best is None or record.final < best.final:
             best = record
+        if record.interrupted:
+            break
     path.extend(best)
+    path.interrupted = record.interrupted  # the last start run, not necessarily the best
+    if path.interrupted:
+        path.converged = False
+        return path
 
     # Robust reweighting rounds, warm-started.
-    if robust is not None:
+    if options.robust is not None:
         masks = [np.asarray(p.mask) for p in problem.data]
-        for _ in range(_ROBUST_ROUNDS):
+        for round_ in range(_ROBUST_ROUNDS):
             preds = _evaluate(path.objective, path.z, jnp.asarray(False))["predictions"]
             residuals = [np.asarray(p.target) - np.asarray(q) for p, q in zip(problem.data, preds)]
-            path.delta = robust_scale(residuals, masks, robust)
-            u = tuple(jnp.asarray(x) for x in robust_weights(residuals, path.delta, robust))
+            path.delta = robust_scale(residuals, masks, options.robust)
+            u = tuple(jnp.asarray(x) for x in robust_weights(residuals, path.delta, options.robust))
             path.objective = eqx.tree_at(lambda o: o.robust, path.objective, u)
-            path.extend(run_solver(solver, path.objective, path.z, max_steps, counter))
+            path.extend(run(f"robust {round_ + 1}", path.z))
+            if path.interrupted:
+                return path
 
     # Active set: weights are ratios on the simplex; hold negative ones at 0.
     nb = int(path.objective.active.shape[0])
     if problem.linear_weights and nb > 1:
-        for _ in range(nb):
+        for round_ in range(nb):
             coef = np.asarray(_evaluate(path.objective, path.z, jnp.asarray(False))["coef"])
             active = np.asarray(path.objective.active)
             negative = (coef * np.sign(coef.sum(axis=0)) < 0) & (active > 0)
@@ -445,7 +345,9 @@ def _solve(problem, solver, n_starts, max_steps, progress, robust) -> _Path:
                 break
             active = jnp.asarray(np.where(negative, 0.0, active))
             path.objective = eqx.tree_at(lambda o: o.active, path.objective, active)
-            path.extend(run_solver(solver, path.objective, path.z, max_steps, counter))
+            path.extend(run(f"active set {round_ + 1}", path.z))
+            if path.interrupted:
+                break
         held = np.asarray(path.objective.active) == 0
         held = held[:, 0] if problem.channels == 1 else held
         if held.any():
@@ -453,10 +355,10 @@ def _solve(problem, solver, n_starts, max_steps, progress, robust) -> _Path:
             path.messages.append(f"{names}: held at 0 (the unconstrained least squares made them negative)")
     return path
 
-
-def _report(problem, path, single, gauge, robust, max_steps) -> FitResult:
+def _report(problem, path, single, steps) -> FitResult:
     """The estimate, its uncertainty and diagnostics (step 5 above)."""
     param, roles, data, c_tgt = problem.param, problem.roles, problem.data, problem.channels
+    robust, max_steps = problem.options.robust, problem.options.max_steps
     messages = list(path.messages)
     final = _evaluate(path.objective, jnp.asarray(path.z), jnp.asarray(True))
     ratios, coef, offset = (np.asarray(final[k]) for k in ("ratios", "coef", "offset"))
@@ -511,24 +413,28 @@ def _report(problem, path, single, gauge, robust, max_steps) -> FitResult:
                 f"{where}target appears shifted by ({dy:+.1f}, {dx:+.1f}) px (dy, dx) relative to "
                 "the source; align the images, the fitted parameters are unreliable"
             )
-    if not path.converged:
+    if path.interrupted:
+        messages.append(
+            f"solver: interrupted after {len(steps.losses)} steps; the estimate is the best point reached"
+        )
+    elif not path.converged:
         messages.append(f"solver: not converged ({path.failure or f'max_steps={max_steps} reached'})")
 
     squeeze = (lambda a: a[0]) if single else (lambda a: a)
     return FitResult(
         params=None,
-        values={k: np.asarray(natural[k], np.float64) for k in _PARAMS},
+        values={k: np.asarray(natural[k], np.float64) for k in PARAM_NAMES},
         stderr=stderr,
         undetermined=tuple(undetermined),
-        fixed={k: np.asarray(param.values[k]).tolist() for k in _PARAMS if roles[k] == "fixed"},
-        gauge=gauge,
+        fixed={k: np.asarray(param.values[k]).tolist() for k in PARAM_NAMES if roles[k] == "fixed"},
+        gauge=problem.options.gauge,
         loss=float(final["loss"]),
         sigma=unc.sigma,
         psnr=psnr,
         ssim=ssim,
-        converged=bool(path.converged),
-        iterations=int(len(path.history)),
-        history=path.history * problem.to_loss,
+        converged=bool(path.converged) and not path.interrupted,
+        iterations=len(steps.losses),
+        history=np.asarray(steps.losses, np.float64),
         gain=squeeze(ratios * gain0),
         offset=squeeze(offset),
         mix=natural.get("mix"),
@@ -536,6 +442,8 @@ def _report(problem, path, single, gauge, robust, max_steps) -> FitResult:
         warnings=tuple(messages),
         model=problem.model,
         tap_weights=None,
+        interrupted=bool(path.interrupted),
+        stages=tuple(steps.stages),
     )
 
 
@@ -543,7 +451,7 @@ def _combine_flags(roles, natural, unc, flags):
     """Standard errors (None where fixed or undetermined), the undetermined entry
     names, and those flagged by the numerical test alone."""
     stderr, undetermined, numeric_only = {}, [], []
-    for name in _PARAMS:
+    for name in PARAM_NAMES:
         if roles[name] == "fixed":
             stderr[name] = None
             continue

@@ -8,7 +8,7 @@ import math
 import equinox as eqx
 import numpy as np
 
-from ..params import SSSParams
+from ..params import PARAM_NAMES, SSSParams
 
 __all__ = ["FitResult", "masked_list"]
 
@@ -42,7 +42,12 @@ class FitResult(eqx.Module):
     stderr : dict
         Standard error of each parameter (float, or a list for weights and
         variances); None where the parameter is fixed (see ``fixed``) or
-        undetermined (see ``undetermined``).
+        undetermined (see ``undetermined``). They are conditional on the model
+        and on the profile held fixed (its variances, in the default gauge): they
+        measure the noise, not the choice of profile. Another profile can move
+        the estimate by many standard errors at the same PSNR (14 for
+        ``sss_level`` in one measured case), so compare profiles before trusting
+        an error bar.
     undetermined : tuple of str
         Parameters the data cannot determine: ``"maxdd"``, ``"weights[2]"``,
         ``"weights[1,0]"`` (Gaussian 1, channel 0), ``"variances[3]"``...
@@ -59,11 +64,24 @@ class FitResult(eqx.Module):
     psnr, ssim : float
         PSNR (dB) and SSIM of the prediction against the target on the mask.
     converged : bool
-        Whether the last solve met its tolerances within ``max_steps``.
+        Whether the last solve met its tolerances within ``max_steps`` (False
+        when ``interrupted``).
     iterations : int
-        Solver steps on the path to the result (best start plus refinements).
-    history : numpy.ndarray
-        Loss after each of those steps (same units as ``loss``).
+        Every solver step the fit took: all starts and all refinement rounds,
+        the count the ``progress`` callback reached.
+    history : numpy.ndarray, shape (iterations,)
+        The loss after each of those steps, in the order taken (same units as
+        ``loss``; the value ``progress`` was given). Each solve starts afresh, so
+        the curve jumps between stages; split it with ``stages``.
+    stages : tuple of (str, int, int)
+        ``(label, first, stop)``: ``history[first:stop]`` are the steps of one
+        solve, labelled ``"start 1"`` ... ``"start n"`` (the multi-start; the
+        lowest final loss wins), then ``"robust 1"``, ``"robust 2"``
+        (reweighting rounds) and ``"active set 1"``... (weights held at 0), both
+        warm-started from the winner. See :meth:`history_by_stage`.
+    interrupted : bool
+        Whether the ``stop`` callable ended the fit early; the estimate is then
+        the best point reached, with its standard errors at that point.
     gain, offset : numpy.ndarray
         Photometric fit ``pred = gain * out + offset`` per target channel: shape
         (C',) for one pair, (P, C') for :func:`fit_pairs`.
@@ -101,6 +119,26 @@ class FitResult(eqx.Module):
     tap_weights: object
     solver: str = "lm"
     profile: str = ""
+    interrupted: bool = False
+    stages: tuple = ()
+
+    def history_by_stage(self) -> dict:
+        """``{label: losses}`` for each solve of the fit (see ``stages``).
+
+        Examples
+        --------
+        >>> import numpy as np, invsss
+        >>> y, x = np.mgrid[0:16, 0:16]
+        >>> source = 0.5 + 0.3 * np.sin(x / 2.0); depth = np.full((16, 16), 500.0)
+        >>> fit = invsss.fit_pair(source, source, depth, None, n_starts=2, robust=None,
+        ...                       profile={"weights": [1.0], "variances": [1.0]})
+        >>> list(fit.history_by_stage())
+        ['start 1', 'start 2']
+        >>> sum(map(len, fit.history_by_stage().values())) == fit.iterations
+        True
+        """
+        history = np.asarray(self.history)
+        return {label: history[first:stop] for label, first, stop in self.stages}
 
     def is_undetermined(self, name: str) -> np.ndarray:
         """Boolean array of parameter ``name``'s shape: True where undetermined."""
@@ -118,9 +156,17 @@ class FitResult(eqx.Module):
         """JSON-ready mapping with the keys of a params file plus the fit report.
 
         Undetermined parameters (and their standard errors) are None, never numbers.
+        The keys are always the same (``channels_mix`` only with an RGB -> grey
+        mix, ``profile`` only for a named profile): the five parameters,
+        ``model``, ``tap_weights``, ``stderr``, ``undetermined``, ``loss``,
+        ``psnr``, ``ssim``, ``converged``, ``interrupted``, ``iterations``,
+        ``fixed``, ``gauge``, ``gain``, ``offset``, ``sigma``, ``solver``,
+        ``warnings`` and ``estimate`` (every parameter as a number, undetermined
+        ones included: what produced the fitted image). The loss history is not
+        written.
         """
         out = {}
-        for name in ("sss_level", "correction", "maxdd", "weights", "variances"):
+        for name in PARAM_NAMES:
             out[name] = masked_list(self.values[name], self.is_undetermined(name))
         out["model"] = self.model
         out["tap_weights"] = self.tap_weights
@@ -130,6 +176,7 @@ class FitResult(eqx.Module):
         out["psnr"] = _number(self.psnr)
         out["ssim"] = _number(self.ssim)
         out["converged"] = bool(self.converged)
+        out["interrupted"] = bool(self.interrupted)
         out["iterations"] = int(self.iterations)
         out["fixed"] = {k: np.asarray(v).tolist() for k, v in self.fixed.items()}
         out["gauge"] = self.gauge
@@ -142,11 +189,8 @@ class FitResult(eqx.Module):
         out["sigma"] = _number(self.sigma)
         out["solver"] = self.solver
         out["warnings"] = list(self.warnings)
-        if self.undetermined:
-            # The numbers that produced the fitted image, undetermined ones
-            # included: what a renderer uses when it needs a value anyway.
-            out["estimate"] = {
-                name: np.asarray(self.values[name]).tolist()
-                for name in ("sss_level", "correction", "maxdd", "weights", "variances")
-            }
+        # The numbers that produced the fitted image, undetermined ones included:
+        # what a renderer uses when it needs a value anyway. Always written, so a
+        # params file has one shape whatever the data determined.
+        out["estimate"] = {name: np.asarray(self.values[name]).tolist() for name in PARAM_NAMES}
         return out

@@ -1,0 +1,123 @@
+"""The settings of a fit, checked once: :class:`FitOptions`.
+
+Everything that says *how* to fit (model, profile, gauge, solver, ...) lives in one
+frozen value, validated when it is made, so that :func:`~invsss.estimator.build_problem`
+and the fit itself never re-check a setting and a bad one fails before any image
+is read. The callbacks (``progress``, ``stop``) are not options: they belong to
+one run, not to the recipe.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import numbers
+import os
+import types
+
+import jax
+import numpy as np
+
+from ..passes import tap_weights as tap_weight_set
+from ..screen_space import MODELS
+from ..validation import InvalidInputError
+from .parametrisation import GAUGES, assign_roles, check_fix, resolve_profile
+from .robust import check_robust
+from .solve import SOLVERS
+
+__all__ = ["FitOptions"]
+
+
+@dataclasses.dataclass(frozen=True)
+class FitOptions:
+    """How to fit: the keyword options of :func:`invsss.fit_pair`, checked once.
+
+    Parameters
+    ----------
+    model : {"sog", "thesis", "separable"}
+    profile : str, path, mapping or SumOfGaussians
+        The sum-of-Gaussians profile (its variances are held in the default gauge;
+        it gives the number of Gaussians and the starting weights).
+    fix : mapping, optional
+        Parameters held at given values, e.g. ``{"maxdd": 0.01}``. Stored as a
+        read-only mapping of float64 arrays.
+    gauge : {"variances", "sss_level"}
+    solver : {"lm", "gauss-newton", "bfgs"}
+    n_starts : int >= 1
+    max_steps : int >= 1
+        Solver steps per start and per refinement round.
+    tap_weights : {"jimenez", "thesis"}, 7 numbers or None
+        None picks "thesis" for the thesis model and "jimenez" otherwise.
+    robust : {"pseudo-huber", "cauchy"} or None
+        ``"none"`` and False are stored as None.
+
+    Raises
+    ------
+    InvalidInputError
+        Any field out of range, with the field's name in a one-line message.
+
+    Examples
+    --------
+    >>> from invsss.estimator import FitOptions
+    >>> options = FitOptions(n_starts=2, fix={"maxdd": 1.0})
+    >>> options.n_starts, float(options.fix["maxdd"]), options.tap_label
+    (2, 1.0, 'jimenez')
+    >>> FitOptions(solver="adam")
+    Traceback (most recent call last):
+    ...
+    invsss.validation.InvalidInputError: solver: expected one of lm, gauss-newton, bfgs, got 'adam'
+    """
+
+    model: str = "sog"
+    profile: object = "thesis-nir"
+    fix: object = None
+    gauge: str = "variances"
+    solver: str = "lm"
+    n_starts: int = 4
+    max_steps: int = 200
+    tap_weights: object = None
+    robust: str | None = "pseudo-huber"
+
+    def __post_init__(self):
+        if self.model not in MODELS:
+            raise InvalidInputError(f"model: expected one of {', '.join(MODELS)}, got {self.model!r}")
+        if self.gauge not in GAUGES:
+            raise InvalidInputError(f"gauge: expected one of {', '.join(GAUGES)}, got {self.gauge!r}")
+        if self.solver not in SOLVERS:
+            raise InvalidInputError(f"solver: expected one of {', '.join(SOLVERS)}, got {self.solver!r}")
+        for name in ("n_starts", "max_steps"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
+                raise InvalidInputError(f"{name}: expected an integer >= 1, got {value!r}")
+            object.__setattr__(self, name, int(value))
+        object.__setattr__(self, "robust", check_robust(self.robust))
+        fixed = check_fix(self.fix)
+        object.__setattr__(self, "fix", types.MappingProxyType(fixed))
+        assign_roles(self.model, self.gauge, fixed)  # gauge and fix= must agree
+        self.taps()
+        # The profile is read in float64 (a float32 copy would round the variances).
+        with jax.enable_x64(True):
+            resolve_profile(self.profile)
+
+    def taps(self, dtype=None):
+        """The 7 tap weights as a JAX array (``dtype`` default: JAX's default float)."""
+        spec = self.tap_weights
+        if spec is None:
+            spec = "thesis" if self.model == "thesis" else "jimenez"
+        try:
+            return tap_weight_set(spec, dtype)
+        except (ValueError, TypeError) as err:
+            raise InvalidInputError(str(err)) from None
+
+    @property
+    def tap_label(self):
+        """The tap weights as a params file writes them: a set's name or 7 numbers."""
+        if self.tap_weights is None:
+            return "thesis" if self.model == "thesis" else "jimenez"
+        if isinstance(self.tap_weights, str):
+            return self.tap_weights
+        return np.asarray(self.taps(), np.float64).tolist()
+
+    @property
+    def profile_label(self) -> str:
+        """The profile's name or path ("" for a profile given as numbers)."""
+        return os.fspath(self.profile) if isinstance(self.profile, (str, os.PathLike)) else ""

@@ -1,0 +1,239 @@
+"""The problem a fit solves, built in the open: :func:`build_problem`.
+
+From checked pairs and :class:`~invsss.estimator.FitOptions` it makes the
+parametrisation (roles, free blocks, references), the projected residual
+(:class:`~invsss.estimator.objective.Objective`) and the starting points of the
+multi-start search. :func:`invsss.fit_pair` solves exactly this problem; tests and
+benchmarks build it themselves to time or probe the solve without running a fit.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..params import PARAM_NAMES
+from ..validation import InvalidInputError
+from .initial import blur_reference, choose_starts, data_scales
+from .inputs import prepare_pairs
+from .objective import Objective
+from .options import FitOptions
+from .parametrisation import Parametrisation, assign_roles, resolve_profile
+
+__all__ = ["FitProblem", "build_problem"]
+
+
+def _initial_weights(profile_weights, k, channels):
+    """Starting (or carried) weights of shape (K,) or (K, C') from the profile."""
+    w = np.asarray(profile_weights, np.float64)
+    if w.shape[0] != k:
+        w = np.ones(k)
+    if w.ndim == 2 and (channels == 1 or w.shape[1] != channels):
+        w = w.mean(axis=1)
+    if w.ndim == 1 and channels > 1:
+        w = np.repeat(w[:, None], channels, axis=1)
+    w = np.maximum(w, 1e-6)
+    return w / w.sum(axis=0)
+
+
+def _build(pairs, roles, fixed, profile_w, profile_v, scales):
+    """The parametrisation and the natural starting values of the free blocks."""
+    c_src, c_tgt = pairs[0].channels
+    variances = fixed.get("variances", profile_v)
+    k = variances.shape[0]
+    w0 = _initial_weights(profile_w, k, c_tgt)
+    if "weights" in fixed:
+        w = fixed["weights"]
+        if w.ndim == 2 and w.shape[1] not in (1, c_tgt):
+            raise InvalidInputError(
+                f"fix['weights']: expected one column per target channel ({c_tgt}), got shape {w.shape}"
+            )
+        if w.shape[0] != k:
+            raise InvalidInputError(
+                f"fix['weights']: expected {k} rows, one per Gaussian of the profile, got shape {w.shape}"
+            )
+    carried = {"sss_level": 1.0, "correction": 0.0, "maxdd": scales.slope, "weights": w0, "variances": variances}
+    values, reference, start, blocks = {}, {}, {}, []
+    for name in PARAM_NAMES:
+        role = roles[name]
+        if role == "fixed":
+            values[name] = jnp.asarray(fixed.get(name, variances if name == "variances" else None))
+        elif role in ("unused", "linear"):
+            values[name] = jnp.asarray(carried[name])
+    if roles["sss_level"] == "free":
+        reference["sss_level"] = blur_reference(scales, variances)
+        blocks.append(("sss_level", ()))
+    if roles["correction"] == "free":
+        reference["correction"] = scales.correction
+        start["correction"] = 0.1 * scales.correction
+        blocks.append(("correction", ()))
+    if roles["maxdd"] == "free":
+        reference["maxdd"] = scales.slope
+        blocks.append(("maxdd", ()))
+    if roles["variances"] == "free":
+        reference["variances"] = np.asarray(variances)
+        blocks.append(("variances", (k,)))
+    if roles["weights"] == "free":
+        if k == 1:
+            values["weights"] = jnp.ones((1,) if c_tgt == 1 else (1, c_tgt))
+        else:
+            blocks.append(("weights", (k - 1,) if c_tgt == 1 else (k - 1, c_tgt)))
+            start["weights"] = w0
+            reference["weights"] = 1.0
+    if c_src == 3 and c_tgt == 1:
+        blocks.append(("mix", (2,)))
+        start["mix"] = np.full(3, 1.0 / 3.0)
+        reference["mix"] = 1.0
+    if len(pairs) > 1:
+        blocks.append(("gain_ratio", (len(pairs) - 1, c_tgt)))
+        start["gain_ratio"] = np.ones((len(pairs) - 1, c_tgt))
+        reference["gain_ratio"] = 1.0
+    param = Parametrisation(
+        tuple(blocks), {k_: jnp.asarray(v) for k_, v in reference.items()}, values
+    )
+    natural0 = {name: start.get(name, reference[name]) for name, _ in blocks}
+    return param, param.unknowns(natural0)
+
+
+def _blur_at_zero(roles, scales, fixed, variances):
+    if roles["sss_level"] == "free":
+        return 2.0  # by construction of the reference (initial.blur_reference)
+    if roles["variances"] == "free":
+        return float(fixed["sss_level"]) * float(np.sqrt(np.max(variances))) / scales.depth
+    return None
+
+
+@eqx.filter_jit
+def _loss(objective, z):
+    return objective.loss(z)
+
+
+class FitProblem:
+    """The checked inputs, parametrisation, objective and starts of one fit.
+
+    Made by :func:`build_problem`; its arrays are float64, so use it under
+    ``jax.enable_x64(True)``.
+
+    Attributes
+    ----------
+    options : FitOptions
+    data : tuple of PairData
+        The checked float64 pairs.
+    roles : dict
+        Each parameter's role: "free", "linear", "fixed" or "unused".
+    fixed : dict
+        The ``fix=`` values as float64 arrays.
+    scales : DataScales
+        Typical depth, slope and correction of the data (the references).
+    param : Parametrisation
+        Maps the unknowns ``z`` to parameter values.
+    objective : Objective
+        The projected residual: ``objective(z) -> (residual, None)``, with plain
+        least-squares weights and every basis image active (the fit changes both
+        in its refinement rounds).
+    starts : tuple of arrays, shape (n,)
+        Starting unknowns, best first (at most ``options.n_starts``; empty when
+        nothing is free).
+    z_base : array, shape (n,)
+        The natural starting values of the free blocks, before the start search.
+    to_loss : float
+        Factor from the solver's ``0.5 * sum(residual^2)`` to the reported loss.
+    variances : numpy.ndarray
+        The variances the fit starts from (fixed or the profile's).
+    channels : int
+        Target channels C'.
+    linear_weights : bool
+        Whether the weights are eliminated by least squares (``sog``).
+    """
+
+    def __init__(self, data, options, profile_w, profile_v):
+        self.options, self.data, self.model = options, tuple(data), options.model
+        self.fixed = dict(options.fix)
+        self.roles = assign_roles(options.model, options.gauge, self.fixed)
+        self.scales = data_scales(self.data)
+        self.param, self.z_base = _build(self.data, self.roles, self.fixed, profile_w, profile_v, self.scales)
+        self.variances = np.asarray(self.fixed.get("variances", profile_v))
+        self.channels = self.data[0].channels[1]
+        self.linear_weights = self.roles["weights"] == "linear"
+        nb = self.variances.shape[0] if self.linear_weights else 1
+        on_mask = np.concatenate([np.asarray(p.target)[np.asarray(p.mask) > 0].ravel() for p in self.data])
+        scale = float(np.std(on_mask)) or 1.0
+        self.objective = Objective(
+            self.param,
+            self.data,
+            options.taps(jnp.float64),
+            tuple(jnp.ones_like(p.target) for p in self.data),
+            jnp.ones((nb, self.channels)),
+            jnp.asarray(scale),
+            options.model,
+            self.linear_weights,
+        )
+        total = float(sum(np.sum(np.asarray(p.mask)) for p in self.data)) * self.channels
+        # 0.5 * sum(rho^2) -> the reported loss (see objective.py).
+        self.to_loss = 2.0 * scale**2 / total
+        self.starts = ()
+        if self.param.size:
+            blur0 = _blur_at_zero(self.roles, self.scales, self.fixed, self.variances)
+            self.starts = tuple(
+                jnp.asarray(z)
+                for z in choose_starts(
+                    lambda u: float(_loss(self.objective, jnp.asarray(u))),
+                    self.param, self.scales, blur0, self.z_base, options.n_starts,
+                )
+            )
+
+    @property
+    def z0(self):
+        """The best start (``z_base`` when nothing is free)."""
+        return self.starts[0] if self.starts else self.z_base
+
+    def loss(self, z) -> float:
+        """The reported loss at ``z`` (mask-weighted mean squared residual)."""
+        return float(_loss(self.objective, jnp.asarray(z)))
+
+
+def build_problem(pairs, options: FitOptions | None = None) -> FitProblem:
+    """Check the pairs and build the problem :func:`invsss.fit_pairs` would solve.
+
+    Parameters
+    ----------
+    pairs : sequence of (source, target, depth, mask) or ImagePair
+        As for :func:`invsss.fit_pairs`.
+    options : FitOptions, optional
+        Default ``FitOptions()``.
+
+    Returns
+    -------
+    FitProblem
+        Its ``objective`` and ``starts`` are what the fit hands the solver first;
+        evaluate them under ``jax.enable_x64(True)``.
+
+    Raises
+    ------
+    InvalidInputError
+        Bad pairs, or ``fix['weights']`` that does not match the profile.
+
+    Examples
+    --------
+    >>> import numpy as np, jax, invsss
+    >>> from invsss.estimator import FitOptions, build_problem
+    >>> rng = np.random.default_rng(0)
+    >>> source = rng.uniform(0.2, 1.0, (16, 16)); depth = np.full((16, 16), 500.0)
+    >>> options = FitOptions(profile={"weights": [1.0], "variances": [1.0]}, n_starts=2,
+    ...                      fix={"correction": 0.0, "maxdd": 1.0})
+    >>> problem = build_problem([(source, source, depth, None)], options)
+    >>> problem.param.free, len(problem.starts)
+    (('sss_level',), 2)
+    >>> with jax.enable_x64(True):
+    ...     residual, _ = problem.objective(problem.z0)
+    >>> residual.shape
+    (256,)
+    """
+    options = FitOptions() if options is None else options
+    if not isinstance(options, FitOptions):
+        raise InvalidInputError(f"options: expected a FitOptions, got {type(options).__name__}")
+    with jax.enable_x64(True):
+        profile_w, profile_v = resolve_profile(options.profile)
+        return FitProblem(prepare_pairs(pairs), options, profile_w, profile_v)
