@@ -22,7 +22,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .models import MODEL_NAMES, get_model, resolve_tap_weights
 from .params import SSSParams
+from .pass_plan import pass_plan
 from .passes import directional_pass, pixel_coordinates, sample_along, tap_spread
 from .passes import tap_weights as tap_weight_set
 from .profiles import sum_of_gaussians
@@ -39,15 +41,8 @@ __all__ = [
     "separable_kernel",
 ]
 
-MODELS = ("sog", "thesis", "separable")
-
-
-def _safe_sqrt(x):
-    # sqrt with a zero derivative at 0: a zero-width pass is the identity, and the
-    # derivative of the pass with respect to its footprint vanishes there, so the
-    # true derivative is 0 * inf; we take the limit 0 rather than produce NaN.
-    positive = x > 0
-    return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1.0)), 0.0)
+#: The model names (kept here for older imports; the table is :mod:`invsss.models`).
+MODELS = MODEL_NAMES
 
 
 def _taps(spec, dtype):
@@ -107,15 +102,6 @@ def _pass_sequence(
     return out
 
 
-def _sog_widths(variances, w_taps):
-    # Sorted variances and the footprint per unit stretch of each layer's pass
-    # pair: sqrt(v_i - v_{i-1}) / c_W.
-    order = jnp.argsort(variances)
-    v = variances[order]
-    widths = _safe_sqrt(jnp.diff(v, prepend=jnp.zeros((1,), v.dtype))) / tap_spread(w_taps)
-    return order, widths
-
-
 def sog_layers(
     image: Float[Array, "H W C"],
     depth: Float[Array, "H W"],
@@ -135,40 +121,39 @@ def sog_layers(
     """
     w_taps = _taps(tap_weights, image.dtype)
     s_x, s_y = stretch_factors(depth, sss_level, correction, maxdd)
-    order, widths = _sog_widths(variances, w_taps)
-    k = widths.shape[0]
-    axes = jnp.tile(jnp.array([1, 0], jnp.int32), k)
+    plan = pass_plan("layered", variances, tap_spread(w_taps), jnp)
+    k = variances.shape[0]
     # Keep each vertical pass (B_i) in slot i; horizontal passes go to slot k,
     # which is out of range and dropped.
     slots = jnp.stack([jnp.full(k, k), jnp.arange(k)], axis=1).reshape(-1)
+    axes = jnp.asarray(plan.axes, jnp.int32)
     layers = _pass_sequence(
-        image, s_x, s_y, mask, w_taps, axes, jnp.repeat(widths, 2), slots=slots, num_slots=k
+        image, s_x, s_y, mask, w_taps, axes, plan.widths, slots=slots, num_slots=k
     )
-    return layers, order
+    return layers, plan.order
 
 
 def render_sog(image, depth, mask, params: SSSParams, tap_weights="jimenez"):
     """``out = sum_i w_i B_i / sum_i w_i`` (per channel for (K, C) weights)."""
     w_taps = _taps(tap_weights, image.dtype)
     s_x, s_y = stretch_factors(depth, params.sss_level, params.correction, params.maxdd)
-    order, widths = _sog_widths(params.variances, w_taps)
-    w = params.weights[order]
+    plan = pass_plan("layered", params.variances, tap_spread(w_taps), jnp)
+    w = params.weights[plan.order]
     w = w.reshape(w.shape[0], -1) / jnp.sum(w.reshape(w.shape[0], -1), axis=0)  # (K, 1 or C)
-    k = widths.shape[0]
+    k = w.shape[0]
     # Pass pair i contributes its vertical pass, B_i, with weight w_i.
     mix = jnp.stack([jnp.zeros_like(w), w], axis=1).reshape(2 * k, 1, 1, -1)
-    axes = jnp.tile(jnp.array([1, 0], jnp.int32), k)
-    return _pass_sequence(image, s_x, s_y, mask, w_taps, axes, jnp.repeat(widths, 2), mix)
+    axes = jnp.asarray(plan.axes, jnp.int32)
+    return _pass_sequence(image, s_x, s_y, mask, w_taps, axes, plan.widths, mix)
 
 
 def render_thesis(image, depth, mask, params: SSSParams, tap_weights="thesis"):
     """K horizontal passes then K vertical passes with ``f_i = s sqrt(v_i) / c_W``."""
     w_taps = _taps(tap_weights, image.dtype)
     s_x, s_y = stretch_factors(depth, params.sss_level, params.correction, params.maxdd)
-    widths = _safe_sqrt(params.variances) / tap_spread(w_taps)
-    k = widths.shape[0]
-    axes = jnp.concatenate([jnp.ones(k, jnp.int32), jnp.zeros(k, jnp.int32)])
-    return _pass_sequence(image, s_x, s_y, mask, w_taps, axes, jnp.concatenate([widths, widths]))
+    plan = pass_plan("chained", params.variances, tap_spread(w_taps), jnp)
+    axes = jnp.asarray(plan.axes, jnp.int32)
+    return _pass_sequence(image, s_x, s_y, mask, w_taps, axes, plan.widths)
 
 
 def separable_kernel(
@@ -233,13 +218,30 @@ def render_separable(
     return out
 
 
+def _render_kernel(image, depth, mask, params, tap_w, taps=17, strength=1.0, follow_surface=0.0):
+    # The kernel layout has no 7-tap passes: tap_w is None and not used.
+    return render_separable(image, depth, mask, params, taps, strength, follow_surface)
+
+
+#: The renderer of each layout of :data:`invsss.models.LAYOUTS`, called as
+#: ``f(image, depth, mask, params, tap_w, **kernel_options)`` with (H, W, C)
+#: inputs; only the kernel layout takes options.
+LAYOUT_RENDERERS = {
+    "layered": render_sog,
+    "chained": render_thesis,
+    "kernel": _render_kernel,
+}
+
+
 @eqx.filter_jit
 def _render(image, depth, mask, params, model, tap_w, taps, strength, follow_surface):
-    if model == "sog":
-        return render_sog(image, depth, mask, params, tap_w)
-    if model == "thesis":
-        return render_thesis(image, depth, mask, params, tap_w)
-    return render_separable(image, depth, mask, params, taps, strength, follow_surface)
+    layout = get_model(model).layout
+    options = (
+        {"taps": taps, "strength": strength, "follow_surface": follow_surface}
+        if layout == "kernel"
+        else {}
+    )
+    return LAYOUT_RENDERERS[layout](image, depth, mask, params, tap_w, **options)
 
 
 def render(
@@ -268,9 +270,11 @@ def render(
         Stretch-factor and profile parameters. Weights of shape (K, C) must have
         the image's C.
     model : {"sog", "thesis", "separable"}
+        A name from :data:`invsss.models.MODEL_NAMES`.
     tap_weights : {"jimenez", "thesis"} or 7 numbers, optional
-        Tap weights of the 7-tap passes; default "jimenez" for ``sog`` and
-        "thesis" for ``thesis``. Not used by ``separable``.
+        Tap weights of the 7-tap passes; default the model's
+        ``default_tap_weights`` ("jimenez" for ``sog``, "thesis" for
+        ``thesis``). Not used by ``separable``.
     taps, strength, follow_surface
         ``separable`` only: kernel size (odd; 11, 17 or 25 in Jimenez's code), blend
         with the identity (scalar or per channel), and the follow-surface factor
@@ -288,8 +292,7 @@ def render(
     >>> bool(jnp.allclose(invsss.render(image, depth, mask, p), 1.0))
     True
     """
-    if model not in MODELS:
-        raise InvalidInputError(f"model: expected one of {', '.join(MODELS)}, got {model!r}")
+    entry = get_model(model)
     check_image(image)
     hw = tuple(np.shape(image)[:2])
     check_depth(depth, hw)
@@ -303,19 +306,20 @@ def render(
             f"params.weights: expected one column per image channel ({channels}), "
             f"got shape {np.shape(params.weights)}"
         )
-    if tap_weights is None:
-        tap_weights = "thesis" if model == "thesis" else "jimenez"
+    tap_weights = resolve_tap_weights(entry, tap_weights)
     dtype = jnp.result_type(float)
     image = jnp.asarray(image, dtype)
     squeeze = image.ndim == 2
     if squeeze:
         image = image[..., None]
-    try:
-        tap_w = tap_weight_set(tap_weights, dtype)
-    except ValueError as err:
-        raise InvalidInputError(str(err)) from None
+    tap_w = None
+    if tap_weights is not None:
+        try:
+            tap_w = tap_weight_set(tap_weights, dtype)
+        except ValueError as err:
+            raise InvalidInputError(str(err)) from None
     out = _render(
-        image, jnp.asarray(depth, dtype), jnp.asarray(mask, dtype), params, model,
+        image, jnp.asarray(depth, dtype), jnp.asarray(mask, dtype), params, entry.name,
         tap_w, taps, strength, follow_surface,
     )
     return out[..., 0] if squeeze else out
