@@ -28,13 +28,13 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 from .estimator.diagnostics import masked_psnr, masked_ssim
+from .params import PARAM_NAMES
 from .validation import InvalidInputError
 
 __all__ = ["plot_fit_report"]
 
 _PANEL_INCHES = 2.9
 _TEXT_WIDTH = 84  # characters per line in the parameter box
-_PARAM_ORDER = ("sss_level", "correction", "maxdd", "weights", "variances")
 
 
 def _hwc(x) -> np.ndarray:
@@ -104,7 +104,7 @@ def _parameter_lines(result) -> list[str]:
     stderr = dict(result.stderr or {})
     fixed = dict(result.fixed or {})
     lines = []
-    for name in _PARAM_ORDER:
+    for name in PARAM_NAMES:
         unknown = np.asarray(result.is_undetermined(name))
         flags = ["fixed"] if name in fixed else []
         if unknown.all():

@@ -17,8 +17,8 @@ import types
 import jax
 import numpy as np
 
+from ..models import get_model
 from ..passes import tap_weights as tap_weight_set
-from ..screen_space import MODELS
 from ..validation import InvalidInputError
 from .parametrisation import GAUGES, assign_roles, check_fix, resolve_profile
 from .robust import check_robust
@@ -46,7 +46,7 @@ class FitOptions:
     max_steps : int >= 1
         Solver steps per start and per refinement round.
     tap_weights : {"jimenez", "thesis"}, 7 numbers or None
-        None picks "thesis" for the thesis model and "jimenez" otherwise.
+        None picks the model's default set (:attr:`invsss.models.ScreenSpaceModel.default_tap_weights`).
     robust : {"pseudo-huber", "cauchy"} or None
         ``"none"`` and False are stored as None.
 
@@ -78,8 +78,7 @@ class FitOptions:
     robust: str | None = "pseudo-huber"
 
     def __post_init__(self):
-        if self.model not in MODELS:
-            raise InvalidInputError(f"model: expected one of {', '.join(MODELS)}, got {self.model!r}")
+        get_model(self.model)  # one-line error naming the known models
         if self.gauge not in GAUGES:
             raise InvalidInputError(f"gauge: expected one of {', '.join(GAUGES)}, got {self.gauge!r}")
         if self.solver not in SOLVERS:
@@ -98,11 +97,16 @@ class FitOptions:
         with jax.enable_x64(True):
             resolve_profile(self.profile)
 
+    def _tap_spec(self):
+        # The model's own set by default; a model without 7-tap passes
+        # (separable) ignores them, and "jimenez" stands in for the array.
+        if self.tap_weights is not None:
+            return self.tap_weights
+        return get_model(self.model).default_tap_weights or "jimenez"
+
     def taps(self, dtype=None):
         """The 7 tap weights as a JAX array (``dtype`` default: JAX's default float)."""
-        spec = self.tap_weights
-        if spec is None:
-            spec = "thesis" if self.model == "thesis" else "jimenez"
+        spec = self._tap_spec()
         try:
             return tap_weight_set(spec, dtype)
         except (ValueError, TypeError) as err:
@@ -111,10 +115,8 @@ class FitOptions:
     @property
     def tap_label(self):
         """The tap weights as a params file writes them: a set's name or 7 numbers."""
-        if self.tap_weights is None:
-            return "thesis" if self.model == "thesis" else "jimenez"
-        if isinstance(self.tap_weights, str):
-            return self.tap_weights
+        if isinstance(self._tap_spec(), str):
+            return self._tap_spec()
         return np.asarray(self.taps(), np.float64).tolist()
 
     @property

@@ -51,6 +51,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ..params import PARAM_NAMES
 from ..profiles import SumOfGaussians, load_profile
 from ..validation import InvalidInputError
 
@@ -64,7 +65,6 @@ __all__ = [
     "Parametrisation",
 ]
 
-PARAM_NAMES = ("sss_level", "correction", "maxdd", "weights", "variances")
 GAUGES = ("variances", "sss_level")
 _SCALARS = ("sss_level", "correction", "maxdd")
 
