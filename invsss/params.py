@@ -7,7 +7,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .validation import InvalidInputError
+from .profiles import SumOfGaussians, check_profile_arrays
+from .validation import InvalidInputError, number_array
 
 __all__ = ["PARAM_NAMES", "SSSParams", "check_parameter_values", "parameter_arrays"]
 
@@ -57,6 +58,11 @@ class SSSParams(eqx.Module):
     def num_gaussians(self) -> int:
         return int(self.variances.shape[-1])
 
+    @property
+    def profile(self) -> SumOfGaussians:
+        """The weights and variances as a :class:`~invsss.profiles.SumOfGaussians`."""
+        return SumOfGaussians(self.weights, self.variances)
+
     @classmethod
     def from_dict(cls, d: dict, source: str = "params") -> "SSSParams":
         """Build from a mapping with the keys of a params JSON file.
@@ -86,21 +92,24 @@ class SSSParams(eqx.Module):
 
 
 def parameter_arrays(d, source: str = "params") -> dict[str, np.ndarray]:
-    """The five parameters of mapping ``d`` as float64 NumPy arrays (shapes unchecked)."""
+    """The five parameters of mapping ``d`` as float64 NumPy arrays (shapes unchecked).
+
+    Booleans, strings and ragged lists are refused with a message naming the key
+    (:func:`invsss.validation.number_array`).
+    """
     missing = [k for k in PARAM_NAMES if k not in d]
     if missing:
         raise InvalidInputError(f"{source}: missing key(s) {', '.join(missing)}")
-    try:
-        return {k: np.asarray(d[k], dtype=np.float64) for k in PARAM_NAMES}
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"{source}: parameter values must be numbers") from None
+    return {k: number_array(d[k], k, source) for k in PARAM_NAMES}
 
 
 def check_parameter_values(params, name: str = "params", *, values: bool = True) -> None:
     """Check a mapping of the five parameters: shapes always, values if ``values``.
 
     Shared by :class:`SSSParams` and its PyTorch twin so both give the same
-    messages. Arrays may be anything ``numpy.asarray`` accepts (or, with
+    messages; weights and variances go through the same check as a
+    :class:`~invsss.profiles.SumOfGaussians` (zero variances allowed here).
+    Arrays may be anything ``numpy.asarray`` accepts (or, with
     ``values=False``, anything with a shape, tracers included).
     """
     for k in ("sss_level", "correction", "maxdd"):
@@ -108,27 +117,19 @@ def check_parameter_values(params, name: str = "params", *, values: bool = True)
             raise InvalidInputError(
                 f"{name}: {k} must be a single number, got shape {np.shape(params[k])}"
             )
-    v_shape, w_shape = np.shape(params["variances"]), np.shape(params["weights"])
-    if len(v_shape) != 1 or v_shape[0] == 0:
-        raise InvalidInputError(f"{name}: variances must be a non-empty list, got shape {v_shape}")
-    if len(w_shape) not in (1, 2) or w_shape[0] != v_shape[0]:
-        raise InvalidInputError(
-            f"{name}: weights must have one entry (or one per channel) for each of "
-            f"the {v_shape[0]} variances, got shape {w_shape}"
-        )
     if not values:
+        check_profile_arrays(
+            params["weights"], params["variances"], name, zero_variances=True, values=False
+        )
         return
     vals = {k: np.asarray(params[k]) for k in PARAM_NAMES}
-    for k, v in vals.items():
-        if not np.all(np.isfinite(v)):
+    for k in ("sss_level", "correction", "maxdd"):
+        if not np.all(np.isfinite(vals[k])):
             raise InvalidInputError(f"{name}: {k} contains NaN or infinite values")
+    check_profile_arrays(vals["weights"], vals["variances"], name, zero_variances=True)
     if vals["sss_level"] <= 0:
         raise InvalidInputError(f"{name}: sss_level must be > 0, got {float(vals['sss_level']):g}")
     if vals["correction"] < 0:
         raise InvalidInputError(f"{name}: correction must be >= 0, got {float(vals['correction']):g}")
     if vals["maxdd"] <= 0:
         raise InvalidInputError(f"{name}: maxdd must be > 0, got {float(vals['maxdd']):g}")
-    if np.any(vals["variances"] < 0):
-        raise InvalidInputError(f"{name}: variances must be >= 0")
-    if np.any(vals["weights"] < 0) or np.any(vals["weights"].sum(axis=0) <= 0):
-        raise InvalidInputError(f"{name}: weights must be >= 0 with a positive sum")

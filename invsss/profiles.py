@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .validation import InvalidInputError, is_concrete
+from .validation import InvalidInputError, is_concrete, number_array
 
 __all__ = [
     "gaussian",
@@ -41,6 +41,7 @@ __all__ = [
     "JENSEN_SKIN1_SOG",
     "PROFILE_NAMES",
     "SumOfGaussians",
+    "check_profile_arrays",
     "load_profile",
 ]
 
@@ -321,6 +322,47 @@ _PROFILE_KEYS = ("weights", "variances")
 _OPTIONAL_KEYS = ("source", "fit")
 
 
+def check_profile_arrays(
+    weights, variances, name: str = "profile", *, zero_variances: bool = False, values: bool = True
+) -> None:
+    """Check sum-of-Gaussians weights and variances: shapes always, values when concrete.
+
+    The one check behind :class:`SumOfGaussians` and :class:`~invsss.params.SSSParams`.
+    Weights are (K,) or (K, C) for K variances; weights >= 0 with a positive
+    sum (per channel); variances > 0, or >= 0 with ``zero_variances`` (the
+    screen-space model takes a zero-variance Gaussian as "no blur"). ``values=False``
+    checks shapes only.
+
+    Examples
+    --------
+    >>> check_profile_arrays([0.4, 0.6], [0.5, 2.0, 8.0], "params.json")
+    Traceback (most recent call last):
+    ...
+    invsss.validation.InvalidInputError: params.json: weights must have shape (3,) or (3, C) to match the 3 variances, got 2 weights of shape (2,)
+    """
+    w_shape, v_shape = tuple(np.shape(weights)), tuple(np.shape(variances))
+    if len(v_shape) != 1 or v_shape[0] == 0:
+        raise InvalidInputError(f"{name}: variances must be a non-empty list, got shape {v_shape}")
+    if len(w_shape) not in (1, 2) or w_shape[0] != v_shape[0]:
+        count = f"{w_shape[0]} weights of shape " if w_shape else ""
+        raise InvalidInputError(
+            f"{name}: weights must have shape ({v_shape[0]},) or ({v_shape[0]}, C) to "
+            f"match the {v_shape[0]} variances, got {count}{w_shape}"
+        )
+    if not (values and is_concrete(weights) and is_concrete(variances)):
+        return
+    w, v = np.asarray(weights), np.asarray(variances)
+    for key, x in (("weights", w), ("variances", v)):
+        if not np.all(np.isfinite(x)):
+            raise InvalidInputError(f"{name}: {key} contains NaN or infinite values")
+    if zero_variances and np.any(v < 0):
+        raise InvalidInputError(f"{name}: variances must be >= 0, min is {float(v.min()):g}")
+    if not zero_variances and np.any(v <= 0):
+        raise InvalidInputError(f"{name}: variances must be > 0, min is {float(v.min()):g}")
+    if np.any(w < 0) or np.any(w.sum(axis=0) <= 0):
+        raise InvalidInputError(f"{name}: weights must be >= 0 with a positive sum")
+
+
 class SumOfGaussians(eqx.Module):
     """A sum-of-Gaussians diffusion profile ``R(r) = sum_i w_i G(v_i, r)`` as a pytree.
 
@@ -396,11 +438,8 @@ class SumOfGaussians(eqx.Module):
                 f"{source}: unknown key(s) {', '.join(map(str, unknown))}; expected "
                 "weights, variances and optionally source"
             )
-        try:
-            weights = np.asarray(d["weights"], dtype=np.float64)
-            variances = np.asarray(d["variances"], dtype=np.float64)
-        except (TypeError, ValueError):
-            raise InvalidInputError(f"{source}: weights and variances must be numbers") from None
+        weights = number_array(d["weights"], "weights", source)
+        variances = number_array(d["variances"], "variances", source)
         label = d.get("source", "") or ""
         if not isinstance(label, str):
             raise InvalidInputError(f"{source}: source must be a string")
@@ -410,23 +449,7 @@ class SumOfGaussians(eqx.Module):
 
     def check(self, name: str = "profile") -> None:
         """Raise :class:`InvalidInputError` on bad shapes or values (concrete arrays only)."""
-        w_shape, v_shape = tuple(np.shape(self.weights)), tuple(np.shape(self.variances))
-        if len(v_shape) != 1 or v_shape[0] == 0:
-            raise InvalidInputError(f"{name}: variances must be a non-empty list, got shape {v_shape}")
-        if len(w_shape) not in (1, 2) or w_shape[0] != v_shape[0]:
-            raise InvalidInputError(
-                f"{name}: weights must have shape ({v_shape[0]},) or ({v_shape[0]}, C) to "
-                f"match the variances, got {w_shape}"
-            )
-        if not (is_concrete(self.weights) and is_concrete(self.variances)):
-            return
-        w, v = np.asarray(self.weights), np.asarray(self.variances)
-        if not (np.all(np.isfinite(w)) and np.all(np.isfinite(v))):
-            raise InvalidInputError(f"{name}: contains NaN or infinite values")
-        if np.any(v <= 0):
-            raise InvalidInputError(f"{name}: variances must be > 0, min is {float(v.min()):g}")
-        if np.any(w < 0) or np.any(w.sum(axis=0) <= 0):
-            raise InvalidInputError(f"{name}: weights must be >= 0 with a positive sum")
+        check_profile_arrays(self.weights, self.variances, name)
 
 
 _NAMED_PROFILES = MappingProxyType(

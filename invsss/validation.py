@@ -10,6 +10,8 @@ responsible (the file readers in :mod:`invsss.io` always validate).
 
 from __future__ import annotations
 
+import json
+import numbers
 import warnings
 
 import jax
@@ -24,6 +26,7 @@ __all__ = [
     "check_same_size",
     "check_same_frame",
     "check_pair",
+    "number_array",
     "check_target_channels",
     "check_mask_background",
     "is_concrete",
@@ -40,6 +43,63 @@ class InputNotice(UserWarning):
     Not an error: the input is used, but the user may have meant something else.
     Filter it with ``warnings.simplefilter("ignore", invsss.InputNotice)``.
     """
+
+
+def _shown(value) -> str:
+    """A value as the user wrote it: JSON spelling where there is one (``true``, ``"600"``)."""
+    try:
+        return json.dumps(value)
+    except (TypeError, ValueError):
+        return repr(value)
+
+
+def _first_non_number(value, key: str):
+    """``(where, value)`` of the first entry of a nested list that is not a number, else None."""
+    if isinstance(value, (list, tuple)):
+        for i, item in enumerate(value):
+            found = _first_non_number(item, f"{key}[{i}]")
+            if found:
+                return found
+        return None
+    # bool is an int subclass, but ``true`` for a number is a mistake, never 1.
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        return key, value
+    return None
+
+
+def number_array(value, key: str, source: str = "params") -> np.ndarray:
+    """``value`` (a number, a nested list of numbers, or a numeric array) as float64.
+
+    The single parser for numeric parameters: booleans and strings are refused
+    (NumPy would turn ``True`` into 1.0 and ``"600"`` into 600.0), as are ragged
+    lists, with one line naming ``source``, the entry and the value.
+
+    Examples
+    --------
+    >>> number_array([0.5, 2], "variances")
+    array([0.5, 2. ])
+    >>> number_array([1.0, True], "weights", "params.json")
+    Traceback (most recent call last):
+    ...
+    invsss.validation.InvalidInputError: params.json: weights[1]: expected a number, got true
+    """
+    if not is_concrete(value):
+        return value  # a tracer: its dtype is the caller's business, values unknown
+    if hasattr(value, "dtype") and hasattr(value, "shape"):  # NumPy, JAX, torch arrays
+        array = np.asarray(value)
+        if array.dtype.kind not in "iuf":
+            raise InvalidInputError(f"{source}: {key}: expected numbers, got dtype {array.dtype}")
+        return array.astype(np.float64)
+    found = _first_non_number(value, key)
+    if found:
+        where, bad = found
+        raise InvalidInputError(f"{source}: {where}: expected a number, got {_shown(bad)}")
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except ValueError:
+        raise InvalidInputError(
+            f"{source}: {key}: expected a rectangular list of numbers (every row the same length)"
+        ) from None
 
 
 def is_concrete(x) -> bool:

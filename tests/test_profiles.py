@@ -218,7 +218,8 @@ def test_load_profile_names_and_json_round_trip(tmp_path):
         ('{"weights": [-1.0, 2.0], "variances": [1.0, 2.0]}', "weights must be >= 0"),
         ('{"weights": [1.0, 2.0], "variances": [1.0]}', "weights must have shape (1,)"),
         ('{"weights": [1.0], "variances": [1.0], "colour": 1}', "unknown key(s) colour"),
-        ('{"weights": ["a"], "variances": [1.0]}', "must be numbers"),
+        ('{"weights": ["a"], "variances": [1.0]}', 'weights[0]: expected a number, got "a"'),
+        ('{"weights": [true], "variances": [1.0]}', "weights[0]: expected a number, got true"),
     ],
 )
 def test_bad_profile_files_raise_one_line_errors(tmp_path, content, fragment):
