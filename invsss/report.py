@@ -4,8 +4,10 @@
 
     source | fitted | target | residual (target - fitted, on the mask)
 
-and below them the solver's convergence curve and the fitted parameters with their
-standard errors. Images are stretched linearly between their 1st and 99th
+and below them the solver's convergence (every start's loss curve and the
+refinement rounds, on one axis of all the fit's steps), the fitted diffusion
+profile ``R(r)`` against the one the fit started from, and the fitted parameters
+with their standard errors (conditional on the profile, as the page says). Images are stretched linearly between their 1st and 99th
 percentiles on the mask (the blur lowers contrast; a fixed white point would show
 a blurred target as flat grey), the fitted image and the target with the
 target's stretch, so a brightness or contrast mismatch stays visible; the mask's
@@ -22,6 +24,7 @@ from __future__ import annotations
 import os
 import textwrap
 
+import jax.numpy as jnp
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -29,6 +32,7 @@ from matplotlib.ticker import MaxNLocator
 
 from .estimator.diagnostics import masked_psnr, masked_ssim
 from .params import PARAM_NAMES
+from .profiles import sum_of_gaussians
 from .validation import InvalidInputError
 
 __all__ = ["plot_fit_report"]
@@ -114,17 +118,87 @@ def _parameter_lines(result) -> list[str]:
         value = _format_value(getattr(params, name), None if name in fixed else stderr.get(name), unknown)
         lines.append(f"{name:<11} {value}" + (f"  [{', '.join(flags)}]" if flags else ""))
     lines.append("")
+    status = "interrupted" if getattr(result, "interrupted", False) else (
+        "converged" if result.converged else "NOT converged")
     lines.append(
         f"model {result.model}   gauge {result.gauge}   "
-        f"{'converged' if result.converged else 'NOT converged'} in {result.iterations} iterations"
+        f"{status} after {result.iterations} iterations (all starts and rounds)"
     )
     lines.append(f"loss {float(result.loss):.4g}   PSNR {float(result.psnr):.2f} dB   SSIM {float(result.ssim):.4f}")
     lines.append(f"gain {_format_value(result.gain)}   offset {_format_value(result.offset)}")
     if result.mix is not None:
         lines.append(f"RGB -> grey mix {_format_value(result.mix)}")
+    lines.extend(textwrap.wrap(_CONDITIONAL_NOTE, width=_TEXT_WIDTH, subsequent_indent="  "))
     for message in result.warnings:
         lines.extend(textwrap.wrap("! " + message, width=_TEXT_WIDTH, subsequent_indent="  "))
     return lines
+
+
+# Standard errors measure the noise for the profile held fixed, not the choice
+# of profile: another profile moved sss_level by 14 of them at the same PSNR.
+_CONDITIONAL_NOTE = (
+    "± standard errors are conditional on the chosen profile (its variances held "
+    "fixed): a different profile can shift the estimate by many of them at equal PSNR."
+)
+
+
+def _plot_convergence(ax, result) -> None:
+    """Every solve's loss curve on one axis of the fit's steps: each start in its
+    own colour (the winner drawn thick), the refinement rounds in black after a
+    dashed line."""
+    history = np.asarray(result.history, dtype=np.float64).ravel()
+    stages = tuple(getattr(result, "stages", ()) or ()) or (("fit", 0, history.size),)
+    starts = [(label, a, b) for label, a, b in stages if label.startswith("start") and b > a]
+    best = min(starts, key=lambda s: history[s[2] - 1], default=None)
+    for i, (label, first, stop) in enumerate(stages):
+        steps = np.arange(first + 1, stop + 1)
+        losses = history[first:stop]
+        shown = np.isfinite(losses) & (losses > 0)
+        if not np.any(shown):
+            continue
+        if label.startswith("start") or label == "fit":
+            winner = best is not None and label == best[0]
+            ax.semilogy(steps[shown], losses[shown], color=f"C{i % 10}", lw=2.0 if winner else 1.0,
+                        marker=".", ms=3, label=label + (" (best)" if winner else ""))
+        else:
+            ax.axvline(first + 0.5, color="0.4", ls="--", lw=0.8)
+            ax.semilogy(steps[shown], losses[shown], color="k", lw=1.5, marker=".", ms=3)
+            ax.annotate(label, (first + 1, losses[shown][0]), fontsize=7, rotation=90,
+                        va="bottom", ha="right", color="0.3")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_xlabel(f"iteration (all {history.size} steps of the fit)")
+    ax.set_ylabel("loss")
+    ax.set_title("convergence: every start, then the refinement rounds", fontsize=9)
+    ax.grid(True, which="major", alpha=0.3)
+    if len(starts) > 1:
+        ax.legend(fontsize=7, loc="upper right")
+
+
+def _plot_profile(ax, result) -> None:
+    """The fitted ``R(r)`` (sum of Gaussians) against the profile the fit started
+    from, weights normalised to sum 1 per channel so the shapes compare."""
+    variances = np.asarray(result.values["variances"], np.float64)
+    weights = np.asarray(result.values["weights"], np.float64)
+    curves = [("fitted", weights, variances, "-")]
+    start = getattr(result, "start_profile", None)
+    if start is not None:
+        curves.append(("start", np.asarray(start["weights"], np.float64),
+                       np.asarray(start["variances"], np.float64), ":"))
+    r_max = 3.0 * float(np.sqrt(max(np.max(c[2]) for c in curves)))
+    r = np.linspace(0.0, r_max, 200)
+    for label, w, v, style in curves:
+        w = w / np.sum(w, axis=0)
+        profile = np.asarray(sum_of_gaussians(jnp.asarray(r), jnp.asarray(w), jnp.asarray(v)), np.float64)
+        profile = profile.reshape(r.size, -1)
+        for c in range(profile.shape[1]):
+            name = label if profile.shape[1] == 1 else f"{label}, channel {c}"
+            colour = "C0" if profile.shape[1] == 1 else ("C3", "C2", "C0")[c % 3]
+            ax.semilogy(r, np.clip(profile[:, c], 1e-12, None), color=colour, ls=style, lw=1.5, label=name)
+    ax.set_xlabel("r (scene units, mm for depth in mm)")
+    ax.set_ylabel("R(r)")
+    ax.set_title("diffusion profile: fitted vs start", fontsize=9)
+    ax.grid(True, which="major", alpha=0.3)
+    ax.legend(fontsize=7, loc="upper right")
 
 
 def _residual_limit(residuals) -> float:
@@ -176,9 +250,9 @@ def plot_fit_report(result, pairs, path) -> None:
             f"pairs: the result has {len(fitted)} fitted image(s) but {len(pairs)} pair(s) were given"
         )
     rows = len(pairs)
-    fig = Figure(figsize=(4 * _PANEL_INCHES + 0.6, rows * _PANEL_INCHES + 3.3), layout="constrained")
+    fig = Figure(figsize=(4 * _PANEL_INCHES + 0.6, rows * _PANEL_INCHES + 5.6), layout="constrained")
     FigureCanvasAgg(fig)
-    grid = fig.add_gridspec(rows + 1, 4, height_ratios=[_PANEL_INCHES] * rows + [3.0])
+    grid = fig.add_gridspec(rows + 2, 4, height_ratios=[_PANEL_INCHES] * rows + [3.0, 2.3])
 
     residuals, residual_axes = [], []
     for k, (source, target, _depth, mask) in enumerate(pairs):
@@ -213,19 +287,10 @@ def plot_fit_report(result, pairs, path) -> None:
         ax.set_yticks([])
         fig.colorbar(image, ax=ax, shrink=0.85, format="%.2g")
 
-    curve = fig.add_subplot(grid[rows, 0:2])
-    history = np.asarray(result.history, dtype=np.float64).ravel()
-    shown = np.isfinite(history) & (history > 0)
-    if np.any(shown):
-        steps = np.arange(1, history.size + 1)
-        curve.semilogy(steps[shown], history[shown], color="C0", lw=1.5, marker=".", ms=3)
-    curve.xaxis.set_major_locator(MaxNLocator(integer=True))
-    curve.set_xlabel("iteration")
-    curve.set_ylabel("loss")
-    curve.set_title("convergence", fontsize=9)
-    curve.grid(True, which="major", alpha=0.3)
+    _plot_convergence(fig.add_subplot(grid[rows, 0:2]), result)
+    _plot_profile(fig.add_subplot(grid[rows, 2:4]), result)
 
-    text = fig.add_subplot(grid[rows, 2:4])
+    text = fig.add_subplot(grid[rows + 1, 0:4])
     text.axis("off")
     box = text.text(
         0.0, 1.0, "\n".join(_parameter_lines(result)), va="top", ha="left",

@@ -444,6 +444,10 @@ def _report(problem, path, single, steps) -> FitResult:
         tap_weights=None,
         interrupted=bool(path.interrupted),
         stages=tuple(steps.stages),
+        start_profile={
+            "weights": problem.start_weights,
+            "variances": np.asarray(problem.variances, np.float64),
+        },
     )
 
 

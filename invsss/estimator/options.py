@@ -117,7 +117,7 @@ class FitOptions:
         """The tap weights as a params file writes them: a set's name or 7 numbers."""
         if isinstance(self._tap_spec(), str):
             return self._tap_spec()
-        return np.asarray(self.taps(), np.float64).tolist()
+        return np.asarray(self._tap_spec(), np.float64).tolist()  # checked in __post_init__
 
     @property
     def profile_label(self) -> str:

@@ -142,6 +142,8 @@ class FitProblem:
         Factor from the solver's ``0.5 * sum(residual^2)`` to the reported loss.
     variances : numpy.ndarray
         The variances the fit starts from (fixed or the profile's).
+    start_weights : numpy.ndarray, shape (K,) or (K, C')
+        The profile's weights, normalised per channel: where the weights start.
     channels : int
         Target channels C'.
     linear_weights : bool
@@ -156,6 +158,7 @@ class FitProblem:
         self.param, self.z_base = _build(self.data, self.roles, self.fixed, profile_w, profile_v, self.scales)
         self.variances = np.asarray(self.fixed.get("variances", profile_v))
         self.channels = self.data[0].channels[1]
+        self.start_weights = _initial_weights(profile_w, self.variances.shape[0], self.channels)
         self.linear_weights = self.roles["weights"] == "linear"
         nb = self.variances.shape[0] if self.linear_weights else 1
         on_mask = np.concatenate([np.asarray(p.target)[np.asarray(p.mask) > 0].ravel() for p in self.data])

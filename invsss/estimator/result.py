@@ -82,6 +82,11 @@ class FitResult(eqx.Module):
     interrupted : bool
         Whether the ``stop`` callable ended the fit early; the estimate is then
         the best point reached, with its standard errors at that point.
+    start_profile : dict or None
+        ``{"weights", "variances"}``: the profile the fit started from (weights
+        normalised per channel, shaped like the fitted ones), for comparing the
+        fitted profile with it (:func:`invsss.report.plot_fit_report` does).
+        Not written by :meth:`to_dict`.
     gain, offset : numpy.ndarray
         Photometric fit ``pred = gain * out + offset`` per target channel: shape
         (C',) for one pair, (P, C') for :func:`fit_pairs`.
@@ -121,6 +126,7 @@ class FitResult(eqx.Module):
     profile: str = ""
     interrupted: bool = False
     stages: tuple = ()
+    start_profile: dict | None = None
 
     def history_by_stage(self) -> dict:
         """``{label: losses}`` for each solve of the fit (see ``stages``).
