@@ -51,6 +51,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ..models import get_model
 from ..params import PARAM_NAMES
 from ..profiles import SumOfGaussians, load_profile
 from ..validation import InvalidInputError
@@ -131,15 +132,13 @@ def assign_roles(model: str, gauge: str, fixed: dict) -> dict[str, str]:
         raise InvalidInputError(
             "gauge: 'sss_level' needs the value of sss_level in fix= (e.g. the focal length in pixels)"
         )
+    entry = get_model(model)
     roles = {}
     roles["sss_level"] = "fixed" if "sss_level" in fixed else "free"
     roles["variances"] = "fixed" if ("variances" in fixed or gauge == "variances") else "free"
     for k in ("correction", "maxdd"):
-        roles[k] = "fixed" if k in fixed else ("unused" if model == "separable" else "free")
-    if "weights" in fixed:
-        roles["weights"] = "fixed"
-    else:
-        roles["weights"] = {"sog": "linear", "thesis": "unused", "separable": "free"}[model]
+        roles[k] = "fixed" if k in fixed else ("free" if k in entry.parameters else "unused")
+    roles["weights"] = "fixed" if "weights" in fixed else entry.weights_role
     return roles
 
 

@@ -7,12 +7,9 @@ import dataclasses
 import numpy as np
 import torch
 
-from ..params import check_parameter_values, parameter_arrays
+from ..params import PARAM_NAMES, check_parameter_values, parameter_arrays
 
 __all__ = ["SSSParams"]
-
-_FIELDS = ("sss_level", "correction", "maxdd", "weights", "variances")
-
 
 def _as_float_tensor(x) -> torch.Tensor:
     # A floating tensor is kept as it is, so a leaf with requires_grad stays the
@@ -58,7 +55,7 @@ class SSSParams:
     variances: torch.Tensor
 
     def __post_init__(self):
-        for k in _FIELDS:
+        for k in PARAM_NAMES:
             object.__setattr__(self, k, _as_float_tensor(getattr(self, k)))
 
     @property
@@ -67,7 +64,7 @@ class SSSParams:
 
     def to(self, dtype=None, device=None) -> "SSSParams":
         """A copy with every field converted (differentiably) to ``dtype``/``device``."""
-        return SSSParams(**{k: getattr(self, k).to(dtype=dtype, device=device) for k in _FIELDS})
+        return SSSParams(**{k: getattr(self, k).to(dtype=dtype, device=device) for k in PARAM_NAMES})
 
     @classmethod
     def from_dict(cls, d: dict, source: str = "params") -> "SSSParams":
@@ -79,11 +76,11 @@ class SSSParams:
 
     def to_dict(self) -> dict:
         """Plain-Python mapping (lists and floats) suitable for JSON."""
-        return {k: getattr(self, k).detach().cpu().tolist() for k in _FIELDS}
+        return {k: getattr(self, k).detach().cpu().tolist() for k in PARAM_NAMES}
 
     def check(self, name: str = "params") -> None:
         """Raise :class:`~invsss.InvalidInputError` if the values break the constraints.
 
         The same checks and messages as :meth:`invsss.SSSParams.check`.
         """
-        check_parameter_values({k: getattr(self, k).detach().cpu().numpy() for k in _FIELDS}, name)
+        check_parameter_values({k: getattr(self, k).detach().cpu().numpy() for k in PARAM_NAMES}, name)

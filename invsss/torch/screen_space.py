@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ..screen_space import MODELS
+from ..models import MODEL_NAMES, get_model, resolve_tap_weights
+from ..pass_plan import pass_plan
 from ..validation import InvalidInputError, check_depth, check_image, check_mask
 from .params import SSSParams
 from .passes import directional_pass, sample_along, tap_spread
@@ -29,12 +30,8 @@ __all__ = [
 ]
 
 
-def _safe_sqrt(x: torch.Tensor) -> torch.Tensor:
-    # A zero-width pass is the identity and its derivative with respect to the
-    # footprint is 0 there, so d/dx sqrt(x) at 0 (0 * inf) is taken as its limit 0,
-    # the same convention as the JAX core; sqrt never sees a 0, so no NaN appears.
-    positive = x > 0
-    return torch.where(positive, torch.sqrt(torch.where(positive, x, torch.ones_like(x))), torch.zeros_like(x))
+#: The model names (the table is :mod:`invsss.models`).
+MODELS = MODEL_NAMES
 
 
 def _taps(tap_weights, like: torch.Tensor) -> torch.Tensor:
@@ -49,20 +46,17 @@ def sog_layers(image, depth, mask, sss_level, correction, maxdd, variances, tap_
     ``B_i = P_y(P_x(B_{i-1}; f_x,i); f_y,i)``, ``B_0 = I``, ``f_i = s sqrt(v_i - v_{i-1}) / c_W``.
     """
     w_taps = _taps(tap_weights, image)
-    c_w = tap_spread(w_taps)
     s_x, s_y = stretch_factors(depth, sss_level, correction, maxdd)
-    # Stable, like jnp.argsort: tied variances keep their order, which decides
-    # which of the two gets the (zero-derivative) zero-width pass.
-    order = torch.argsort(variances, stable=True)
-    v = variances[order]
-    widths = _safe_sqrt(torch.diff(v, prepend=v.new_zeros(1))) / c_w
+    # The plan sorts stably, as the JAX core does: tied variances keep their
+    # order, which decides which of the two gets the zero-width pass.
+    plan = pass_plan("layered", variances, tap_spread(w_taps), torch)
     layers = []
     layer = image
-    for width in widths:
-        layer = directional_pass(layer, s_x * width, mask, w_taps, axis=1)
-        layer = directional_pass(layer, s_y * width, mask, w_taps, axis=0)
-        layers.append(layer)
-    return torch.stack(layers), order
+    for axis, width in zip(plan.axes, plan.widths):
+        layer = directional_pass(layer, (s_x if axis == 1 else s_y) * width, mask, w_taps, axis=axis)
+        if axis == 0:  # the vertical pass completes a layer
+            layers.append(layer)
+    return torch.stack(layers), plan.order
 
 
 def render_sog(image, depth, mask, params: SSSParams, tap_weights="jimenez"):
@@ -84,14 +78,11 @@ def render_sog(image, depth, mask, params: SSSParams, tap_weights="jimenez"):
 def render_thesis(image, depth, mask, params: SSSParams, tap_weights="thesis"):
     """K horizontal passes then K vertical passes, ``f_i = s sqrt(v_i) / c_W``, in the given order."""
     w_taps = _taps(tap_weights, image)
-    c_w = tap_spread(w_taps)
     s_x, s_y = stretch_factors(depth, params.sss_level, params.correction, params.maxdd)
-    widths = _safe_sqrt(params.variances) / c_w
+    plan = pass_plan("chained", params.variances, tap_spread(w_taps), torch)
     out = image
-    for width in widths:
-        out = directional_pass(out, s_x * width, mask, w_taps, axis=1)
-    for width in widths:
-        out = directional_pass(out, s_y * width, mask, w_taps, axis=0)
+    for axis, width in zip(plan.axes, plan.widths):
+        out = directional_pass(out, (s_x if axis == 1 else s_y) * width, mask, w_taps, axis=axis)
     return out
 
 
@@ -147,6 +138,20 @@ def render_separable(image, depth, mask, params: SSSParams, taps: int = 17, stre
     return _separable_pass(out, depth, mask, offsets_px, kernel, follow_surface, axis=0)
 
 
+def _render_kernel(image, depth, mask, params, tap_w, taps=17, strength=1.0, follow_surface=0.0):
+    # The kernel layout has no 7-tap passes: tap_w is None and not used.
+    return render_separable(image, depth, mask, params, taps, strength, follow_surface)
+
+
+#: The twin's renderer of each layout of :data:`invsss.models.LAYOUTS`, called
+#: as ``f(image, depth, mask, params, tap_w, **kernel_options)``.
+LAYOUT_RENDERERS = {
+    "layered": render_sog,
+    "chained": render_thesis,
+    "kernel": _render_kernel,
+}
+
+
 def _concrete(x):
     # The shared validators read values with NumPy; they never see the graph.
     return x.detach().cpu().numpy() if torch.is_tensor(x) else x
@@ -184,8 +189,10 @@ def render(
     params : invsss.torch.SSSParams
         Weights of shape (K, C) must have the image's C (or 1).
     model : {"sog", "thesis", "separable"}
+        A name from :data:`invsss.models.MODEL_NAMES`.
     tap_weights : {"jimenez", "thesis"} or 7 numbers, optional
-        Default "jimenez" for ``sog``, "thesis" for ``thesis``; unused by ``separable``.
+        Default the model's ``default_tap_weights`` ("jimenez" for ``sog``,
+        "thesis" for ``thesis``); unused by ``separable``.
     taps, strength, follow_surface
         ``separable`` only, as in :func:`invsss.render`.
 
@@ -209,8 +216,7 @@ def render(
     >>> out.sum().backward(); p.sss_level.grad is not None
     True
     """
-    if model not in MODELS:
-        raise InvalidInputError(f"model: expected one of {', '.join(MODELS)}, got {model!r}")
+    entry = get_model(model)
     check_image(_concrete(image))
     hw = tuple(np.shape(image)[:2])
     check_depth(_concrete(depth), hw)
@@ -224,8 +230,7 @@ def render(
             f"params.weights: expected one column per image channel ({channels}), "
             f"got shape {tuple(params.weights.shape)}"
         )
-    if tap_weights is None:
-        tap_weights = "thesis" if model == "thesis" else "jimenez"
+    tap_weights = resolve_tap_weights(entry, tap_weights)
 
     floating = torch.is_tensor(image) and image.is_floating_point()
     dtype = image.dtype if floating else torch.get_default_dtype()
@@ -234,20 +239,20 @@ def render(
     squeeze = image.ndim == 2
     if squeeze:
         image = image[..., None]
-    try:
-        tap_w = tap_weight_set(tap_weights, dtype, device)
-    except ValueError as err:
-        raise InvalidInputError(str(err)) from None
+    tap_w = None
+    if tap_weights is not None:
+        try:
+            tap_w = tap_weight_set(tap_weights, dtype, device)
+        except ValueError as err:
+            raise InvalidInputError(str(err)) from None
     depth, mask = _to(depth, dtype, device), _to(mask, dtype, device)
     params = params.to(dtype, device)
-    if model == "sog":
-        out = render_sog(image, depth, mask, params, tap_w)
-    elif model == "thesis":
-        out = render_thesis(image, depth, mask, params, tap_w)
-    else:
+    options = {}
+    if entry.layout == "kernel":
         if torch.is_tensor(strength):
             strength = strength.to(dtype=dtype, device=device)
         if torch.is_tensor(follow_surface):
             follow_surface = follow_surface.to(dtype=dtype, device=device)
-        out = render_separable(image, depth, mask, params, taps, strength, follow_surface)
+        options = {"taps": taps, "strength": strength, "follow_surface": follow_surface}
+    out = LAYOUT_RENDERERS[entry.layout](image, depth, mask, params, tap_w, **options)
     return out[..., 0] if squeeze else out
