@@ -35,10 +35,11 @@ import jax
 import numpy as np
 
 from .io import read_params, write_text_atomic
+from .models import get_model, resolve_tap_weights
 from .params import SSSParams
 from .passes import TAP_OFFSETS, tap_spread
 from .passes import tap_weights as tap_weight_set
-from .screen_space import MODELS, separable_kernel
+from .screen_space import separable_kernel
 from .validation import InvalidInputError
 
 __all__ = ["EXPORT_FORMATS", "shader_constants", "to_hlsl", "to_json", "export_params"]
@@ -46,17 +47,17 @@ __all__ = ["EXPORT_FORMATS", "shader_constants", "to_hlsl", "to_json", "export_p
 #: Output formats of :func:`export_params` and ``invsss export``.
 EXPORT_FORMATS = ("json", "hlsl")
 
-_UNITS = {
-    "sog": "depth and profile in scene units (mm recommended); sssLevel in pixels per scene unit "
-    "at unit depth; passWidths in scene units, footprint_px = s * passWidths[i]; "
-    "tapOffsets in footprints",
-    "thesis": "depth and profile in scene units (mm recommended); sssLevel in pixels per scene "
-    "unit at unit depth; passWidths in scene units, footprint_px = s * passWidths[i]; "
-    "tapOffsets in footprints",
-    "separable": "depth and profile in scene units (mm recommended); sssLevel in pixels per scene "
-    "unit at unit depth; kernelOffsets in scene units, tap at pixel + offset * sssLevel / depth "
-    "(correction and maxdd unused)",
-}
+_SCALE_UNITS = (
+    "depth and profile in scene units (mm recommended); sssLevel in pixels per scene unit "
+    "at unit depth; "
+)
+_PASS_UNITS = _SCALE_UNITS + (
+    "passWidths in scene units, footprint_px = s * passWidths[i]; tapOffsets in footprints"
+)
+_KERNEL_UNITS = _SCALE_UNITS + (
+    "kernelOffsets in scene units, tap at pixel + offset * sssLevel / depth "
+    "(correction and maxdd unused)"
+)
 
 
 def _floats(x) -> list:
@@ -98,9 +99,10 @@ def shader_constants(
     params : SSSParams
         Weights of shape (K,), (K, 1) or (K, 3).
     model : {"sog", "thesis", "separable"}
+        A name from :data:`invsss.models.MODEL_NAMES`.
     tap_weights : {"jimenez", "thesis"} or 7 numbers, optional
-        7-tap weight set of ``sog`` and ``thesis`` (default: "thesis" for
-        ``thesis``, "jimenez" otherwise). Not used by ``separable``.
+        7-tap weight set of ``sog`` and ``thesis`` (default: the model's
+        ``default_tap_weights``). Not used by ``separable``.
     taps : int
         ``separable`` only: number of kernel taps (odd; 11, 17 or 25 in Jimenez's code).
     strength : float
@@ -139,23 +141,24 @@ def shader_constants(
     if not isinstance(params, SSSParams):
         raise InvalidInputError(f"params: expected invsss.SSSParams, got {type(params).__name__}")
     params.check()
-    if model not in MODELS:
-        raise InvalidInputError(f"model: expected one of {', '.join(MODELS)}, got {model!r}")
+    entry = get_model(model)
     weights = np.asarray(params.weights, dtype=np.float64)
     variances = np.asarray(params.variances, dtype=np.float64)
     constants = {
-        "model": model,
-        "units": _UNITS[model],
+        "model": entry.name,
+        "units": _KERNEL_UNITS if entry.layout == "kernel" else _PASS_UNITS,
         "sssLevel": float(params.sss_level),
         "correction": float(params.correction),
         "maxdd": float(params.maxdd),
     }
-    if model == "separable":
-        constants.update(_separable_constants(weights, variances, taps, strength))
-        return constants
+    options = {"tap_weights": tap_weights, "taps": taps, "strength": strength}
+    constants.update(_RECIPES[entry.layout](entry, weights, variances, options))
+    return constants
 
-    if tap_weights is None:
-        tap_weights = "thesis" if model == "thesis" else "jimenez"
+
+def _pass_constants(entry, weights, variances, options) -> dict:
+    """The 7-tap layouts: tap set, per-pass widths, and for ``layered`` the blend."""
+    tap_weights = resolve_tap_weights(entry, options["tap_weights"])
     # Derived numbers in float64 whatever the session's default: a shader gets
     # them rounded once, to its own float32, not twice.
     with jax.enable_x64(True):
@@ -164,27 +167,29 @@ def shader_constants(
         except ValueError as err:
             raise InvalidInputError(str(err)) from None
         c_w = float(tap_spread(w_taps))
-    if model == "sog":
-        order = np.argsort(variances, kind="stable")
-        v = variances[order]
-        widths = np.sqrt(np.diff(v, prepend=0.0)) / c_w
-    else:
-        v = variances
-        widths = np.sqrt(v) / c_w
-    constants.update(
-        numPasses=int(v.size),
-        tapWeightSet=tap_weights if isinstance(tap_weights, str) else "custom",
-        tapOffsets=list(TAP_OFFSETS),
-        tapWeights=_floats(w_taps),
-        tapSpread=c_w,
-        variances=_floats(v),
-        passWidths=_floats(widths),
-    )
-    if model == "sog":
-        layer_weights = _layer_weights(weights, order, "params")
+    plan = entry.pass_plan(variances, c_w, np)
+    v = variances if plan.order is None else variances[plan.order]
+    # One width per Gaussian: in both layouts the vertical passes are one per
+    # Gaussian, in pass order, and each horizontal pass has the same width.
+    widths = plan.widths[np.asarray(plan.axes) == 0]
+    constants = {
+        "numPasses": int(v.size),
+        "tapWeightSet": tap_weights if isinstance(tap_weights, str) else "custom",
+        "tapOffsets": list(TAP_OFFSETS),
+        "tapWeights": _floats(w_taps),
+        "tapSpread": c_w,
+        "variances": _floats(v),
+        "passWidths": _floats(widths),
+    }
+    if entry.layout == "layered":
+        layer_weights = _layer_weights(weights, plan.order, "params")
         constants["layerWeights"] = _floats(layer_weights)
         constants["blendFactors"] = _floats(_blend_factors(layer_weights))
     return constants
+
+
+def _kernel_constants(entry, weights, variances, options) -> dict:
+    return _separable_constants(weights, variances, options["taps"], options["strength"])
 
 
 def _separable_constants(weights, variances, taps, strength) -> dict:
@@ -213,6 +218,10 @@ def _separable_constants(weights, variances, taps, strength) -> dict:
         "kernelWeights": _floats(kernel_rgb),
         "kernel": _floats(iryoku),
     }
+
+
+#: How each layout of :data:`invsss.models.LAYOUTS` is exported.
+_RECIPES = {"layered": _pass_constants, "chained": _pass_constants, "kernel": _kernel_constants}
 
 
 # ------------------------------------------------------------------ writers
