@@ -2,15 +2,23 @@
 
 from __future__ import annotations
 
+import warnings
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
 from .profiles import SumOfGaussians, check_profile_arrays
-from .validation import InvalidInputError, number_array
+from .validation import InputNotice, InvalidInputError, is_concrete, number_array
 
-__all__ = ["PARAM_NAMES", "SSSParams", "check_parameter_values", "parameter_arrays"]
+__all__ = [
+    "PARAM_NAMES",
+    "SSSParams",
+    "check_parameter_values",
+    "check_plausible",
+    "parameter_arrays",
+]
 
 #: The five parameters of the model, in the order of MODEL.md section 6. Every
 #: module that lists them (params files, the estimator, the report, the torch
@@ -133,3 +141,61 @@ def check_parameter_values(params, name: str = "params", *, values: bool = True)
         raise InvalidInputError(f"{name}: correction must be >= 0, got {float(vals['correction']):g}")
     if vals["maxdd"] <= 0:
         raise InvalidInputError(f"{name}: maxdd must be > 0, got {float(vals['maxdd']):g}")
+
+
+#: Blur narrower than this (standard deviation, pixels) changes no pixel visibly.
+NARROWEST_USEFUL_BLUR_PX = 0.01
+
+
+def check_plausible(params: SSSParams, depth, name: str = "params") -> list[str]:
+    """Warn (:class:`~invsss.validation.InputNotice`) about values whose blur is absurd here.
+
+    Valid but absurd values (``sss_level: 1e30`` or ``1e-30``, a huge correction)
+    render an image that is all one colour or unchanged, with no
+    error to say why. At the image's median depth ``d`` (MODEL.md section 2),
+    the widest Gaussian blurs with a standard deviation of ``L sqrt(v_max) / d``
+    pixels on a flat surface, and the narrowest with ``L sqrt(v_min) /
+    (d + c min(g, delta))`` on the image's steepest depth slope ``g`` (``v_min``
+    the smallest non-zero variance). A warning names the values when the first exceeds the image's
+    larger side or the second is below ``NARROWEST_USEFUL_BLUR_PX``. Skipped for
+    tracers. Returns the warning messages.
+
+    Examples
+    --------
+    >>> import numpy as np, warnings
+    >>> depth = np.full((32, 48), 500.0)
+    >>> with warnings.catch_warnings():
+    ...     warnings.simplefilter("ignore")
+    ...     check_plausible(SSSParams(1e30, 0.0, 1.0, [1.0], [2.0]), depth, "p.json")
+    ['p.json: sss_level 1e+30 blurs by up to 2.8e+27 px at the median depth 500, wider than the 32x48 image']
+    >>> check_plausible(SSSParams(600.0, 0.0, 1.0, [1.0], [2.0]), depth)
+    []
+    """
+    arrays = [getattr(params, k) for k in PARAM_NAMES] + [depth]
+    if not all(is_concrete(a) for a in arrays):
+        return []
+    level, correction, maxdd = (float(getattr(params, k)) for k in ("sss_level", "correction", "maxdd"))
+    variances = np.asarray(params.variances, dtype=np.float64)
+    d = float(np.median(np.asarray(depth)))
+    height, width = np.shape(depth)[:2]
+    messages = []
+    widest = level * np.sqrt(variances.max()) / d
+    if widest > max(height, width):
+        messages.append(
+            f"{name}: sss_level {level:g} blurs by up to {widest:.2g} px at the median depth "
+            f"{d:g}, wider than the {height}x{width} image"
+        )
+    positive = variances[variances > 0]
+    if positive.size:
+        # The steepest slope in the image, capped at maxdd: the most the correction narrows.
+        slope = max(float(np.abs(g).max()) for g in np.gradient(np.asarray(depth, np.float64)))
+        narrowest = level * np.sqrt(positive.min()) / (d + correction * min(slope, maxdd))
+        if narrowest < NARROWEST_USEFUL_BLUR_PX:
+            messages.append(
+                f"{name}: sss_level {level:g}, correction {correction:g}, maxdd {maxdd:g} give "
+                f"passes as narrow as {narrowest:.2g} px at the median depth {d:g} "
+                f"(below {NARROWEST_USEFUL_BLUR_PX} px: no visible blur)"
+            )
+    for message in messages:
+        warnings.warn(message, InputNotice, stacklevel=2)
+    return messages

@@ -116,6 +116,45 @@ def test_per_channel_weights_must_match_the_image(scene, capsys):
     assert "params.json" in _one_error_line(capsys)
 
 
+@pytest.mark.parametrize("value, shown", [(True, "true"), ("600", '"600"'), (False, "false")])
+def test_a_number_given_as_bool_or_string_is_refused(scene, capsys, value, shown):
+    scene["params"].write_text(json.dumps({**PARAMS, "sss_level": value}))
+    assert main(_args(scene)) == 2
+    line = _one_error_line(capsys)
+    assert line.endswith(f"params.json: sss_level: expected a number, got {shown}")
+    assert not scene["out"].exists()
+
+
+def _fit_params(weights):
+    """A fit's params file: two undetermined weights (null) and the point estimate."""
+    return {**PARAMS, "weights": weights, "variances": [0.3, 0.8, 1.5, 3.0],
+            "undetermined": ["weights[2]", "weights[3]"],
+            "estimate": {**PARAMS, "weights": [0.1, 0.2, 0.3, 0.4], "variances": [0.3, 0.8, 1.5, 3.0]}}
+
+
+def test_editing_a_determined_weight_of_a_fit_changes_the_rendering(scene, capsys):
+    outputs = []
+    for first in (0.05, 0.9):
+        scene["params"].write_text(json.dumps(_fit_params([first, 0.2, None, None])))
+        assert main(_args(scene)) == 0
+        assert "weights[2], weights[3] not determined" in capsys.readouterr().err
+        outputs.append(invsss.read_image(scene["out"]))
+    assert not np.allclose(outputs[0], outputs[1], atol=1e-4)
+
+
+def test_absurd_sss_level_renders_with_a_warning(scene, capsys):
+    scene["params"].write_text(json.dumps({**PARAMS, "sss_level": 1e30}))
+    assert main(_args(scene, "--model", "sog")) == 0
+    err = capsys.readouterr().err
+    assert "invsss: warning:" in err and "sss_level 1e+30" in err and "wider than the 20x24 image" in err
+
+
+def test_params_of_an_interrupted_fit_are_refused(scene, capsys):
+    (scene["params"].parent / "invsss-manifest.json").write_text(json.dumps({"state": "incomplete"}))
+    assert main(_args(scene)) == 2
+    assert "incomplete result" in _one_error_line(capsys)
+
+
 def test_version_and_missing_command(capsys):
     assert main(["--version"]) == 0
     assert capsys.readouterr().out.strip() == f"invsss {invsss.__version__}"

@@ -454,11 +454,11 @@ def _fitted_params_file(tmp_path, with_estimate):
 
 def test_undetermined_values_are_filled_from_the_fit_estimate_with_a_warning(tmp_path):
     path = _fitted_params_file(tmp_path, with_estimate=True)
-    with pytest.warns(UserWarning, match=r"maxdd, weights not determined"):
+    with pytest.warns(UserWarning, match=r"maxdd, weights\[1\], weights\[2\] not determined"):
         params, extras = invsss.read_params(path)
     assert float(params.maxdd) == 0.25
     np.testing.assert_allclose(np.asarray(params.weights), [0.6, 0.3, 0.1], rtol=1e-6)
-    assert extras["filled_from_estimate"] == ["maxdd", "weights"]
+    assert extras["filled_from_estimate"] == ["maxdd", "weights[1]", "weights[2]"]
 
 
 def test_undetermined_values_without_estimate_are_an_error(tmp_path):
@@ -479,4 +479,5 @@ def test_cli_render_warns_once_about_filled_values(tmp_path, capsys):
                  "--mask", str(tmp_path / "mask.exr"), "--params", str(path), "--out", str(tmp_path / "o.exr")])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 0
-    assert err == [f"invsss: warning: {path}: maxdd, weights not determined by the fit; using its point estimate"]
+    assert err == [f"invsss: warning: {path}: maxdd, weights[1], weights[2] not determined by the fit; "
+                   "using its point estimate"]

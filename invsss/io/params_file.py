@@ -1,4 +1,16 @@
-"""The params JSON file: the five parameters, the model choice and a fit's report."""
+"""The params JSON file: the five parameters, the model choice and a fit's report.
+
+The schema is defined once, as the strict pydantic model :class:`ParamsFile`:
+numbers must be JSON numbers (``true`` or ``"600"`` are refused, never read as
+1 or 600), unknown keys are refused (a misspelt key never falls back to a
+default), and every file carries a ``schema_version``. ``docs/params-schema.json``
+is generated from the model (:func:`params_json_schema`) and
+``docs/params-json.md`` describes each key.
+
+Compatibility: a file without ``schema_version`` was written by an invsss older
+than the versioned schema and is read as version 1; a file with a newer version
+than :data:`SCHEMA_VERSION` is refused with a message saying to upgrade.
+"""
 
 from __future__ import annotations
 
@@ -8,41 +20,149 @@ import os
 import warnings
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Annotated, Any, Literal, Optional, Union
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from ..params import PARAM_NAMES, SSSParams
 from ..passes import TAP_WEIGHTS
 from ..screen_space import MODELS
-from ..validation import InvalidInputError
+from ..validation import InvalidInputError, number_array
 from .images import _one_line, write_text_atomic
 
-__all__ = ["PARAMS_KEYS", "PARAMS_OPTIONAL_KEYS", "read_params", "write_params"]
+__all__ = [
+    "SCHEMA_VERSION",
+    "MANIFEST_NAME",
+    "PARAMS_KEYS",
+    "PARAMS_OPTIONAL_KEYS",
+    "ParamsFile",
+    "params_json_schema",
+    "read_params",
+    "write_params",
+]
+
+#: The version :func:`write_params` writes and the newest :func:`read_params` reads.
+SCHEMA_VERSION = 1
+
+#: The file a result directory keeps beside params.json; its ``state`` says
+#: whether the run that wrote the directory finished.
+MANIFEST_NAME = "invsss-manifest.json"
 
 #: The keys every params JSON file must have (the fields of :class:`SSSParams`).
 PARAMS_KEYS = PARAM_NAMES
 
-#: Keys a params JSON file may have besides :data:`PARAMS_KEYS`: the model
-#: choice, and the report the estimator writes next to the fitted values.
-PARAMS_OPTIONAL_KEYS = (
-    "model",
-    "tap_weights",
-    "stderr",
-    "undetermined",
-    "loss",
-    "psnr",
-    "ssim",
-    "converged",
-    "iterations",
-    "fixed",
-    "gauge",
-    "channels_mix",
-    "gain",
-    "offset",
-    "profile",
-    "estimate",
-    "sigma",
-    "solver",
-    "warnings",
-)
+_Number = float  # strict: a JSON number; booleans and strings are refused
+_MaybeNumber = Optional[_Number]  # null: a value the fit did not determine
+
+
+class Estimate(BaseModel):
+    """The fit's point estimate: every parameter as a number, undetermined ones included."""
+
+    model_config = ConfigDict(strict=True, extra="forbid")
+
+    sss_level: _Number
+    correction: _Number
+    maxdd: _Number
+    weights: Union[list[_Number], list[list[_Number]]]
+    variances: list[_Number]
+
+
+class ParamsFile(BaseModel):
+    """The params JSON file (``invsss fit`` writes it, ``invsss render``/``export`` read it)."""
+
+    model_config = ConfigDict(
+        strict=True, extra="forbid", title="invsss params file", use_attribute_docstrings=True
+    )
+
+    schema_version: Annotated[int, Field(ge=1)] = SCHEMA_VERSION
+    """Version of this schema; files without it were written before versioning (read as 1)."""
+    sss_level: _MaybeNumber
+    """L > 0: pixels per scene unit at unit depth (the focal length in pixels for depth in mm)."""
+    correction: _MaybeNumber
+    """c >= 0: how strongly a depth slope narrows the blur."""
+    maxdd: _MaybeNumber
+    """delta > 0: the depth slope above which the correction stops growing."""
+    weights: Union[list[_MaybeNumber], list[list[_MaybeNumber]]]
+    """Gaussian weights, one per Gaussian (K) or one per Gaussian and channel (K x C)."""
+    variances: list[_MaybeNumber]
+    """Gaussian variances in scene units squared, one per Gaussian (K)."""
+    model: Optional[Literal[MODELS]] = None  # type: ignore[valid-type]
+    """Screen-space model to render with (default sog)."""
+    tap_weights: Union[
+        Literal[tuple(TAP_WEIGHTS)],  # type: ignore[valid-type]
+        Annotated[list[_Number], Field(min_length=7, max_length=7)],
+        None,
+    ] = None
+    """7-tap weight set: a name or 7 numbers (default: the model's own)."""
+    estimate: Optional[Estimate] = None
+    """A fit's point estimate; fills the null entries above when rendering."""
+    stderr: Any = None
+    """Fit report: standard errors of the parameters (null where undetermined)."""
+    undetermined: Optional[list[str]] = None
+    """Fit report: the entries the data did not determine (``weights[2]``, ...)."""
+    loss: Optional[_Number] = None
+    """Fit report: final value of the objective."""
+    psnr: Optional[_Number] = None
+    """Fit report: PSNR of the fitted prediction against the target, dB."""
+    ssim: Optional[_Number] = None
+    """Fit report: SSIM of the fitted prediction against the target."""
+    converged: Optional[bool] = None
+    """Fit report: whether the solver met its tolerance."""
+    interrupted: Optional[bool] = None
+    """Fit report: true when the fit was stopped before it finished (e.g. Ctrl-C)."""
+    iterations: Optional[int] = None
+    """Fit report: solver iterations used."""
+    fixed: Any = None
+    """Fit report: the parameters held fixed and their values."""
+    gauge: Optional[str] = None
+    """Fit report: which side of the sss_level/variance-scale degeneracy was fixed."""
+    channels_mix: Any = None
+    """Fit report: RGB -> grey mix fitted for a grey target of an RGB source."""
+    gain: Any = None
+    """Fit report: per-channel gain fitted between prediction and target."""
+    offset: Any = None
+    """Fit report: per-channel offset fitted between prediction and target."""
+    profile: Any = None
+    """Fit report: the profile the fit started from (a name or a file)."""
+    sigma: Optional[_Number] = None
+    """Fit report: estimated noise level of the target."""
+    solver: Optional[str] = None
+    """Fit report: the nonlinear solver used."""
+    warnings: Optional[list[str]] = None
+    """Fit report: warnings the fit raised."""
+
+
+#: Keys a params JSON file may have besides :data:`PARAMS_KEYS`: the schema
+#: version, the model choice and the report the estimator writes. Defined by
+#: :class:`ParamsFile`; add a key there, not here.
+PARAMS_OPTIONAL_KEYS = tuple(k for k in ParamsFile.model_fields if k not in PARAMS_KEYS)
+
+
+def params_json_schema() -> dict:
+    """The JSON Schema of a params file, generated from :class:`ParamsFile`.
+
+    ``docs/params-schema.json`` is this, written with ``json.dumps(..., indent=2)``.
+
+    Examples
+    --------
+    >>> schema = params_json_schema()
+    >>> schema["additionalProperties"], schema["required"][:2]
+    (False, ['sss_level', 'correction'])
+    """
+    schema = ParamsFile.model_json_schema()
+    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+    return schema
+
+
+# ------------------------------------------------------------------- errors
+
+
+def _shown(value) -> str:
+    try:
+        return json.dumps(value)
+    except (TypeError, ValueError):
+        return repr(value)
 
 
 def _check_keys(keys, name: str) -> None:
@@ -55,26 +175,132 @@ def _check_keys(keys, name: str) -> None:
                 f"{name}: unknown key {key!r}{hint}; expected {', '.join(PARAMS_KEYS)} "
                 f"and optionally {', '.join(PARAMS_OPTIONAL_KEYS)}"
             )
+    missing = [k for k in PARAMS_KEYS if k not in keys]
+    if missing:
+        raise InvalidInputError(f"{name}: missing key(s) {', '.join(missing)}")
 
 
-def _check_model_choice(extras: Mapping, name: str) -> None:
-    if "model" in extras and extras["model"] not in MODELS:
+def _check_version(content: Mapping, name: str) -> None:
+    version = content.get("schema_version", 1)
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
         raise InvalidInputError(
-            f"{name}: model must be one of {', '.join(MODELS)}, got {extras['model']!r}"
+            f"{name}: schema_version: expected an integer >= 1, got {_shown(version)}"
         )
-    if "tap_weights" in extras:
-        taps = extras["tap_weights"]
-        named = isinstance(taps, str) and taps in TAP_WEIGHTS
-        numbers = (
-            isinstance(taps, list)
-            and len(taps) == 7
-            and all(isinstance(t, (int, float)) and not isinstance(t, bool) for t in taps)
+    if version > SCHEMA_VERSION:
+        raise InvalidInputError(
+            f"{name}: written by a newer invsss (schema_version {version}; this one reads up "
+            f"to {SCHEMA_VERSION}); upgrade invsss to read it"
         )
-        if not (named or numbers):
+
+
+def _without_nulls(value):
+    """``value`` with every null replaced by 0.0, so only the non-null entries get checked."""
+    if isinstance(value, list):
+        return [_without_nulls(v) for v in value]
+    return 0.0 if value is None else value
+
+
+def _message(error: dict, content: Mapping, name: str) -> str:
+    """One line for pydantic's first error, naming the key and the value as written."""
+    key = error["loc"][0]
+    value = content.get(key)
+    if key == "model":
+        return f"{name}: model must be one of {', '.join(MODELS)}, got {_shown(value)}"
+    if key == "tap_weights":
+        return (
+            f"{name}: tap_weights must be one of {', '.join(TAP_WEIGHTS)} or a list of "
+            f"7 numbers, got {_shown(value)}"
+        )
+    # For numbers, our own walk names the first bad entry as the user wrote it
+    # (pydantic's location inside a union names the union's members instead).
+    entries, label = None, key
+    if key in PARAMS_KEYS:
+        entries = value
+    elif key == "estimate" and isinstance(value, Mapping) and len(error["loc"]) > 1:
+        label = error["loc"][1]
+        entries = value.get(label) if label in PARAMS_KEYS else None
+        label = f"estimate.{label}"
+    if label.split(".")[-1] in ("weights", "variances") and not isinstance(entries, list):
+        return f"{name}: {label}: expected a list of numbers, got {_shown(entries)}"
+    if entries is not None:
+        try:
+            number_array(_without_nulls(entries), label, name)
+        except InvalidInputError as err:
+            return str(err)
+    where = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in error["loc"][1:])
+    expected = error["msg"][0].lower() + error["msg"][1:]
+    if error["type"] in ("float_type", "int_type"):
+        expected = "expected a number" if error["type"] == "float_type" else "expected an integer"
+    elif error["type"] == "bool_type":
+        expected = "expected true or false"
+    elif error["type"] == "extra_forbidden":
+        expected = "unknown key"
+    shown = _shown(error.get("input"))
+    return f"{name}: {key}{where}: {expected}, got {shown}"
+
+
+def _validated(content: Mapping, name: str) -> ParamsFile:
+    _check_version(content, name)
+    _check_keys(content, name)
+    try:
+        return ParamsFile.model_validate(dict(content))
+    except ValidationError as err:
+        raise InvalidInputError(_message(err.errors()[0], content, name)) from None
+
+
+# ---------------------------------------------------------------- reading
+
+
+def _check_result_complete(path: str) -> None:
+    """Refuse a params file whose result directory says its run did not finish."""
+    manifest = os.path.join(os.path.dirname(os.path.abspath(path)), MANIFEST_NAME)
+    if not os.path.exists(manifest):
+        return  # a hand-written file, or a result written before manifests
+    try:
+        state = json.loads(Path(manifest).read_text(encoding="utf-8")).get("state")
+    except (OSError, UnicodeDecodeError, ValueError, AttributeError):
+        state = None  # an unreadable manifest vouches for nothing
+    if state != "complete":
+        raise InvalidInputError(
+            f"{path}: belongs to an incomplete result (the run that wrote it was "
+            "interrupted); re-run it"
+        )
+
+
+def _null_entries(value, where: str) -> list[str]:
+    """Names of the null entries of a number or nested list: ``["weights[2]", ...]``."""
+    if isinstance(value, list):
+        return [n for i, v in enumerate(value) for n in _null_entries(v, f"{where}[{i}]")]
+    return [where] if value is None else []
+
+
+def _filled(value, estimate):
+    """``value`` with each null entry taken from ``estimate`` (same nesting), the rest kept."""
+    if isinstance(value, list):
+        return [_filled(v, e) for v, e in zip(value, estimate)]
+    return estimate if value is None else value
+
+
+def _fill_from_estimate(values: dict, estimate: Estimate | None, name: str) -> list[str]:
+    """Fill the null entries of ``values`` in place from ``estimate``; return their names."""
+    nulls = {k: _null_entries(v, k) for k, v in values.items()}
+    nulls = {k: entries for k, entries in nulls.items() if entries}
+    if not nulls:
+        return []
+    if estimate is None:
+        raise InvalidInputError(
+            f"{name}: {', '.join(nulls)} is null (undetermined by the fit); "
+            "give a number, or re-fit with --fix"
+        )
+    for key in nulls:
+        point = getattr(estimate, key)
+        if np.shape(point) != np.shape(_without_nulls(values[key])):
             raise InvalidInputError(
-                f"{name}: tap_weights must be one of {', '.join(TAP_WEIGHTS)} or a list of "
-                f"7 numbers, got {taps!r}"
+                f"{name}: estimate.{key} has shape {np.shape(point)}, but {key} has shape "
+                f"{np.shape(_without_nulls(values[key]))}; cannot fill its null entries"
             )
+        values[key] = _filled(values[key], point)
+    return [entry for entries in nulls.values() for entry in entries]
 
 
 def read_params(path) -> tuple[SSSParams, dict]:
@@ -82,26 +308,32 @@ def read_params(path) -> tuple[SSSParams, dict]:
 
     The file is one JSON object with the keys :data:`PARAMS_KEYS`
     (``weights`` a list, or a list of per-channel lists; ``variances`` a list)
-    and optionally any of :data:`PARAMS_OPTIONAL_KEYS`. Any other key is an
-    error, so a misspelt key never silently falls back to a default.
+    and optionally any of :data:`PARAMS_OPTIONAL_KEYS` (schema:
+    :class:`ParamsFile`). Any other key is an error, so a misspelt key never
+    silently falls back to a default; numbers must be JSON numbers.
 
     A fit's params file holds ``null`` where the data did not determine a
-    value, and its point estimate under ``estimate``; such nulls are filled
-    from ``estimate`` and listed in ``extras["filled_from_estimate"]``.
+    value, and its point estimate under ``estimate``. Only those null entries
+    are filled from ``estimate`` (an edited entry beside them is kept); a
+    warning names them and ``extras["filled_from_estimate"]`` lists them
+    (``["weights[2]", "weights[3]"]``).
 
     Returns
     -------
     params : SSSParams
     extras : dict
         The optional keys present in the file (``model``, ``tap_weights``, the
-        estimator's report), as parsed.
+        estimator's report) as written, without ``schema_version``.
 
     Raises
     ------
     InvalidInputError
-        Missing file, invalid JSON, missing or unknown keys, values that break
-        the constraints of :meth:`SSSParams.check`, an unknown ``model`` or
-        ``tap_weights``.
+        Missing file, invalid JSON, missing or unknown keys, a value that is
+        not a JSON number where one is expected, values that break the
+        constraints of :meth:`SSSParams.check`, an unknown ``model`` or
+        ``tap_weights``, a newer ``schema_version``, a null without an
+        ``estimate``, or a file in a result directory whose
+        ``invsss-manifest.json`` says the run did not complete.
 
     Examples
     --------
@@ -128,35 +360,24 @@ def read_params(path) -> tuple[SSSParams, dict]:
         ) from None
     if not isinstance(content, dict):
         raise InvalidInputError(f"{name}: expected a JSON object with the parameter keys")
-    _check_keys(content, name)
-    extras = {k: v for k, v in content.items() if k not in PARAMS_KEYS}
-    _check_model_choice(extras, name)
-    values = {k: content[k] for k in PARAMS_KEYS if k in content}
-    nulls = [k for k, v in values.items() if _has_null(v)]
-    if nulls:
-        # A fit writes undetermined values as null, and beside them the point
-        # estimate that produced its fit.exr; a renderer needs numbers, so use
-        # those and say which ones the data did not determine.
-        estimate = extras.get("estimate")
-        if not isinstance(estimate, dict) or any(_has_null(estimate.get(k)) for k in nulls):
-            raise InvalidInputError(
-                f"{name}: {', '.join(nulls)} is null (undetermined by the fit); "
-                "give a number, or re-fit with --fix"
-            )
-        values.update({k: estimate[k] for k in nulls})
-        extras["filled_from_estimate"] = nulls
+    _check_result_complete(name)
+    parsed = _validated(content, name)
+    extras = {k: content[k] for k in content if k not in PARAMS_KEYS and k != "schema_version"}
+    values = {k: content[k] for k in PARAMS_KEYS}
+    filled = _fill_from_estimate(values, parsed.estimate, name)
+    if filled:
+        # A renderer needs numbers: use the estimate that produced the fit's
+        # image for exactly the entries the data did not determine, and say so.
+        extras["filled_from_estimate"] = filled
         warnings.warn(
-            f"{name}: {', '.join(nulls)} not determined by the fit; using its point estimate",
+            f"{name}: {', '.join(filled)} not determined by the fit; using its point estimate",
             stacklevel=2,
         )
     params = SSSParams.from_dict(values, source=name)
     return params, extras
 
 
-def _has_null(value) -> bool:
-    if isinstance(value, list):
-        return any(_has_null(v) for v in value)
-    return value is None
+# ---------------------------------------------------------------- writing
 
 
 def _to_json(value):
@@ -169,18 +390,31 @@ def _to_json(value):
 def write_params(path, mapping) -> None:
     """Write parameters (and optional report keys) as JSON, atomically.
 
+    ``schema_version`` (:data:`SCHEMA_VERSION`) is written first unless the
+    mapping has it.
+
     Parameters
     ----------
     path : str or os.PathLike
     mapping : Mapping or SSSParams
-        The keys :func:`read_params` accepts; arrays become lists. Keys that
-        :func:`read_params` would reject are rejected here, so every file this
-        writes can be read back.
+        The keys :func:`read_params` accepts; arrays become lists. Content that
+        :func:`read_params` would reject by the schema (unknown keys, a string
+        for a number) is rejected here, so every file this writes can be read
+        back.
 
     Raises
     ------
     InvalidInputError
-        Unknown keys, values that are not JSON-serialisable, a missing directory.
+        Unknown keys, values the schema refuses or that are not
+        JSON-serialisable, a missing directory.
+
+    Examples
+    --------
+    >>> import json, tempfile, os, invsss
+    >>> path = os.path.join(tempfile.mkdtemp(), "params.json")
+    >>> invsss.write_params(path, invsss.SSSParams(900.0, 0.0, 1.0, [1.0], [2.0]))
+    >>> list(json.load(open(path)))[:2]
+    ['schema_version', 'sss_level']
     """
     name = os.fspath(path)
     if isinstance(mapping, SSSParams):
@@ -189,9 +423,11 @@ def write_params(path, mapping) -> None:
         raise InvalidInputError(
             f"{name}: expected a mapping or SSSParams to write, got {type(mapping).__name__}"
         )
-    _check_keys(mapping, name)
     try:
-        text = json.dumps(dict(mapping), indent=2, default=_to_json) + "\n"
+        # Through JSON and back: what gets checked is exactly what gets written.
+        content = json.loads(json.dumps(dict(mapping), default=_to_json))
     except (TypeError, ValueError) as err:
         raise InvalidInputError(f"{name}: cannot write params ({_one_line(err)})") from None
-    write_text_atomic(name, text)
+    content = {"schema_version": SCHEMA_VERSION, **content}
+    _validated(content, name)
+    write_text_atomic(name, json.dumps(content, indent=2) + "\n")
