@@ -51,7 +51,8 @@ from .passes import TAP_WEIGHTS
 from .profiles import PROFILE_NAMES
 from .result_dir import ResultDir, ResultWriteError
 from .screen_space import MODELS, render
-from .validation import InvalidInputError, check_same_size
+from .params import check_plausible
+from .validation import InvalidInputError, check_same_frame
 
 __all__ = ["build_parser", "main"]
 
@@ -123,8 +124,8 @@ def _run_render(args: argparse.Namespace, stop: StopSignals) -> int:
     image = read_image(args.image)
     depth = read_depth(args.depth, scale=args.depth_scale)
     mask = read_mask(args.mask)
-    check_same_size(image.shape, depth.shape, args.image, args.depth)
-    check_same_size(image.shape, mask.shape, args.image, args.mask)
+    check_same_frame([(args.image, image), (args.depth, depth), (args.mask, mask)])
+    check_plausible(params, depth, args.params)
     weights_shape = np.shape(params.weights)
     if len(weights_shape) == 2 and weights_shape[1] not in (1, image.shape[2]):
         raise InvalidInputError(
