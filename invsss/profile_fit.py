@@ -1,7 +1,9 @@
 """Fit a sum of Gaussians to any sampled radial profile (thesis 4.1.3).
 
 The thesis fitted its measured 940 nm profile with MATLAB's curve fitting tool; this
-module does the same job with :class:`optimistix.LevenbergMarquardt`, for one channel
+module does the same job with :class:`optimistix.LevenbergMarquardt`, stepped by the
+estimator's :func:`~invsss.estimator.solve.run_solver` (one way to solve in the
+package), for one channel
 or for several channels sharing their variances (d'Eon & Luebke's RGB skin fit).
 
 The model ``R(r) = sum_i w_i G(v_i, r)`` is linear in the weights, so the fit is a
@@ -28,6 +30,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
+from .estimator.solve import run_solver
 from .profiles import SumOfGaussians, gaussian
 from .validation import InvalidInputError
 
@@ -163,27 +166,45 @@ def _projected_residual(log_v, args):
     return jnp.einsum("cmk,ck->cm", a, w) - bb
 
 
+class _ProjectedResidual(eqx.Module):
+    """The variable-projection residual over ``log v`` as the solver's objective.
+
+    The data are fields (traced arrays), so every start of one problem shape
+    reuses the compiled solver step.
+    """
+
+    r: Array
+    b: Array
+    sample_weights: Array
+    ridge: Array
+    masks: Array
+    per_channel: bool = eqx.field(static=True)
+
+    @property
+    def args(self):
+        return (self.r, self.b, self.sample_weights, self.per_channel, self.ridge, self.masks)
+
+    def __call__(self, log_v, args=None):
+        return _projected_residual(log_v, self.args).ravel(), None
+
+
 @eqx.filter_jit
-def _fit_from(log_v_start, r, b, sample_weights, per_channel, rtol, atol, max_steps):
+def _weights_and_loss(problem, log_v):
+    a, bb, w = _weights_for(log_v, problem.args)
+    loss = jnp.sum((jnp.einsum("cmk,ck->cm", a, w) - bb) ** 2)
+    return w, jnp.where(jnp.isfinite(loss), loss, jnp.inf)
+
+
+def _fit_from(log_v_start, problem, solver, max_steps):
     """Variable projection from one start: ``(log v, w (C', K), loss, converged, steps)``.
 
-    Compiled once per problem shape and reused by every start (a Python loop: a solve
-    takes milliseconds, compiling a vmapped one takes seconds).
+    Stepped by :func:`invsss.estimator.solve.run_solver`, the package's one way
+    to run a solver (its step compiles once per problem shape and serves every
+    start).
     """
-    dtype = b.dtype
-    ridge = 100.0 * jnp.finfo(dtype).eps
-    masks = jnp.asarray(_subset_masks(log_v_start.shape[0]), dtype)
-    args = (r, b, sample_weights, per_channel, ridge, masks)
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, norm=optx.rms_norm)
-    solution = optx.least_squares(
-        _projected_residual, solver, log_v_start, args, max_steps=max_steps, throw=False
-    )
-    log_v = solution.value
-    a, bb, w = _weights_for(log_v, args)
-    loss = jnp.sum((jnp.einsum("cmk,ck->cm", a, w) - bb) ** 2)
-    loss = jnp.where(jnp.isfinite(loss), loss, jnp.inf)
-    converged = solution.result == optx.RESULTS.successful
-    return log_v, w, loss, converged, solution.stats["num_steps"]
+    record = run_solver(solver, problem, log_v_start, max_steps)
+    w, loss = _weights_and_loss(problem, record.z)
+    return record.z, w, loss, record.converged, record.steps
 
 
 # --------------------------------------------------------------------------- starts
@@ -389,13 +410,16 @@ def fit_sum_of_gaussians(
         raise InvalidInputError("weighting: gives zero weight to every positive profile sample")
 
     log_v0 = _initial_log_variances(r_np, y2, int(num_gaussians), int(num_starts), variance_range)
-    r_j = jnp.asarray(r_np, dtype)
-    b_j = jnp.asarray(weighted.T / scale, dtype)
-    s_j = jnp.asarray(s2.T, dtype)
-    results = [
-        _fit_from(jnp.asarray(start, dtype), r_j, b_j, s_j, per_channel, rtol, atol, int(max_steps))
-        for start in log_v0
-    ]
+    problem = _ProjectedResidual(
+        jnp.asarray(r_np, dtype),
+        jnp.asarray(weighted.T / scale, dtype),
+        jnp.asarray(s2.T, dtype),
+        jnp.asarray(100.0 * jnp.finfo(dtype).eps, dtype),
+        jnp.asarray(_subset_masks(int(num_gaussians)), dtype),
+        per_channel,
+    )
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, norm=optx.rms_norm)
+    results = [_fit_from(jnp.asarray(start, dtype), problem, solver, int(max_steps)) for start in log_v0]
     log_v, w, _, converged, steps = min(results, key=lambda result: float(result[2]))
     variances = jnp.exp(log_v)
     # (K, C') with C' = C or 1; where() turns the -0.0 of a masked weight into 0.0.
@@ -415,7 +439,7 @@ def fit_sum_of_gaussians(
         profile=fitted,
         rms=jnp.asarray(rms, dtype),
         max_relative_error=jnp.asarray(max_rel, dtype),
-        converged=converged,
-        num_steps=steps,
+        converged=jnp.asarray(converged),
+        num_steps=jnp.asarray(steps),
         weighting=weighting if isinstance(weighting, str) else "custom",
     )
