@@ -86,6 +86,10 @@ class ScreenSpaceModel:
             raise ValueError(f"model {self.name}: layout {self.layout!r}")
         if (self.weights_role == "unused") == ("weights" in self.parameters):
             raise ValueError(f"model {self.name}: weights_role disagrees with parameters")
+        if self.weights_role == "linear" and self.layout != "layered":
+            # Only the layered layout's output is a weighted mean of images
+            # that do not depend on the weights (the estimator's basis).
+            raise ValueError(f"model {self.name}: linear weights need the layered layout")
         if (self.default_tap_weights is None) != (self.layout not in LAYOUTS_WITH_PASSES):
             raise ValueError(f"model {self.name}: 7-tap passes need a default tap weight set")
 

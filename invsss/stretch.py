@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-__all__ = ["depth_slopes", "stretch_factors"]
+__all__ = ["depth_slopes", "stretch_along", "stretch_factors"]
 
 
 def depth_slopes(depth: Float[Array, "H W"]) -> tuple[Float[Array, "H W"], Float[Array, "H W"]]:
@@ -34,6 +34,22 @@ def stretch_factors(
     5.0
     """
     slope_x, slope_y = depth_slopes(depth)
-    s_x = sss_level / (depth + correction * jnp.minimum(slope_x, maxdd))
-    s_y = sss_level / (depth + correction * jnp.minimum(slope_y, maxdd))
+    s_x = stretch_along(depth, slope_x, sss_level, correction, maxdd)
+    s_y = stretch_along(depth, slope_y, sss_level, correction, maxdd)
     return s_x, s_y
+
+
+def stretch_along(depth, slope, sss_level, correction, maxdd, xp=jnp):
+    """The stretch factor along one axis from the depth and that axis's slope magnitude.
+
+    ``s = L / (d + c * min(slope, delta))``, elementwise, with ``slope >= 0``
+    (:func:`depth_slopes`). ``xp`` is the array namespace: ``jax.numpy``, or
+    ``numpy`` to stay in NumPy's float64 (as the estimator's data scales do).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> stretch_along(np.array([2.0, 2.0]), np.array([0.0, 1.0]), 10.0, 5.0, 0.1, xp=np).tolist()
+    [5.0, 4.0]
+    """
+    return sss_level / (depth + correction * xp.minimum(slope, maxdd))

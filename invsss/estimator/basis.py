@@ -7,8 +7,9 @@ The prediction of target channel ``j`` of pair ``p`` is
 where the basis images ``X_pi`` depend nonlinearly on the free parameters and
 ``beta``, ``b`` are eliminated by least squares (:mod:`.projection`). The basis is
 
-* ``sog`` with weights eliminated: the K blurred layers ``B_i`` (MODEL.md section 5)
-  in the profile's order, so ``beta_ij = a_j w_ij`` (gain times weight);
+* a model whose weights are linear (``sog``), with weights eliminated: the K
+  blurred layers ``B_i`` (MODEL.md section 5) in the profile's order, so
+  ``beta_ij = a_j w_ij`` (gain times weight);
 * otherwise the model's output, so ``beta_j = a_j`` is the gain.
 
 Bilinear cases, and how they are made linear:
@@ -32,8 +33,9 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from ..models import get_model
 from ..params import SSSParams
-from ..screen_space import render_separable, render_sog, render_thesis, sog_layers
+from ..screen_space import LAYOUT_RENDERERS, sog_layers
 from .inputs import PairData
 
 __all__ = ["basis_images", "model_source"]
@@ -49,19 +51,22 @@ def model_source(pair: PairData, natural: dict) -> Float[Array, "H W Cb"]:
 def basis_images(
     pair: PairData, natural: dict, model: str, tap_weights: Float[Array, "7"], linear_weights: bool
 ) -> Float[Array, "nb H W Cb"]:
-    """The basis images of one pair for the natural parameter values ``natural``."""
+    """The basis images of one pair for the natural parameter values ``natural``.
+
+    ``model`` is a name of :data:`invsss.models.MODEL_NAMES`; its table entry
+    says whether the weights are linear (then the basis is the blurred layers)
+    and which layout renders it. ``tap_weights`` is ignored by the kernel layout.
+    """
+    entry = get_model(model)
     image = model_source(pair, natural)
     L, c, delta = natural["sss_level"], natural["correction"], natural["maxdd"]
     variances = natural["variances"]
-    if model == "sog" and linear_weights:
+    if entry.weights_role == "linear" and linear_weights:
+        # The table only allows linear weights for the layered layout, whose
+        # output is the weighted mean of these layers.
         layers, order = sog_layers(image, pair.depth, pair.mask, L, c, delta, variances, tap_weights)
         # Back to the profile's order, so coefficient i belongs to Gaussian i.
         return layers[jnp.argsort(order)]
     params = SSSParams(L, c, delta, natural["weights"], variances)
-    if model == "sog":
-        out = render_sog(image, pair.depth, pair.mask, params, tap_weights)
-    elif model == "thesis":
-        out = render_thesis(image, pair.depth, pair.mask, params, tap_weights)
-    else:
-        out = render_separable(image, pair.depth, pair.mask, params)
+    out = LAYOUT_RENDERERS[entry.layout](image, pair.depth, pair.mask, params, tap_weights)
     return out[None]

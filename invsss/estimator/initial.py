@@ -18,7 +18,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ..stretch import depth_slopes
+from ..stretch import depth_slopes, stretch_along
 from .parametrisation import softplus_inverse
 
 __all__ = ["DataScales", "data_scales", "blur_reference", "choose_starts"]
@@ -63,8 +63,8 @@ class DataScales(eqx.Module):
 
     def max_stretch(self, sss_level, correction, maxdd) -> float:
         """The largest stretch factor over the masked pixels (pixels per mm)."""
-        sx = sss_level / (self.depths + correction * np.minimum(self.slopes_x, maxdd))
-        sy = sss_level / (self.depths + correction * np.minimum(self.slopes_y, maxdd))
+        sx = stretch_along(self.depths, self.slopes_x, sss_level, correction, maxdd, xp=np)
+        sy = stretch_along(self.depths, self.slopes_y, sss_level, correction, maxdd, xp=np)
         return float(max(sx.max(), sy.max()))
 
 
