@@ -39,16 +39,24 @@ import jax.numpy as jnp
 import numpy as np
 
 import invsss
+from invsss.models import MODEL_NAMES, get_model, resolve_tap_weights
+from invsss.screen_space import LAYOUT_RENDERERS
 
 # The thesis's 940 nm forearm fit (its Table 5.1, MODEL.md section 4).
 THESIS_VARIANCES = [8.749, 2.099, 0.549, 0.5574, 1.194]
 THESIS_WEIGHTS = [0.1478, 0.1323, 0.0004, 0.0527, 0.090]
 
-JAX_MODELS = {
-    "sog": invsss.render_sog,
-    "thesis": invsss.render_thesis,
-    "separable": invsss.render_separable,
-}
+
+def layout_renderer(model: str, renderers: dict):
+    """The pure per-layout renderer of ``model`` (JAX or torch table) with its default taps bound."""
+    entry = get_model(model)
+    render_layout = renderers[entry.layout]
+    tap_w = resolve_tap_weights(entry)  # None for the kernel layout, which ignores it
+
+    def render_model(image, depth, mask, params):
+        return render_layout(image, depth, mask, params, tap_w)
+
+    return render_model
 
 
 def make_scene(size: int, seed: int = 0):
@@ -96,7 +104,7 @@ def jax_device(kind: str):
 def bench_jax(model: str, size: int, repeats: int, device) -> dict:
     image, target, depth, mask = (jax.device_put(a, device) for a in make_scene(size))
     params = jax.device_put(invsss.SSSParams(**scene_params(size)), device)
-    render_model = JAX_MODELS[model]
+    render_model = layout_renderer(model, LAYOUT_RENDERERS)
 
     def forward(p):
         return render_model(image, depth, mask, p)
@@ -131,8 +139,9 @@ def bench_torch(model: str, size: int, repeats: int, device) -> dict:
 
     import invsss.torch as itorch
 
-    models = {"sog": itorch.render_sog, "thesis": itorch.render_thesis, "separable": itorch.render_separable}
-    render_model = models[model]
+    from invsss.torch.screen_space import LAYOUT_RENDERERS as TORCH_LAYOUT_RENDERERS
+
+    render_model = layout_renderer(model, TORCH_LAYOUT_RENDERERS)
     image, target, depth, mask = (torch.as_tensor(a, device=device) for a in make_scene(size))
     values = scene_params(size)
 
@@ -179,7 +188,7 @@ def main(argv=None) -> int:
     parser.add_argument("--sizes", type=int, nargs="+", default=[256, 512, 1024],
                         help="square image sizes in pixels (default: 256 512 1024)")
     parser.add_argument("--repeats", type=int, default=5, help="timed runs per cell (default: 5)")
-    parser.add_argument("--models", nargs="+", choices=tuple(JAX_MODELS), default=["sog"],
+    parser.add_argument("--models", nargs="+", choices=MODEL_NAMES, default=["sog"],
                         help="screen-space models (default: sog)")
     parser.add_argument("--device", choices=("auto", "cpu", "gpu"), default="auto",
                         help="auto: the GPU when both frameworks have one, else the CPU")
