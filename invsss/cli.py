@@ -112,6 +112,11 @@ def _add_render_parser(subparsers) -> None:
         default=1.0,
         help="multiplies the stored depth (unit conversion, e.g. 1000 for metres to mm)",
     )
+    parser.add_argument(
+        "--linear-codes",
+        action="store_true",
+        help="the image's integer codes are linear values: do not decode 8-bit files as sRGB",
+    )
     _add_model_arguments(parser)
     parser.add_argument("--out", required=True, help="output image (.exr, .png, .tif, .jpg, .npy)")
     parser.set_defaults(func=_run_render)
@@ -121,7 +126,7 @@ def _run_render(args: argparse.Namespace, stop: StopSignals) -> int:
     _check_output_path(args.out)
     params, extras = read_params(args.params)
     model, tap_weights = _model_choice(args, extras)
-    image = read_image(args.image)
+    image = read_image(args.image, linear=args.linear_codes)
     depth = read_depth(args.depth, scale=args.depth_scale)
     mask = read_mask(args.mask)
     check_same_frame([(args.image, image), (args.depth, depth), (args.mask, mask)])
@@ -203,6 +208,12 @@ def _add_fit_parser(subparsers) -> None:
                         help="starting points of the multi-start search (default: 4)")
     parser.add_argument("--max-steps", type=int, default=200, metavar="N",
                         help="solver steps per start and per refinement (default: 200)")
+    parser.add_argument(
+        "--linear-codes",
+        action="store_true",
+        help="the source and target images' integer codes are linear values: do not "
+        "decode 8-bit files as sRGB",
+    )
     parser.add_argument("--out", required=True, metavar="DIR",
                         help="output directory (created if missing); a directory that "
                         "already holds a result is refused unless --overwrite is given")

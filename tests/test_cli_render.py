@@ -155,6 +155,20 @@ def test_params_of_an_interrupted_fit_are_refused(scene, capsys):
     assert "incomplete result" in _one_error_line(capsys)
 
 
+def test_linear_codes_flag_reads_8bit_codes_as_linear(scene, capsys):
+    png = scene["image"].with_name("image.png")
+    invsss.write_image(png, invsss.read_image(scene["image"]))  # 8-bit sRGB-encoded
+    args = _args(scene, "--model", "sog")
+    args[args.index("--image") + 1] = str(png)
+    assert main(args) == 0
+    assert "image.png: 8-bit codes decoded as sRGB" in capsys.readouterr().err
+    decoded = invsss.read_image(scene["out"])
+    assert main([*args, "--linear-codes"]) == 0
+    assert "sRGB" not in capsys.readouterr().err
+    # sRGB codes read as linear are brighter than their decoded values
+    assert float(invsss.read_image(scene["out"]).mean()) > float(decoded.mean()) + 0.05
+
+
 def test_version_and_missing_command(capsys):
     assert main(["--version"]) == 0
     assert capsys.readouterr().out.strip() == f"invsss {invsss.__version__}"

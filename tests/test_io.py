@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import warnings
 
 import numpy as np
 import OpenImageIO as oiio
@@ -481,3 +482,112 @@ def test_cli_render_warns_once_about_filled_values(tmp_path, capsys):
     assert code == 0
     assert err == [f"invsss: warning: {path}: maxdd, weights[1], weights[2] not determined by the fit; "
                    "using its point estimate"]
+
+
+# ---------------------------------------------------------------- input notices
+
+
+def test_srgb_decoding_is_noted_and_linear_codes_skip_it(tmp_path):
+    codes = np.full((4, 4, 3), 128, np.uint8)
+    path = _write_raw(tmp_path / "photo.png", codes, "uint8")
+    with pytest.warns(invsss.InputNotice, match=r"photo.png: 8-bit codes decoded as sRGB.*--linear-codes"):
+        decoded = invsss.read_image(path)
+    np.testing.assert_allclose(decoded, _reference_srgb_eotf(128), rtol=1e-6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no notice when the user said what the codes are
+        linear = invsss.read_image(path, linear=True)
+    np.testing.assert_allclose(linear, 128 / 255, rtol=1e-6)
+
+
+def test_linear_and_float_files_bring_no_notice(tmp_path, rgb):
+    invsss.write_image(tmp_path / "a.exr", rgb)
+    invsss.write_image(tmp_path / "b.png", rgb, bits=16)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        invsss.read_image(tmp_path / "a.exr")
+        invsss.read_image(tmp_path / "b.png")
+
+
+def test_load_pair_passes_linear_codes_to_both_images(tmp_path):
+    paths = _scene_files(tmp_path)
+    for key in ("source", "target"):
+        paths[key] = _write_raw(tmp_path / f"{key}.png", np.full((H, W, 3), 64, np.uint8), "uint8")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        pair = invsss.load_pair(paths["source"], paths["target"], paths["depth"], paths["mask"],
+                                linear_codes=True)
+    np.testing.assert_allclose(pair.source, 64 / 255, rtol=1e-6)
+    np.testing.assert_allclose(pair.target, 64 / 255, rtol=1e-6)
+
+
+def test_dropping_a_translucent_alpha_is_noted(tmp_path, rgb):
+    alpha = np.ones((H, W, 1), np.float32)
+    opaque = _write_raw(tmp_path / "opaque.exr", np.concatenate([rgb, alpha], -1), "float",
+                        ("R", "G", "B", "A"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        invsss.read_image(opaque)
+    alpha[:2] = 0.5
+    cut = _write_raw(tmp_path / "cut.exr", np.concatenate([rgb, alpha], -1), "float",
+                     ("R", "G", "B", "A"))
+    with pytest.warns(invsss.InputNotice, match=rf"cut.exr: alpha channel dropped, though {2 * W} pixel"):
+        np.testing.assert_array_equal(invsss.read_image(cut), rgb)
+
+
+def _mask_notices(func) -> list[str]:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        func()
+    return [str(w.message) for w in caught if issubclass(w.category, invsss.InputNotice)]
+
+
+def test_a_mask_over_the_whole_frame_is_noted_by_load_pair_and_the_estimator(tmp_path):
+    from invsss.estimator.inputs import prepare_pair
+
+    paths = _scene_files(tmp_path)  # its mask is all ones
+    notes = _mask_notices(lambda: invsss.load_pair(*(paths[k] for k in ("source", "target", "depth", "mask"))))
+    assert notes == [f"{paths['mask']}: covers 100% of the frame; it likely includes background "
+                     "(the mask should select skin only)"]
+    image, depth = np.ones((H, W, 3)), np.full((H, W), 500.0)
+    notes = _mask_notices(lambda: prepare_pair(image, image, depth, np.ones((H, W))))
+    assert len(notes) == 1 and notes[0].startswith("mask: covers 100%")
+    assert _mask_notices(lambda: prepare_pair(image, image, depth, None)) == []  # None: every pixel, asked for
+
+
+def test_a_mask_on_the_far_plane_is_noted(tmp_path):
+    from invsss.estimator.inputs import prepare_pair
+
+    image = np.ones((H, W, 3))
+    depth = np.full((H, W), 500.0)
+    depth[:, W // 2:] = 1e4  # the right half is background at the far plane
+    skin = np.zeros((H, W))
+    skin[2:8, 2:6] = 1.0
+    assert _mask_notices(lambda: prepare_pair(image, image, depth, skin)) == []
+    skin[2:8, W // 2: W // 2 + 3] = 1.0  # spills onto the background
+    notes = _mask_notices(lambda: prepare_pair(image, image, depth, skin))
+    assert len(notes) == 1 and "18 masked pixel(s) lie on the depth's far plane (10000)" in notes[0]
+
+
+def test_grey_rgb_mismatch_names_the_target_file(tmp_path):
+    paths = _scene_files(tmp_path, target_channels=3)
+    grey = tmp_path / "grey_source.exr"
+    invsss.write_image(grey, np.ones((H, W), np.float32))
+    message = _raises(invsss.load_pair, grey, paths["target"], paths["depth"], paths["mask"],
+                      match_file=paths["target"])
+    assert message.startswith(f"{paths['target']}: expected 1 channel(s)")
+
+
+def test_a_directory_is_not_an_image_file(tmp_path):
+    (tmp_path / "dir.png").mkdir()
+    message = _raises(invsss.read_image, tmp_path / "dir.png", match_file="dir.png")
+    assert "expected an image file" in message
+
+
+def test_an_image_read_back_can_be_written_again(tmp_path, rgb):
+    invsss.write_image(tmp_path / "a.exr", rgb)
+    again = invsss.read_image(tmp_path / "a.exr")
+    assert again.flags["C_CONTIGUOUS"]
+    invsss.write_image(tmp_path / "b.png", again[:, ::-1])  # strided input too
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        np.testing.assert_allclose(invsss.read_image(tmp_path / "b.png"), rgb[:, ::-1], atol=0.01)

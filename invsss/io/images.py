@@ -40,12 +40,13 @@ import contextlib
 import math
 import os
 import secrets
+import warnings
 from typing import NamedTuple
 
 import numpy as np
 
 from ..pair import ImagePair
-from ..validation import InvalidInputError, check_image, check_pair
+from ..validation import InputNotice, InvalidInputError, check_image, check_pair
 from .colour import linear_to_srgb, srgb_to_linear
 
 __all__ = [
@@ -112,7 +113,8 @@ def _checked_path(path, kind: str) -> tuple[str, str]:
     if not os.path.exists(name):
         raise InvalidInputError(f"{name}: {kind} file not found")
     if os.path.isdir(name):
-        raise InvalidInputError(f"{name}: is a directory, expected a {kind} file")
+        article = "an" if kind[0] in "aeiou" else "a"
+        raise InvalidInputError(f"{name}: is a directory, expected {article} {kind} file")
     return name, ext
 
 
@@ -184,6 +186,8 @@ def _read_raster(path, kind: str) -> tuple[str, _Raster]:
     if kind == "image":
         # Alpha and a render's depth channel (Z) are not colour.
         extra = [c for c in (spec.alpha_channel, spec.z_channel) if c >= 0]
+        if spec.alpha_channel >= 0:
+            _note_dropped_alpha(name, codes[..., spec.alpha_channel])
         codes = np.delete(codes, extra, axis=2)
     elif kind == "depth" and spec.z_channel >= 0:
         # A render with a named depth channel: that is the depth, not channel 0.
@@ -200,29 +204,52 @@ def _bits(codes: np.ndarray) -> int | None:
     return None
 
 
-def _decode_colour(raster: _Raster) -> np.ndarray:
-    """Linear float values from stored codes, by the rule in the module docstring."""
+def _note_dropped_alpha(name: str, alpha: np.ndarray) -> None:
+    """Say so when a transparent or translucent alpha is dropped: its colour is used as stored."""
+    opaque = 1.0 if _bits(alpha) is None else float(2 ** _bits(alpha) - 1)
+    see_through = int(np.count_nonzero(alpha < opaque))
+    if see_through:
+        warnings.warn(
+            f"{name}: alpha channel dropped, though {see_through} pixel(s) are not opaque; "
+            "their colour is used as stored (put the skin region in the mask instead)",
+            InputNotice,
+            stacklevel=4,
+        )
+
+
+def _decode_colour(raster: _Raster, linear: bool = False) -> tuple[np.ndarray, str | float | None]:
+    """Linear float values from stored codes, by the rule in the module docstring.
+
+    Returns the values and the transfer function undone: "srgb", a gamma, or
+    None for float data. ``linear=True`` takes integer codes as linear values.
+    """
     codes = raster.codes
     bits = _bits(codes)
     if bits is None:
-        return codes.astype(np.float32)
+        return codes.astype(np.float32), None
     c = codes.astype(np.float64) / float(2**bits - 1)
     encoding = raster.encoding
     if encoding == "srgb" and bits > 8 and raster.file_format == "png":
         encoding = None  # OpenImageIO's default label for every PNG: no information
     if encoding is None:
         encoding = "srgb" if bits == 8 else 1.0
+    if linear:
+        encoding = 1.0
     decoded = srgb_to_linear(c) if encoding == "srgb" else c**encoding
-    return decoded.astype(np.float32)
+    return decoded.astype(np.float32), encoding
 
 
-def read_image(path) -> np.ndarray:
+def read_image(path, *, linear: bool = False) -> np.ndarray:
     """Read a colour or grey image as linear float32.
 
     Parameters
     ----------
     path : str or os.PathLike
         An EXR, PNG (8/16-bit), TIFF, JPEG or float ``.npy`` file.
+    linear : bool
+        The file's integer codes already hold linear values (e.g. an 8-bit PNG
+        of raw sensor data): divide them by their maximum and nothing else,
+        whatever the file declares. Float files are unaffected.
 
     Returns
     -------
@@ -237,6 +264,12 @@ def read_image(path) -> np.ndarray:
     InvalidInputError
         Missing, unreadable or corrupt file, unsupported extension, a channel
         count other than 1 or 3, fewer than 2x2 pixels, NaN or infinite values.
+
+    Warns
+    -----
+    InputNotice
+        Integer codes were decoded as sRGB (say ``linear=True`` if they are
+        linear), or an alpha channel with non-opaque pixels was dropped.
 
     Examples
     --------
@@ -253,13 +286,20 @@ def read_image(path) -> np.ndarray:
             f"{name}: expected a float NPY array of linear values, got {raster.codes.dtype} "
             "(save integer-coded images as PNG or TIFF so their encoding is known)"
         )
-    image = _decode_colour(raster)
+    image, encoding = _decode_colour(raster, linear)
+    if encoding == "srgb":
+        warnings.warn(
+            f"{name}: {_bits(raster.codes)}-bit codes decoded as sRGB to linear values "
+            "(if they are linear already, use linear=True / --linear-codes)",
+            InputNotice,
+            stacklevel=2,
+        )
     if image.shape[2] not in (1, 3):
         raise InvalidInputError(
             f"{name}: expected 1 or 3 colour channels (plus optional alpha), got {image.shape[2]}"
         )
     check_image(image, name)
-    return image
+    return np.ascontiguousarray(image)
 
 
 def read_depth(path, scale: float = 1.0) -> np.ndarray:
@@ -358,7 +398,9 @@ def read_mask(path) -> np.ndarray:
     return mask
 
 
-def load_pair(source, target, depth, mask, depth_scale: float = 1.0) -> ImagePair:
+def load_pair(
+    source, target, depth, mask, depth_scale: float = 1.0, *, linear_codes: bool = False
+) -> ImagePair:
     """Read and cross-check the four files of one example.
 
     Parameters
@@ -369,6 +411,11 @@ def load_pair(source, target, depth, mask, depth_scale: float = 1.0) -> ImagePai
         Depth for :func:`read_depth`, multiplied by ``depth_scale``.
     mask : str or os.PathLike
         Mask for :func:`read_mask`.
+    depth_scale : float
+        Multiplies the stored depth (unit conversion).
+    linear_codes : bool
+        Integer codes of the source and target are linear (``linear=True`` of
+        :func:`read_image`).
 
     Returns
     -------
@@ -397,8 +444,8 @@ def load_pair(source, target, depth, mask, depth_scale: float = 1.0) -> ImagePai
     >>> pair.source.shape, pair.target.shape, pair.depth.shape
     ((4, 6, 3), (4, 6, 1), (4, 6))
     """
-    source_image = read_image(source)
-    target_image = read_image(target)
+    source_image = read_image(source, linear=linear_codes)
+    target_image = read_image(target, linear=linear_codes)
     depth_map = read_depth(depth, scale=depth_scale)
     mask_map = read_mask(mask)
     names = {"source": source, "target": target, "depth": depth, "mask": mask}
@@ -492,6 +539,8 @@ def write_image(path, image, *, bits: int | None = None) -> None:
     if image.ndim == 2:
         image = image[..., None]
     pixels, pixel_type, colour_space = _encode(image, bits, ext)
+    # OpenImageIO takes C-ordered pixels only; a read image or a slice may be strided.
+    pixels = np.ascontiguousarray(pixels)
 
     with _atomic_target(name) as temporary:
         if ext == ".npy":
