@@ -1,0 +1,237 @@
+"""The model table (invsss.models) and the shared pass plan (invsss.pass_plan).
+
+What the table claims about a model is checked against what the model does:
+its parameter set against which parameters change the rendered image, its
+default tap set against ``render`` with no tap set, its layout against the
+JAX renderer, the PyTorch twin and the export. The pass widths are checked
+against MODEL.md's formulas written out here with plain Python loops.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import types
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import invsss
+from invsss.estimator.initial import data_scales
+from invsss.estimator.parametrisation import assign_roles
+from invsss.models import MODEL_NAMES, MODELS, ScreenSpaceModel, get_model, resolve_tap_weights
+from invsss.params import PARAM_NAMES
+from invsss.pass_plan import pass_plan
+from invsss.validation import InvalidInputError
+
+# MODEL.md section 3, typed in again.
+TAPS = {
+    "jimenez": [0.006, 0.061, 0.242, 0.382, 0.242, 0.061, 0.006],
+    "thesis": [0.1053, 0.1402, 0.1664, 0.1762, 0.1664, 0.1402, 0.1053],
+}
+
+
+def spread(name):
+    return math.sqrt(sum(w * (k / 3.0) ** 2 for w, k in zip(TAPS[name], range(-3, 4))))
+
+
+def scene(size=14, seed=3):
+    """Texture on depth whose x-slope runs from 0 to above maxdd=3, so that
+    correction and maxdd both change the stretch somewhere."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:size, 0:size].astype(np.float64)
+    depth = 400.0 + 0.25 * x**2 + 0.5 * y
+    image = rng.random((size, size, 3))
+    return image, depth, np.ones((size, size))
+
+
+BASE = dict(sss_level=600.0, correction=50.0, maxdd=3.0, weights=[0.3, 0.7], variances=[1.0, 4.0])
+# One change per parameter; the weights change their ratio (only ratios matter in sog).
+CHANGED = dict(sss_level=700.0, correction=80.0, maxdd=1.5, weights=[0.7, 0.3], variances=[1.5, 3.0])
+
+
+# ------------------------------------------------------------------ the table
+
+
+def test_table_names_and_lookup():
+    assert MODEL_NAMES == tuple(MODELS) == ("sog", "thesis", "separable")
+    assert invsss.MODELS == invsss.screen_space.MODELS == MODEL_NAMES
+    for name in MODEL_NAMES:
+        assert get_model(name).name == name
+    # MODEL.md sections 3 and 5: jimenez is the default set, the thesis shipped its own.
+    defaults = {name: m.default_tap_weights for name, m in MODELS.items()}
+    assert defaults == {"sog": "jimenez", "thesis": "thesis", "separable": None}
+    with pytest.raises(InvalidInputError, match=r"^model: expected one of sog, thesis, separable, got 'x'$"):
+        get_model("x")
+    with pytest.raises(InvalidInputError, match="model: expected one of"):
+        invsss.render(*scene(), invsss.SSSParams(**BASE), model="x")
+
+
+@pytest.mark.parametrize("name", MODEL_NAMES)
+def test_parameters_are_the_ones_that_change_the_image(name):
+    image, depth, mask = scene()
+    base = np.asarray(invsss.render(image, depth, mask, invsss.SSSParams(**BASE), model=name))
+    changed = set()
+    for k in PARAM_NAMES:
+        out = invsss.render(image, depth, mask, invsss.SSSParams(**{**BASE, k: CHANGED[k]}), model=name)
+        diff = np.max(np.abs(np.asarray(out) - base))
+        if diff > 1e-4:
+            changed.add(k)
+        else:  # a parameter outside the model must not enter it at all
+            assert diff == 0.0, (k, diff)
+    assert changed == set(get_model(name).parameters)
+
+
+@pytest.mark.parametrize("name", MODEL_NAMES)
+def test_default_taps_come_from_the_table(name):
+    image, depth, mask = scene()
+    p = invsss.SSSParams(**BASE)
+    default = np.asarray(invsss.render(image, depth, mask, p, model=name))
+    entry = get_model(name)
+    for spec in TAPS:
+        out = np.asarray(invsss.render(image, depth, mask, p, model=name, tap_weights=spec))
+        # The kernel layout has no 7-tap passes: no tap set changes it.
+        same = spec == entry.default_tap_weights or entry.default_tap_weights is None
+        assert np.array_equal(out, default) == same, spec
+    assert resolve_tap_weights(name) == entry.default_tap_weights
+    assert resolve_tap_weights(name, "thesis") == (None if entry.default_tap_weights is None else "thesis")
+
+
+def test_estimator_roles_follow_the_table():
+    for name, entry in MODELS.items():
+        roles = assign_roles(name, "variances", {})
+        assert roles["weights"] == entry.weights_role
+        for k in ("correction", "maxdd"):
+            assert roles[k] == ("free" if k in entry.parameters else "unused")
+        assert assign_roles(name, "variances", {"weights": np.ones(2)})["weights"] == "fixed"
+
+
+def test_a_bad_entry_is_caught_when_written():
+    sog = get_model("sog")
+    for change in (
+        {"parameters": frozenset({"sss_level", "blur"})},
+        {"weights_role": "unused"},  # weights are in its parameters
+        {"layout": "spiral"},
+        {"layout": "chained"},  # linear weights need the layered layout
+        {"default_tap_weights": None},  # 7-tap passes need a default tap set
+    ):
+        with pytest.raises(ValueError):
+            dataclasses.replace(sog, **change)
+    assert isinstance(dataclasses.replace(sog, name="sog2"), ScreenSpaceModel)
+
+
+# ------------------------------------------------------------------ the pass plan
+
+
+def expected_plan(layout, variances, c_w):
+    """MODEL.md section 5 with loops: (axes, widths, order or None)."""
+    k = len(variances)
+    if layout == "layered":
+        order = sorted(range(k), key=lambda i: variances[i])  # Python's sort is stable
+        axes, widths, previous = [], [], 0.0
+        for i in order:
+            w = math.sqrt(variances[i] - previous) / c_w
+            axes += [1, 0]
+            widths += [w, w]
+            previous = variances[i]
+        return tuple(axes), widths, order
+    widths = [math.sqrt(v) / c_w for v in variances]
+    return (1,) * k + (0,) * k, widths + widths, None
+
+
+def namespaces():
+    # jnp runs under x64 (see the test): in float32, v_i - v_{i-1} of two close
+    # variances loses most of its digits.
+    out = [(np, np.asarray), (jnp, lambda v: jnp.asarray(v, jnp.float64))]
+    try:
+        import torch
+
+        out.append((torch, lambda v: torch.tensor(v, dtype=torch.float64)))
+    except ImportError:  # the twin is optional
+        pass
+    return out
+
+
+@pytest.mark.parametrize("layout", ["layered", "chained"])
+@pytest.mark.parametrize("variances", [[8.749, 2.099, 0.549, 0.5574, 1.194], [2.0, 0.0, 2.0, 0.5]])
+@pytest.mark.parametrize("taps", ["jimenez", "thesis"])
+def test_pass_plan_matches_the_formulas(layout, variances, taps):
+    c_w = spread(taps)
+    axes, widths, order = expected_plan(layout, variances, c_w)
+    for xp, asarray in namespaces():
+        with jax.enable_x64(True):
+            plan = pass_plan(layout, asarray(variances), c_w, xp)
+        assert plan.axes == axes, xp.__name__
+        assert np.asarray(plan.widths).dtype == np.float64, xp.__name__
+        np.testing.assert_allclose(np.asarray(plan.widths), widths, rtol=1e-14, atol=0, err_msg=xp.__name__)
+        if order is None:
+            assert plan.order is None
+        else:
+            assert np.asarray(plan.order).tolist() == order, xp.__name__
+    with pytest.raises(ValueError, match="layout"):
+        pass_plan("kernel", np.asarray(variances), c_w, np)
+
+
+def test_tap_spread_matches_model_md():
+    # MODEL.md section 3: c_W = 0.34641 (jimenez) and 0.61008 (thesis).
+    assert spread("jimenez") == pytest.approx(0.34641, abs=5e-6)
+    assert spread("thesis") == pytest.approx(0.61008, abs=5e-6)
+    for name in TAPS:
+        with jax.enable_x64(True):
+            got = float(invsss.tap_spread(invsss.tap_weights(name)))
+        assert got == pytest.approx(spread(name), rel=1e-14)
+
+
+def test_torch_gradients_flow_through_the_plan():
+    torch = pytest.importorskip("torch")
+    v = torch.tensor([2.0, 0.5, 3.0], dtype=torch.float64, requires_grad=True)
+    for layout in ("layered", "chained"):
+        assert torch.autograd.gradcheck(lambda v: pass_plan(layout, v, 0.4, torch).widths, (v,))
+
+
+# ------------------------------------------------------------------ every model everywhere
+
+
+@pytest.mark.parametrize("name", MODEL_NAMES)
+def test_every_model_renders_in_both_frameworks_and_exports(name):
+    torch = pytest.importorskip("torch")
+    pytest.importorskip("kornia")
+    import invsss.torch as itorch
+
+    image, depth, mask = scene()
+    with jax.enable_x64(True):
+        p = invsss.SSSParams(**BASE)
+        out = np.asarray(invsss.render(image, depth, mask, p, model=name))
+    twin = itorch.render(
+        torch.tensor(image), torch.tensor(depth), torch.tensor(mask),
+        itorch.SSSParams(**{k: torch.tensor(v, dtype=torch.float64) for k, v in BASE.items()}), model=name,
+    )
+    np.testing.assert_allclose(twin.detach().numpy(), out, rtol=0, atol=1e-9)
+    assert not np.allclose(out, image)  # the model did blur
+
+    constants = invsss.shader_constants(invsss.SSSParams(**BASE), name)
+    assert constants["model"] == name
+    entry = get_model(name)
+    if entry.layout == "kernel":
+        assert "passWidths" not in constants and constants["numTaps"] == 17
+    else:
+        # One width per Gaussian, in pass order, from MODEL.md's formula.
+        _, widths, _ = expected_plan(entry.layout, BASE["variances"], spread(entry.default_tap_weights))
+        np.testing.assert_allclose(constants["passWidths"], widths[1::2] if entry.layout == "layered"
+                                   else widths[: len(BASE["variances"])], rtol=1e-14)
+        assert constants["tapWeightSet"] == entry.default_tap_weights
+    assert "static const" in invsss.to_hlsl(constants)
+
+
+def test_data_scales_max_stretch_is_the_render_stretch():
+    image, depth, mask = scene()
+    mask[:, :3] = 0.0  # the steepest masked pixels decide, not the masked-out ones
+    pair = types.SimpleNamespace(depth=depth, mask=mask)
+    with jax.enable_x64(True):
+        scales = data_scales([pair])
+        for c, delta in ((50.0, 3.0), (0.0, 1.0), (200.0, 0.1)):
+            s_x, s_y = invsss.stretch_factors(jnp.asarray(depth), 600.0, c, delta)
+            want = max(np.asarray(s_x)[mask > 0].max(), np.asarray(s_y)[mask > 0].max())
+            assert scales.max_stretch(600.0, c, delta) == pytest.approx(want, rel=1e-12)
