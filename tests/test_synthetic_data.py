@@ -112,3 +112,56 @@ def test_recorded_slope_fractions_and_undetermined_parameters(name):
         assert 0.1 < min(fractions["x"], fractions["y"])
         assert max(fractions["x"], fractions["y"]) < 0.9
         assert masked_rms(no_correction, clean, mask) > truth["noise_sigma"]
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_normalised_weights_are_the_fit_form_of_the_weights(name):
+    # weights_normalised is what a fit's params.json holds: per-channel sums of 1,
+    # shape (K,) for a one-channel target and (K, 3) for an RGB one. The sog model
+    # divides by the weights' sum, so it must render the very same target.
+    source, target, depth, mask, truth = load(name)
+    weights = np.asarray(truth["weights"], np.float64)
+    normalised = np.asarray(truth["weights_normalised"], np.float64)
+    k = len(truth["variances"])
+    assert normalised.shape == ((k,) if target.shape[-1] == 1 else (k, target.shape[-1]))
+    np.testing.assert_allclose(normalised.sum(axis=0), 1.0, atol=1e-5)
+    expected = weights / weights.sum()
+    if normalised.ndim == 2:
+        expected = np.repeat(expected[:, None], normalised.shape[1], axis=1)
+    np.testing.assert_allclose(normalised, expected, atol=1e-6)
+    np.testing.assert_allclose(
+        noise_free_target(source, depth, mask, truth, weights=normalised),
+        noise_free_target(source, depth, mask, truth),
+        rtol=1e-5, atol=1e-6,
+    )
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_undetermined_weights_are_those_of_coinciding_gaussians(name):
+    # A fit cannot separate two Gaussians whose layers differ by a blur below
+    # COINCIDENT_PX pixel at the largest stretch on the mask; truth.json must list
+    # their weights (every channel for an RGB target), each with a reason. It may
+    # list more (a weight whose standard error is too large in one scene).
+    from invsss.estimator.uncertainty import COINCIDENT_PX
+    from invsss.stretch import stretch_factors
+
+    _, target, depth, mask, truth = load(name)
+    assert set(truth["undetermined_why"]) == set(truth["undetermined"])
+    assert all(isinstance(v, str) and v for v in truth["undetermined_why"].values())
+    s_x, s_y = stretch_factors(depth, truth["sss_level"], truth["correction"], truth["maxdd"])
+    skin = mask > 0.5
+    s_max = float(max(np.max(np.asarray(s_x)[skin]), np.max(np.asarray(s_y)[skin])))
+    v = np.asarray(truth["variances"])
+    order = np.argsort(v)
+    coinciding = set()
+    for a, b in zip(order[:-1], order[1:]):
+        if s_max * np.sqrt(v[b] - v[a]) < COINCIDENT_PX:
+            coinciding |= {int(a), int(b)}
+    channels = target.shape[-1]
+    expected = {
+        f"weights[{i}]" if channels == 1 else f"weights[{i},{c}]"
+        for i in coinciding
+        for c in range(channels)
+    }
+    listed = {e for e in truth["undetermined"] if e.startswith("weights")}
+    assert coinciding and expected <= listed
