@@ -218,8 +218,8 @@ def check_mask_background(mask, depth, mask_name: str = "mask") -> None:
 
     Two signs: the mask covers more than ``MASK_WHOLE_FRAME`` of the frame, or
     it is > 0 on the depth's far plane (the maximum depth, shared by more than
-    ``FAR_PLANE_SHARE`` of the pixels, as a renderer's or depth camera's
-    background is). Background pixels pull the fit towards "no scattering".
+    ``FAR_PLANE_SHARE`` of the pixels but not by all, as a renderer's or depth
+    camera's background is). Background pixels pull the fit towards "no scattering".
     Skipped for tracers.
 
     Examples
@@ -246,7 +246,8 @@ def check_mask_background(mask, depth, mask_name: str = "mask") -> None:
         return
     far = d == d.max()
     on_far_plane = int(np.count_nonzero(m & far))
-    if far.mean() > FAR_PLANE_SHARE and on_far_plane:
+    # A depth map that is one flat plane has no background to tell apart.
+    if FAR_PLANE_SHARE < far.mean() < 1.0 and on_far_plane:
         warnings.warn(
             f"{mask_name}: {on_far_plane} masked pixel(s) lie on the depth's far plane "
             f"({float(d.max()):g}); the mask likely includes background",

@@ -559,9 +559,10 @@ def test_a_mask_on_the_far_plane_is_noted(tmp_path):
 
     image = np.ones((H, W, 3))
     depth = np.full((H, W), 500.0)
-    depth[:, W // 2:] = 1e4  # the right half is background at the far plane
     skin = np.zeros((H, W))
     skin[2:8, 2:6] = 1.0
+    assert _mask_notices(lambda: prepare_pair(image, image, depth, skin)) == []  # one flat plane
+    depth[:, W // 2:] = 1e4  # the right half is background at the far plane
     assert _mask_notices(lambda: prepare_pair(image, image, depth, skin)) == []
     skin[2:8, W // 2: W // 2 + 3] = 1.0  # spills onto the background
     notes = _mask_notices(lambda: prepare_pair(image, image, depth, skin))
