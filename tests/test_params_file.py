@@ -51,6 +51,7 @@ def _error(tmp_path, content) -> str:
         ({"variances": "0.5, 2.0"}, 'variances: expected a list of numbers, got "0.5, 2.0"'),
         ({"estimate": {**PARAMS, "maxdd": True}}, "estimate.maxdd: expected a number, got true"),
         ({"interrupted": 1}, "interrupted: expected true or false, got 1"),
+        ({"estimate": {k: v for k, v in PARAMS.items() if k != "maxdd"}}, "estimate.maxdd is missing"),
         ({"iterations": 2.5}, "iterations: expected an integer, got 2.5"),
     ],
 )

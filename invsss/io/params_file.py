@@ -211,6 +211,9 @@ def _message(error: dict, content: Mapping, name: str) -> str:
             f"{name}: tap_weights must be one of {', '.join(TAP_WEIGHTS)} or a list of "
             f"7 numbers, got {_shown(value)}"
         )
+    where = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in error["loc"][1:])
+    if error["type"] == "missing":
+        return f"{name}: {key}{where} is missing"
     # For numbers, our own walk names the first bad entry as the user wrote it
     # (pydantic's location inside a union names the union's members instead).
     entries, label = None, key
@@ -227,7 +230,6 @@ def _message(error: dict, content: Mapping, name: str) -> str:
             number_array(_without_nulls(entries), label, name)
         except InvalidInputError as err:
             return str(err)
-    where = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in error["loc"][1:])
     expected = error["msg"][0].lower() + error["msg"][1:]
     if error["type"] in ("float_type", "int_type"):
         expected = "expected a number" if error["type"] == "float_type" else "expected an integer"
