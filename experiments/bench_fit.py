@@ -19,9 +19,10 @@ with gain, offset and 0.5 % noise. On that pair the script times:
     the same SciPy solver given the exact Jacobian (``jax.jacfwd``, jitted), to
     separate the cost of finite differences from the cost of the algorithm.
 
-The problem is the estimator's own: ``fit_pair`` is run once while its first
-solve is recorded (the objective pytree and the starting point, the best point of
-its start grid), and every method is timed on that objective from that point.
+The problem is the estimator's own: :func:`invsss.estimator.build_problem` makes
+the objective pytree and the starting point (the best point of its start grid)
+that ``fit_pair`` hands its solver first, and every method is timed on that
+objective from that point.
 Times are medians over ``--repeats`` runs; compile times (first call minus the
 median) are a separate column. Errors are absolute differences from the truth;
 ``weights`` is the largest over the Gaussians (weights normalised to sum 1). The
@@ -52,8 +53,7 @@ from scipy.ndimage import gaussian_filter
 from scipy.optimize import least_squares
 
 import invsss
-from invsss.estimator import fit as fit_module
-from invsss.estimator import fit_pair
+from invsss.estimator import FitOptions, build_problem, fit_pair
 from invsss.estimator.solve import make_solver, run_solver
 
 PROFILE = {"weights": [0.3, 0.45, 0.25], "variances": [0.549, 2.099, 8.749]}
@@ -85,34 +85,25 @@ def make_scene(size: int, seed: int = 0):
     return source, target, depth, mask
 
 
+def fit_options(max_steps: int) -> FitOptions:
+    """One start, no robust reweighting: the estimator's plain problem."""
+    return FitOptions(profile=PROFILE, n_starts=1, robust=None, max_steps=max_steps)
+
+
 def capture_problem(scene, max_steps: int):
-    """Run ``fit_pair`` once and record the objective and start of its first solve.
+    """The objective and start of ``fit_pair``'s first solve, and the fit's result.
 
-    That first solve (one start, no robust reweighting) is the problem every method
-    below is timed on, so it is exactly the estimator's problem without copying its
-    set-up. Returns ``(objective, z0, result)``; call under x64.
+    Built by :func:`~invsss.estimator.build_problem`, so it is exactly the
+    estimator's problem. Returns ``(objective, z0, result)``; call under x64.
     """
-    seen = []
-    original = fit_module.run_solver
-
-    def recording(solver, objective, z0, *args, **kwargs):
-        if not seen:
-            seen.append((objective, np.asarray(z0)))
-        return original(solver, objective, z0, *args, **kwargs)
-
-    fit_module.run_solver = recording
-    try:
-        result = run_fit(scene, max_steps)
-    finally:
-        fit_module.run_solver = original
-    objective, z0 = seen[0]
-    return objective, z0, result
+    source, target, depth, mask = scene
+    problem = build_problem([(source, target, depth, mask)], fit_options(max_steps))
+    return problem.objective, np.asarray(problem.z0), run_fit(scene, max_steps)
 
 
 def run_fit(scene, max_steps: int):
     source, target, depth, mask = scene
-    return fit_pair(source, target, depth, mask, profile=PROFILE, n_starts=1, robust=None,
-                    max_steps=max_steps)
+    return fit_pair(source, target, depth, mask, options=fit_options(max_steps))
 
 
 @eqx.filter_jit

@@ -427,3 +427,27 @@ def test_history_holds_every_start_and_round(recovered):
     assert bounds[0][0] == 0 and bounds[-1][1] == result.iterations
     assert all(a[1] == b[0] for a, b in zip(bounds, bounds[1:]))
     assert all(len(v) > 0 for v in result.history_by_stage().values())
+
+
+def test_report_draws_every_start_and_both_profiles(recovered):
+    from matplotlib.figure import Figure
+
+    from invsss.report import _parameter_lines, _plot_convergence, _plot_profile
+
+    result = recovered["face"][0]
+    fig = Figure()
+    curve, profile = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
+    _plot_convergence(curve, result)
+    # One curve per solve, each over its own steps of the shared iteration axis.
+    drawn = [line for line in curve.get_lines() if len(line.get_xdata()) > 2]
+    assert len(drawn) == len(result.stages)
+    assert sorted(int(x) for line in drawn for x in line.get_xdata()) == list(range(1, result.iterations + 1))
+    labels = [t.get_text() for t in curve.get_legend().get_texts()]
+    assert labels.count("start 1") + labels.count("start 1 (best)") == 1 and sum("(best)" in t for t in labels) == 1
+    _plot_profile(profile, result)
+    fitted, start = profile.get_lines()
+    r = np.asarray(fitted.get_xdata())
+    expected = invsss.profiles.sum_of_gaussians(r, np.asarray(result.values["weights"]), np.asarray(PROFILE3["variances"]))
+    np.testing.assert_allclose(fitted.get_ydata(), np.maximum(np.asarray(expected), 1e-12), rtol=1e-5)
+    assert not np.allclose(fitted.get_ydata(), start.get_ydata())
+    assert any("conditional on the chosen profile" in line for line in _parameter_lines(result))

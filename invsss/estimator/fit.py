@@ -106,7 +106,9 @@ def fit_pair(
     progress : callable, optional
         Called as ``progress(iteration, loss)`` after every solver step;
         ``iteration`` counts the steps of the whole fit (all starts and
-        refinements) from 1, ``loss`` is in the units of :attr:`FitResult.loss`.
+        refinements) from 1, ``loss`` is in the units of :attr:`FitResult.loss`;
+        the last ``iteration`` is :attr:`FitResult.iterations` and the losses are
+        :attr:`FitResult.history`.
     robust : {"pseudo-huber", "cauchy"} or None
         Robust loss by iterative reweighting (see :mod:`invsss.estimator.robust`).
     options : FitOptions, optional
