@@ -1,0 +1,462 @@
+"""The scene description of ``invsss scene``: a TOML file checked by a pydantic model.
+
+Lengths are millimetres throughout (a mesh is scaled into mm by ``mm_per_unit``),
+angles degrees, scattering coefficients 1/mm. A minimal file::
+
+    spp = 64
+    seed = 1
+
+    [object]
+    primitive = "sphere"        # or "slab" (with size), or mesh = "head.glb" with mm_per_unit
+    radius = 40.0
+
+    [camera]
+    position = [0.0, 0.0, 400.0]
+    look_at = [0.0, 0.0, 0.0]
+    fov = 20.0                  # horizontal, degrees; or focal_px
+    width = 64
+    height = 64
+
+    [[lights]]
+    type = "point"              # point, spot, area or directional
+    position = [100.0, 150.0, 300.0]
+    intensity = 2e5
+
+    [medium]
+    preset = "thesis-940"       # or sigma_s_prime, sigma_a (1/mm) and eta
+
+Every key is checked: an unknown or misspelt key, a string where a number belongs, a
+missing field, each gives one line naming the key (as a dotted path) and, for an
+unknown key, the nearest valid one. Numbers are strict: ``true`` or ``"3"`` is not a
+number.
+"""
+
+from __future__ import annotations
+
+import difflib
+import os
+import tomllib
+from typing import Annotated, Literal, Union, get_args, get_origin
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from ..validation import InvalidInputError
+from .media import MEDIUM_PRESETS
+
+__all__ = [
+    "VARIANTS",
+    "SceneConfig",
+    "SceneObject",
+    "Pose",
+    "Camera",
+    "PointLight",
+    "SpotLight",
+    "AreaLight",
+    "DirectionalLight",
+    "Occluder",
+    "Medium",
+    "load_config",
+    "parse_config",
+]
+
+#: Mitsuba variants a scene may ask for; ``scalar_rgb`` needs nothing but the wheel.
+VARIANTS = ("scalar_rgb", "llvm_ad_rgb", "cuda_ad_rgb")
+
+Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+Positive = Annotated[float, Field(gt=0)]
+# A light's power: one number (grey) or one per RGB channel.
+Colour = Union[Annotated[float, Field(ge=0)], Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=3, max_length=3)]]
+Coefficient = Union[Positive, Annotated[list[Positive], Field(min_length=3, max_length=3)]]
+
+
+class _Strict(BaseModel):
+    # strict: TOML's true or "3" never becomes a number; forbid: a misspelt key is an error.
+    model_config = ConfigDict(strict=True, extra="forbid", frozen=True)
+
+
+class Pose(_Strict):
+    """Where the object sits: rotated about the world x, then y, then z axis (degrees), then moved (mm)."""
+
+    translate: Vec3 = [0.0, 0.0, 0.0]
+    rotate: Vec3 = [0.0, 0.0, 0.0]
+
+
+class SceneObject(_Strict):
+    """The skin object: a closed mesh file, or a built-in primitive for tests.
+
+    ``primitive = "slab"``: a box of ``size = [width, height, thickness]`` mm whose
+    front face is the plane z = 0 (facing +z), centred on the z axis.
+    ``primitive = "sphere"``: a sphere of ``radius`` mm about the origin.
+    A ``mesh`` (any format trimesh reads; a relative path is relative to the
+    config file) is scaled by ``mm_per_unit`` and must be closed, since it holds
+    the medium. ``pose`` then places it.
+    """
+
+    mesh: str | None = None
+    mm_per_unit: Positive | None = None
+    primitive: Literal["slab", "sphere"] | None = None
+    size: Annotated[list[Positive], Field(min_length=3, max_length=3)] | None = None
+    radius: Positive | None = None
+    pose: Pose = Pose()
+
+    @model_validator(mode="after")
+    def _one_kind(self):
+        if (self.mesh is None) == (self.primitive is None):
+            raise ValueError("give either mesh (with mm_per_unit) or primitive, not both or neither")
+        if self.mesh is not None and self.mm_per_unit is None:
+            raise ValueError("mesh needs mm_per_unit (millimetres per mesh unit)")
+        if self.primitive == "slab" and self.size is None:
+            raise ValueError('primitive "slab" needs size = [width, height, thickness] in mm')
+        if self.primitive == "sphere" and self.radius is None:
+            raise ValueError('primitive "sphere" needs radius in mm')
+        return self
+
+
+class Camera(_Strict):
+    """A pinhole camera, principal point at the image centre, square pixels.
+
+    Give the horizontal field of view ``fov`` in degrees or the focal length
+    ``focal_px`` in pixels (``focal_px = width / 2 / tan(fov / 2)``).
+    """
+
+    position: Vec3
+    look_at: Vec3
+    up: Vec3 = [0.0, 1.0, 0.0]
+    fov: Annotated[float, Field(gt=0, lt=180)] | None = None
+    focal_px: Positive | None = None
+    width: Annotated[int, Field(ge=2)]
+    height: Annotated[int, Field(ge=2)]
+
+    @model_validator(mode="after")
+    def _one_focal(self):
+        if (self.fov is None) == (self.focal_px is None):
+            raise ValueError("give either fov (horizontal, degrees) or focal_px, not both or neither")
+        return self
+
+    @property
+    def fov_deg(self) -> float:
+        """The horizontal field of view in degrees, whichever way it was given."""
+        import math
+
+        if self.fov is not None:
+            return self.fov
+        return math.degrees(2.0 * math.atan(self.width / 2.0 / self.focal_px))
+
+    @property
+    def focal_length_px(self) -> float:
+        """The focal length in pixels, whichever way it was given."""
+        import math
+
+        if self.focal_px is not None:
+            return self.focal_px
+        return self.width / 2.0 / math.tan(math.radians(self.fov) / 2.0)
+
+
+class PointLight(_Strict):
+    """An isotropic point light; ``intensity`` in W/sr (radiance scale is arbitrary but shared)."""
+
+    type: Literal["point"]
+    position: Vec3
+    intensity: Colour
+
+
+class SpotLight(_Strict):
+    """A spot light at ``position`` aimed at ``look_at``; full intensity inside ``beam_width``
+    degrees of its axis, falling to zero at ``cutoff`` degrees."""
+
+    type: Literal["spot"]
+    position: Vec3
+    look_at: Vec3
+    intensity: Colour
+    cutoff: Annotated[float, Field(gt=0, le=90)] = 20.0
+    beam_width: Annotated[float, Field(gt=0, le=90)] | None = None
+
+
+class AreaLight(_Strict):
+    """A rectangle of ``width`` x ``height`` mm at ``center``, emitting ``radiance`` towards ``look_at``."""
+
+    type: Literal["area"]
+    center: Vec3
+    look_at: Vec3
+    width: Positive
+    height: Positive
+    radiance: Colour
+
+
+class DirectionalLight(_Strict):
+    """A light at infinity shining along ``direction`` with ``irradiance`` on a facing surface."""
+
+    type: Literal["directional"]
+    direction: Vec3
+    irradiance: Colour
+
+
+Light = Annotated[Union[PointLight, SpotLight, AreaLight, DirectionalLight], Field(discriminator="type")]
+
+
+class Occluder(_Strict):
+    """Opaque black stripes that cast sharp shadows (shadow edges are where scattering shows).
+
+    ``count`` parallel stripes fill a ``width`` x ``length`` mm rectangle at
+    ``center`` whose plane faces ``normal``; the stripes run along ``along`` and
+    each covers ``duty`` of its period across them.
+    """
+
+    center: Vec3
+    normal: Vec3
+    along: Vec3 = [0.0, 1.0, 0.0]
+    width: Positive
+    length: Positive
+    count: Annotated[int, Field(ge=1)] = 4
+    duty: Annotated[float, Field(gt=0, lt=1)] = 0.5
+
+
+class Medium(_Strict):
+    """The homogeneous medium inside a rough dielectric boundary.
+
+    Either a ``preset`` (see :data:`invsss.scenes.media.MEDIUM_PRESETS`) or
+    ``sigma_s_prime`` and ``sigma_a`` in 1/mm (one number, or three for RGB) with
+    ``eta``. ``roughness`` is the boundary's Beckmann alpha: a smooth boundary lets
+    no point light into the medium by next-event estimation, about 0.5 works.
+    """
+
+    preset: Literal[tuple(MEDIUM_PRESETS)] | None = None  # type: ignore[valid-type]
+    sigma_s_prime: Coefficient | None = None
+    sigma_a: Coefficient | None = None
+    eta: Annotated[float, Field(gt=1.0, lt=3.0)] | None = None
+    roughness: Annotated[float, Field(gt=0.0, le=1.0)] = 0.5
+
+    @model_validator(mode="after")
+    def _preset_or_coefficients(self):
+        given = [k for k in ("sigma_s_prime", "sigma_a", "eta") if getattr(self, k) is not None]
+        if self.preset is not None and given:
+            raise ValueError(f"give either preset or coefficients, not both (also got {', '.join(given)})")
+        if self.preset is None and (self.sigma_s_prime is None or self.sigma_a is None):
+            raise ValueError("give a preset, or sigma_s_prime and sigma_a (1/mm)")
+        return self
+
+    def coefficients(self) -> dict:
+        """``{"sigma_s_prime": [...], "sigma_a": [...], "eta": float, "source": str}``, lists of 1 or 3."""
+        if self.preset is not None:
+            preset = MEDIUM_PRESETS[self.preset]
+            values = {k: preset[k] for k in ("sigma_s_prime", "sigma_a", "eta")}
+            source = f"preset {self.preset}: {preset['source']}"
+        else:
+            values = {"sigma_s_prime": self.sigma_s_prime, "sigma_a": self.sigma_a,
+                      "eta": 1.3 if self.eta is None else self.eta}
+            source = "given in the scene file"
+        s, a = (v if isinstance(v, list) else [v] for v in (values["sigma_s_prime"], values["sigma_a"]))
+        if len(s) != len(a):
+            s, a = (v * 3 if len(v) == 1 else v for v in (s, a))
+        return {"sigma_s_prime": [float(x) for x in s], "sigma_a": [float(x) for x in a],
+                "eta": float(values["eta"]), "source": source}
+
+
+class SceneConfig(_Strict):
+    """A whole scene: object, camera, lights, optional occluders, medium and render settings.
+
+    ``spp`` is split into two independently seeded halves (``seed`` and ``seed + 1``)
+    whose difference gives the noise estimate; ``geometry_spp`` samples the depth,
+    normal and coverage passes (stratified).
+    """
+
+    variant: Literal[VARIANTS] = "scalar_rgb"  # type: ignore[valid-type]
+    spp: Annotated[int, Field(ge=2)] = 64
+    seed: Annotated[int, Field(ge=0, lt=2**31)] = 0
+    max_depth: Annotated[int, Field(ge=1)] = 256
+    geometry_spp: Annotated[int, Field(ge=1)] = 64
+    object: SceneObject
+    camera: Camera
+    lights: Annotated[list[Light], Field(min_length=1)]
+    occluders: list[Occluder] = []
+    medium: Medium
+
+    @field_validator("spp")
+    @classmethod
+    def _even_spp(cls, spp: int) -> int:
+        if spp % 2:
+            raise ValueError(f"expected an even number (it is split into two equally sampled halves), got {spp}")
+        return spp
+
+    def with_overrides(self, *, width: int | None = None, height: int | None = None,
+                       spp: int | None = None, seed: int | None = None) -> "SceneConfig":
+        """A copy with another resolution, spp or seed, checked like the file.
+
+        Giving only one of ``width``, ``height`` keeps the aspect ratio. The view
+        stays the same: a camera given by ``focal_px`` has it scaled with the width.
+
+        Examples
+        --------
+        >>> config = parse_config({"object": {"primitive": "sphere", "radius": 10.0},
+        ...     "camera": {"position": [0.0, 0.0, 100.0], "look_at": [0.0, 0.0, 0.0],
+        ...                "focal_px": 100.0, "width": 64, "height": 32},
+        ...     "lights": [{"type": "point", "position": [0.0, 0.0, 100.0], "intensity": 1.0}],
+        ...     "medium": {"preset": "thesis-940"}})
+        >>> small = config.with_overrides(width=32)
+        >>> small.camera.width, small.camera.height, small.camera.focal_px
+        (32, 16, 50.0)
+        """
+        camera = self.camera.model_dump()
+        old_width, old_height = camera["width"], camera["height"]
+        if width is not None and height is None:
+            height = max(2, round(old_height * width / old_width))
+        elif height is not None and width is None:
+            width = max(2, round(old_width * height / old_height))
+        if width is not None:
+            camera.update(width=width, height=height)
+            if camera["focal_px"] is not None:
+                camera["focal_px"] = camera["focal_px"] * width / old_width
+        content = self.model_dump()
+        content["camera"] = camera
+        if spp is not None:
+            content["spp"] = spp
+        if seed is not None:
+            content["seed"] = seed
+        return parse_config(content, "command line")
+
+
+# ------------------------------------------------------------------ reading
+
+
+def load_config(path) -> SceneConfig:
+    """Read and check a scene TOML file; a relative mesh path becomes relative to the file.
+
+    Raises
+    ------
+    InvalidInputError
+        An unreadable file, bad TOML, or a bad key or value (one line naming it),
+        or a mesh file that does not exist.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> path = os.path.join(tempfile.mkdtemp(), "scene.toml")
+    >>> _ = open(path, "w").write('sppp = 4\\n')
+    >>> load_config(path)
+    Traceback (most recent call last):
+    ...
+    invsss.validation.InvalidInputError: ...scene.toml: sppp: unknown key, did you mean 'spp'? (valid: variant, spp, seed, max_depth, geometry_spp, object, camera, lights, occluders, medium)
+    """
+    name = os.fspath(path)
+    try:
+        with open(name, "rb") as f:
+            content = tomllib.load(f)
+    except OSError as err:
+        raise InvalidInputError(f"{name}: cannot read the scene file ({err.strerror})") from None
+    except tomllib.TOMLDecodeError as err:
+        raise InvalidInputError(f"{name}: not valid TOML ({err})") from None
+    config = parse_config(content, name)
+    if config.object.mesh is not None:
+        mesh = os.path.join(os.path.dirname(os.path.abspath(name)), os.path.expanduser(config.object.mesh))
+        if not os.path.isfile(mesh):
+            raise InvalidInputError(f"{name}: object.mesh: file {config.object.mesh} not found (looked at {mesh})")
+        config = config.model_copy(update={"object": config.object.model_copy(update={"mesh": mesh})})
+    return config
+
+
+def parse_config(content: dict, name: str = "scene") -> SceneConfig:
+    """Check a scene description already parsed into a dict (``name`` is used in messages).
+
+    Examples
+    --------
+    >>> parse_config({"spp": True}, "demo")
+    Traceback (most recent call last):
+    ...
+    invsss.validation.InvalidInputError: demo: spp: expected an integer, got true
+    """
+    try:
+        return SceneConfig.model_validate(content)
+    except ValidationError as err:
+        errors = err.errors()
+        # A misspelt key also makes the real one "missing": name the misspelling first.
+        unknown = [e for e in errors if e["type"] == "extra_forbidden"]
+        raise InvalidInputError(_message((unknown or errors)[0], name)) from None
+
+
+def _message(error: dict, name: str) -> str:
+    """One line for pydantic's first error: the key as a dotted path, what was expected."""
+    model, path, union = _walk(list(error["loc"]))
+    where = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".")
+    kind = error["type"]
+    if union and kind in ("float_type", "list_type", "greater_than", "greater_than_equal"):
+        return f"{name}: {where}: expected a number or a list of 3 numbers (RGB), got {_shown(error.get('input'))}"
+    if kind == "extra_forbidden":
+        valid = list(model.model_fields)
+        nearest = difflib.get_close_matches(str(path[-1]), valid, n=1, cutoff=0.0)
+        hint = f", did you mean {nearest[0]!r}?" if nearest else ""
+        return f"{name}: {where}: unknown key{hint} (valid: {', '.join(valid)})"
+    if kind == "missing":
+        return f"{name}: {where}: missing"
+    if kind in ("int_type", "float_type", "bool_type", "string_type"):
+        expected = {"int_type": "an integer", "float_type": "a number",
+                    "bool_type": "true or false", "string_type": "a string"}[kind]
+        return f"{name}: {where}: expected {expected}, got {_shown(error.get('input'))}"
+    if kind == "union_tag_invalid":
+        given = error.get("input", {}).get("type") if isinstance(error.get("input"), dict) else None
+        return f"{name}: {where}.type: expected one of {error['ctx']['expected_tags']}, got {_shown(given)}"
+    if kind == "union_tag_not_found":
+        return f"{name}: {where}: missing type (point, spot, area or directional)"
+    message = error["msg"].removeprefix("Value error, ")
+    message = message[0].lower() + message[1:]
+    if kind in ("value_error", "assertion_error"):
+        return f"{name}: {where}: {message}"
+    return f"{name}: {where}: {message}, got {_shown(error.get('input'))}"
+
+
+def _walk(loc: list) -> tuple[type[BaseModel], list, bool]:
+    """Follow pydantic's error location through the models.
+
+    Returns the model that holds the last key, the location as the user wrote
+    it (list indices and keys kept, the labels pydantic adds for union members, a
+    light's ``"point"`` or a number's ``"float"``, dropped) and whether the value
+    was one of a union of plain types (a number or a list of numbers).
+    """
+    model: type[BaseModel] = SceneConfig
+    path: list = []
+    inside = None  # the annotation of the field the location has entered
+    union = False
+    for part in loc:
+        if isinstance(part, int):
+            path.append(part)
+            continue
+        if inside is not None:
+            members = _models_in(inside)
+            tags = {_tag(m): m for m in members if _tag(m) is not None}
+            if part in tags:
+                model, inside = tags[part], None
+                continue
+            if len(members) != 1:
+                union = union or not members
+                continue  # a union member's label, not a key
+            model, inside = members[0], None
+        path.append(part)
+        if part not in model.model_fields:
+            break
+        inside = model.model_fields[part].annotation
+    return model, path, union
+
+
+def _models_in(annotation) -> list[type[BaseModel]]:
+    """The pydantic models an annotation can hold (through list, Optional, Union, Annotated)."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return [annotation]
+    found: list[type[BaseModel]] = []
+    for arg in get_args(annotation):
+        found += _models_in(arg)
+    return found if get_origin(annotation) is not Literal else []
+
+
+def _tag(model: type[BaseModel]) -> str | None:
+    field = model.model_fields.get("type")
+    if field is None or get_origin(field.annotation) is not Literal:
+        return None
+    return get_args(field.annotation)[0]
+
+
+def _shown(value) -> str:
+    import json
+
+    try:
+        return json.dumps(value)
+    except (TypeError, ValueError):
+        return repr(value)
