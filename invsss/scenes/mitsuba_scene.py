@@ -1,0 +1,285 @@
+"""A :class:`~invsss.scenes.config.SceneConfig` as Mitsuba 3 scene dictionaries.
+
+One scene description gives several Mitsuba scenes that differ only in the skin
+object's material and the integrator (see :func:`scene_dict`):
+
+* ``"source"``: a Lambertian skin, ``path`` integrator;
+* ``"target"``: a rough dielectric boundary (Beckmann) around the homogeneous
+  medium, ``volpath``;
+* ``"specular"``: the same boundary around a black, purely absorbing interior, so
+  only the reflection off the boundary is left (subtracted from the target);
+* ``"geometry"``: the skin alone with an ``aov`` integrator (position, shading
+  normal, and an albedo of 1 whose pixel average is the coverage);
+* ``"visible"``: the same with the occluders present, skin albedo 1 and occluder
+  albedo 0, so the pixel average is the fraction of the pixel where skin is seen.
+
+Scene units are millimetres. Mitsuba is imported by :func:`import_mitsuba` only.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from ..validation import InvalidInputError
+from .config import SceneConfig
+
+__all__ = ["import_mitsuba", "scene_dict", "medium_dict", "load_mesh_ply", "SCENE_KINDS"]
+
+SCENE_KINDS = ("source", "target", "specular", "geometry", "visible")
+
+#: Absorption (1/mm) of the black interior of the specular-only scene: light that
+#: refracts in is gone within a few micrometres.
+_BLACK_INTERIOR_SIGMA_T = 1e4
+
+
+def import_mitsuba(variant: str):
+    """Import Mitsuba 3 and select ``variant``; one line naming the fix if it cannot be.
+
+    Raises
+    ------
+    InvalidInputError
+        Mitsuba is not installed (``pip install "invsss[scenes]"``), or the variant
+        is not available on this machine.
+    """
+    try:
+        import mitsuba as mi
+    except ImportError:
+        raise InvalidInputError(
+            'rendering scenes needs Mitsuba 3 and trimesh: pip install "invsss[scenes]"'
+        ) from None
+    try:
+        mi.set_variant(variant)
+    except (ImportError, AttributeError, RuntimeError) as err:
+        reason = " ".join(str(err).split())
+        raise InvalidInputError(
+            f"variant: Mitsuba variant {variant!r} is not available here ({reason}); "
+            'scalar_rgb needs nothing else'
+        ) from None
+    return mi
+
+
+def _colour(value) -> dict:
+    """A number or an RGB triple as a Mitsuba spectrum."""
+    return {"type": "rgb", "value": [float(v) for v in value] if isinstance(value, list) else float(value)}
+
+
+def _pose(mi, config: SceneConfig):
+    pose = config.object.pose
+    rx, ry, rz = pose.rotate
+    # Rotations about x, then y, then z (world axes), then the translation.
+    return (
+        mi.ScalarTransform4f()
+        .translate(pose.translate)
+        .rotate([0, 0, 1], rz)
+        .rotate([0, 1, 0], ry)
+        .rotate([1, 0, 0], rx)
+    )
+
+
+def load_mesh_ply(mesh_path: str, folder: str) -> str:
+    """Load a mesh with trimesh, check that it is closed, and save it as PLY in ``folder``.
+
+    Vertices that coincide are merged first (seams of texture coordinates or
+    normals split a closed surface into open pieces); the surface must then be
+    watertight with outward normals, since it is the boundary of the medium.
+
+    Raises
+    ------
+    InvalidInputError
+        Unreadable file, or a surface that does not enclose a volume.
+    """
+    try:
+        import trimesh
+    except ImportError:
+        raise InvalidInputError('loading meshes needs trimesh: pip install "invsss[scenes]"') from None
+    try:
+        mesh = trimesh.load(mesh_path, force="mesh", process=True)
+    except Exception as err:  # trimesh raises many types for bad files
+        raise InvalidInputError(f"object.mesh: cannot read {mesh_path} ({' '.join(str(err).split())})") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise InvalidInputError(f"object.mesh: {mesh_path} holds no triangles")
+    mesh.merge_vertices(merge_tex=True, merge_norm=True)
+    if not mesh.is_watertight:
+        raise InvalidInputError(
+            f"object.mesh: {mesh_path} is not closed; the medium needs a surface that "
+            "encloses a volume (close its holes first)"
+        )
+    if mesh.volume < 0:
+        mesh.invert()  # inward-facing triangles would swap the inside and outside of the medium
+    path = os.path.join(folder, "object.ply")
+    mesh.export(path, file_type="ply")
+    return path
+
+
+def medium_dict(sigma_s_prime, sigma_a) -> dict:
+    """A homogeneous, isotropic Mitsuba medium from ``sigma_s'`` and ``sigma_a`` (1/mm, 1 or 3 values)."""
+    s = np.asarray(sigma_s_prime, np.float64)
+    a = np.asarray(sigma_a, np.float64)
+    sigma_t = s + a
+    return {
+        "type": "homogeneous",
+        # With an isotropic phase function sigma_s is sigma_s' (no anisotropy to reduce).
+        "sigma_t": _colour(sigma_t.tolist() if sigma_t.size > 1 else float(sigma_t.item())),
+        "albedo": _colour((s / sigma_t).tolist() if sigma_t.size > 1 else float((s / sigma_t).item())),
+        "phase": {"type": "isotropic"},
+    }
+
+
+def _boundary(eta: float, roughness: float) -> dict:
+    return {"type": "roughdielectric", "distribution": "beckmann", "alpha": roughness,
+            "int_ior": eta, "ext_ior": 1.0}
+
+
+def _object_shape(mi, config: SceneConfig, mesh_ply: str | None) -> dict:
+    obj = config.object
+    pose = _pose(mi, config)
+    if obj.primitive == "sphere":
+        return {"type": "sphere", "to_world": pose.scale(obj.radius)}
+    if obj.primitive == "slab":
+        width, height, thickness = obj.size
+        # Mitsuba's cube spans [-1, 1]^3; the slab's front face is z = 0.
+        return {"type": "cube",
+                "to_world": pose.translate([0, 0, -thickness / 2]).scale([width / 2, height / 2, thickness / 2])}
+    return {"type": "ply", "filename": mesh_ply, "to_world": pose.scale(obj.mm_per_unit)}
+
+
+def _frame(mi, center, normal, along, half_u: float, half_v: float):
+    """The transform that maps Mitsuba's rectangle ([-1, 1]^2, normal +z) onto a placed rectangle."""
+    n = np.asarray(normal, np.float64)
+    n /= np.linalg.norm(n)
+    v = np.asarray(along, np.float64)
+    v -= n * (v @ n)
+    if np.linalg.norm(v) < 1e-9:
+        raise InvalidInputError("occluders: along must not be parallel to normal")
+    v /= np.linalg.norm(v)
+    u = np.cross(v, n)
+    matrix = np.eye(4)
+    matrix[:3, 0], matrix[:3, 1], matrix[:3, 2], matrix[:3, 3] = u * half_u, v * half_v, n, center
+    return mi.ScalarTransform4f(matrix.tolist()), u
+
+
+def _occluder_shapes(mi, config: SceneConfig) -> dict:
+    shapes = {}
+    black = {"type": "diffuse", "reflectance": _colour(0.0)}
+    for k, occ in enumerate(config.occluders):
+        period = occ.width / occ.count
+        _, across = _frame(mi, occ.center, occ.normal, occ.along, 1.0, 1.0)
+        for i in range(occ.count):
+            offset = (-occ.width / 2 + (i + 0.5) * period) * across
+            transform, _ = _frame(mi, np.asarray(occ.center) + offset, occ.normal, occ.along,
+                                  occ.duty * period / 2, occ.length / 2)
+            shapes[f"occluder_{k}_{i}"] = {"type": "rectangle", "to_world": transform, "bsdf": black}
+    return shapes
+
+
+def _some_up(direction) -> list[float]:
+    """An up vector not parallel to ``direction`` (for look_at frames where roll does not matter)."""
+    d = np.asarray(direction, np.float64)
+    d /= np.linalg.norm(d)
+    return [1.0, 0.0, 0.0] if abs(d[1]) > 0.9 else [0.0, 1.0, 0.0]
+
+
+def _lights(mi, config: SceneConfig) -> dict:
+    lights = {}
+    for k, light in enumerate(config.lights):
+        if light.type == "point":
+            lights[f"light_{k}"] = {"type": "point", "position": light.position,
+                                    "intensity": _colour(light.intensity)}
+        elif light.type == "spot":
+            axis = np.subtract(light.look_at, light.position)
+            lights[f"light_{k}"] = {
+                "type": "spot",
+                "to_world": mi.ScalarTransform4f().look_at(origin=light.position, target=light.look_at,
+                                                            up=_some_up(axis)),
+                "intensity": _colour(light.intensity),
+                "cutoff_angle": light.cutoff,
+                "beam_width": light.beam_width if light.beam_width is not None else 0.75 * light.cutoff,
+            }
+        elif light.type == "area":
+            axis = np.subtract(light.look_at, light.center)
+            lights[f"light_{k}"] = {
+                "type": "rectangle",
+                "to_world": mi.ScalarTransform4f()
+                .look_at(origin=light.center, target=light.look_at, up=_some_up(axis))
+                .scale([light.width / 2, light.height / 2, 1.0]),
+                "emitter": {"type": "area", "radiance": _colour(light.radiance)},
+            }
+        else:
+            lights[f"light_{k}"] = {"type": "directional", "direction": light.direction,
+                                    "irradiance": _colour(light.irradiance)}
+    return lights
+
+
+def _sensor(mi, config: SceneConfig, sampler: dict, pixel_format: str) -> dict:
+    camera = config.camera
+    return {
+        "type": "perspective",
+        "fov": camera.fov_deg,
+        "fov_axis": "x",
+        "near_clip": 1e-2,
+        "far_clip": 1e7,
+        "to_world": mi.ScalarTransform4f().look_at(origin=camera.position, target=camera.look_at, up=camera.up),
+        # A box filter: each pixel is the plain average over its own area, so coverage
+        # and depth are per-pixel quantities and nothing bleeds into neighbours.
+        "film": {"type": "hdrfilm", "width": camera.width, "height": camera.height,
+                 "rfilter": {"type": "box"}, "pixel_format": pixel_format},
+        "sampler": sampler,
+    }
+
+
+def scene_dict(mi, config: SceneConfig, kind: str, *, albedo=None, mesh_ply: str | None = None,
+               coefficients: dict | None = None, spp: int | None = None) -> dict:
+    """The Mitsuba scene dictionary of one pass (``kind`` in :data:`SCENE_KINDS`).
+
+    Parameters
+    ----------
+    mi : module
+        Mitsuba, variant already set (:func:`import_mitsuba`).
+    config : SceneConfig
+    kind : str
+        Which pass (see the module docstring).
+    albedo : float or list of float
+        The Lambertian albedo of ``"source"``.
+    mesh_ply : str
+        The object's mesh as PLY (:func:`load_mesh_ply`), for mesh objects.
+    coefficients : dict
+        :meth:`~invsss.scenes.config.Medium.coefficients`, for ``"target"`` and ``"specular"``.
+    spp : int
+        Samples per pixel (the renders override it per call).
+    """
+    if kind not in SCENE_KINDS:
+        raise ValueError(f"kind {kind!r}: expected one of {SCENE_KINDS}")
+    shape = _object_shape(mi, config, mesh_ply)
+    geometry = kind in ("geometry", "visible")
+    if geometry:
+        shape["bsdf"] = {"type": "diffuse", "reflectance": _colour(1.0)}
+        integrator = {"type": "aov", "aovs": "pos:position,nn:sh_normal,cov:albedo"}
+        # Stratified samples give the pixel averages of coverage and depth with little noise.
+        sampler = {"type": "stratified", "sample_count": spp or config.geometry_spp}
+    else:
+        sampler = {"type": "independent", "sample_count": spp or config.spp}
+        if kind == "source":
+            shape["bsdf"] = {"type": "diffuse", "reflectance": _colour(albedo)}
+            integrator = {"type": "path", "max_depth": config.max_depth}
+        else:
+            shape["bsdf"] = _boundary(coefficients["eta"], config.medium.roughness)
+            if kind == "target":
+                shape["interior"] = medium_dict(coefficients["sigma_s_prime"], coefficients["sigma_a"])
+            else:
+                shape["interior"] = {"type": "homogeneous", "sigma_t": _BLACK_INTERIOR_SIGMA_T,
+                                     "albedo": _colour(0.0)}
+            integrator = {"type": "volpath", "max_depth": config.max_depth}
+    scene = {
+        "type": "scene",
+        "integrator": integrator,
+        "sensor": _sensor(mi, config, sampler, "rgb"),
+        "object": shape,
+    }
+    if kind != "geometry":
+        scene.update(_occluder_shapes(mi, config))
+    if not geometry:
+        scene.update(_lights(mi, config))
+    return scene
+

@@ -1,0 +1,258 @@
+"""Render a scene description into one source/target pair folder.
+
+:func:`render_scene` runs the passes of :mod:`invsss.scenes.mitsuba_scene` and
+turns them into images; :func:`write_scene` (and ``invsss scene``) writes them as
+one unit through :class:`invsss.result_dir.ResultDir`:
+
+==============  ==========================================================
+``source.exr``  Lambertian render, albedo from :mod:`~invsss.scenes.calibration`
+``target.exr``  path-traced medium, boundary reflection subtracted; the mean of
+                two independently seeded halves
+``depth.exr``   eye-space z in mm (distance along the optical axis), the
+                average over the pixel's skin samples; 0 where no skin is seen
+``mask.png``    255 where skin covers at least half the pixel, else 0
+``normal.exr``  unit shading normals in camera space (x right, y up, z towards
+                the camera); 0 where no skin is seen
+``coverage.exr`` fraction of the pixel where skin is seen (occluders excluded)
+``scene.json``  the resolved scene, medium, calibration, seeds, spp, Mitsuba
+                version, render times and the noise estimate (:mod:`~invsss.scenes.noise`)
+==============  ==========================================================
+
+Images are one channel when the medium and every light are grey (a NIR-like
+pair), else RGB.
+
+Depth is taken from Mitsuba's ``position`` AOV, not its ``depth`` AOV: the
+latter is the ray distance from the near-clip-shifted origin, not eye z.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import platform
+import tempfile
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from .. import __version__
+from ..io import write_image, write_text_atomic
+from ..profiles import jensen_dipole_total
+from ..result_dir import ResultDir
+from .calibration import CALIBRATION_PIXELS, CALIBRATION_SPP, slab_albedo
+from .config import SceneConfig
+from .mitsuba_scene import import_mitsuba, load_mesh_ply, scene_dict
+from .noise import half_render_noise
+
+__all__ = ["SCENE_FILES", "SceneRender", "render_scene", "scene_writers", "write_scene"]
+
+#: The files of a scene folder, in the order they are written.
+SCENE_FILES = ("source.exr", "target.exr", "depth.exr", "mask.png", "normal.exr", "coverage.exr", "scene.json")
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneRender:
+    """A rendered pair and its geometry (arrays as written) plus the ``scene.json`` content."""
+
+    source: np.ndarray  # (H, W, C) float32
+    target: np.ndarray  # (H, W, C) float32
+    depth: np.ndarray  # (H, W) float32, mm, 0 off the skin
+    mask: np.ndarray  # (H, W) float32 in {0, 1}
+    normal: np.ndarray  # (H, W, 3) float32
+    coverage: np.ndarray  # (H, W) float32 in [0, 1]
+    info: dict
+    target_halves: tuple[np.ndarray, np.ndarray]
+
+
+def _camera_frame(config: SceneConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Camera origin and its right, up and forward unit vectors (as Mitsuba's look_at builds them)."""
+    origin = np.asarray(config.camera.position, np.float64)
+    forward = np.asarray(config.camera.look_at, np.float64) - origin
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, np.asarray(config.camera.up, np.float64))
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    return origin, right, up, forward
+
+
+def _channels(image, count: int) -> np.ndarray:
+    return np.asarray(image, np.float64)[..., :count]
+
+
+def _aov(bitmap_channels: dict, name: str) -> np.ndarray:
+    return np.asarray(bitmap_channels[name], np.float64)
+
+
+def _render_aovs(mi, scene: dict) -> dict:
+    loaded = mi.load_dict(scene)
+    mi.render(loaded)
+    bitmap = loaded.sensors()[0].film().bitmap()
+    return {name: np.asarray(channel, np.float64) for name, channel in bitmap.split()}
+
+
+def _is_grey(config: SceneConfig, coefficients: dict) -> bool:
+    colours = []
+    for light in config.lights:
+        colours.append(getattr(light, "intensity", None) or getattr(light, "radiance", None)
+                       or getattr(light, "irradiance", None))
+    return len(coefficients["sigma_s_prime"]) == 1 and not any(isinstance(c, list) for c in colours)
+
+
+def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = None) -> SceneRender:
+    """Render every pass of ``config`` and return the pair, its geometry and ``scene.json``.
+
+    Parameters
+    ----------
+    config : SceneConfig
+        From :func:`~invsss.scenes.config.load_config` (a mesh path must be absolute
+        or relative to the working directory).
+    progress : callable, optional
+        Called with a short line before each pass.
+
+    Raises
+    ------
+    InvalidInputError
+        Mitsuba or trimesh missing, an unavailable variant, an unreadable or open mesh,
+        or a camera that sees no skin.
+    """
+    say = progress or (lambda text: None)
+    started = time.perf_counter()
+    mi = import_mitsuba(config.variant)
+    coefficients = config.medium.coefficients()
+    channels = 1 if _is_grey(config, coefficients) else 3
+    timings: dict[str, float] = {}
+
+    def timed(name: str, work):
+        say(f"scene: {name}")
+        t0 = time.perf_counter()
+        result = work()
+        timings[name] = round(time.perf_counter() - t0, 3)
+        return result
+
+    half_spp = config.spp // 2
+    seeds = {"source": 2 * config.seed, "target_halves": [2 * config.seed, 2 * config.seed + 1],
+             "specular_halves": [2 * config.seed, 2 * config.seed + 1], "calibration": 0}
+    with tempfile.TemporaryDirectory(prefix="invsss-scene-") as folder:
+        mesh_ply = load_mesh_ply(config.object.mesh, folder) if config.object.mesh else None
+
+        def build(kind: str, **extra):
+            return scene_dict(mi, config, kind, mesh_ply=mesh_ply, coefficients=coefficients, **extra)
+
+        geometry = timed("geometry", lambda: _render_aovs(mi, build("geometry")))
+        visible = timed("visibility", lambda: _render_aovs(mi, build("visible")))
+        coverage = np.clip(visible["cov"][..., 0], 0.0, 1.0)
+        mask = (coverage >= 0.5).astype(np.float32)
+        if not mask.any():
+            from ..validation import InvalidInputError
+
+            raise InvalidInputError("camera: sees no skin (no pixel is at least half covered by the object)")
+        depth, normal = _depth_and_normal(config, geometry)
+
+        albedo, albedo_error = timed("calibration", lambda: slab_albedo(
+            mi, coefficients["sigma_s_prime"], coefficients["sigma_a"], coefficients["eta"],
+            config.medium.roughness, max_depth=config.max_depth, seed=seeds["calibration"]))
+        albedo_list = albedo.tolist()
+        source_scene = mi.load_dict(build("source", albedo=albedo_list if albedo.size > 1 else albedo_list[0]))
+        source = timed("source", lambda: _channels(mi.render(source_scene, spp=config.spp, seed=seeds["source"]),
+                                                   channels))
+        target_scene = mi.load_dict(build("target"))
+        specular_scene = mi.load_dict(build("specular"))
+        halves = []
+        for k in range(2):
+            full = timed(f"target half {k + 1}", lambda: _channels(
+                mi.render(target_scene, spp=half_spp, seed=seeds["target_halves"][k]), channels))
+            mirror = timed(f"specular half {k + 1}", lambda: _channels(
+                mi.render(specular_scene, spp=half_spp, seed=seeds["specular_halves"][k]), channels))
+            halves.append(full - mirror)
+    target = 0.5 * (halves[0] + halves[1])
+    noise = half_render_noise(halves[0], halves[1], mask)
+    dipole = np.asarray(jensen_dipole_total(np.asarray(coefficients["sigma_s_prime"]),
+                                            np.asarray(coefficients["sigma_a"]), coefficients["eta"]))
+    info = {
+        "invsss_version": __version__,
+        "mitsuba_version": mi.__version__,
+        "variant": config.variant,
+        "platform": platform.platform(),
+        "config": config.model_dump(),
+        "focal_px": config.camera.focal_length_px,
+        "channels": channels,
+        "medium": {
+            **coefficients,
+            "roughness": config.medium.roughness,
+            "boundary": "roughdielectric, Beckmann",
+            "phase": "isotropic (sigma_s = sigma_s')",
+        },
+        "source_albedo": {
+            "value": albedo_list,
+            "standard_error": albedo_error.tolist(),
+            "method": "path-traced slab of the medium under a uniform sky, boundary reflection "
+            "subtracted (invsss.scenes.calibration)",
+            "spp": CALIBRATION_SPP,
+            "pixels": CALIBRATION_PIXELS,
+            "dipole_total": np.atleast_1d(dipole).tolist(),
+        },
+        "spp": {"source": config.spp, "target": config.spp, "target_per_half": half_spp,
+                "specular_per_half": half_spp, "geometry": config.geometry_spp},
+        "seeds": seeds,
+        "max_depth": config.max_depth,
+        "render_seconds": {**timings, "total": round(time.perf_counter() - started, 3)},
+        "noise": noise,
+        "depth_background": 0.0,
+        "normal_frame": "camera: x right, y up, z towards the camera",
+        "skin_pixels": int(mask.sum()),
+    }
+    return SceneRender(
+        source=source.astype(np.float32),
+        target=target.astype(np.float32),
+        depth=depth.astype(np.float32),
+        mask=mask,
+        normal=normal.astype(np.float32),
+        coverage=coverage.astype(np.float32),
+        info=info,
+        target_halves=(halves[0].astype(np.float32), halves[1].astype(np.float32)),
+    )
+
+
+def _depth_and_normal(config: SceneConfig, aovs: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Eye-space z (mm) and camera-space normals from the skin-only AOV pass.
+
+    AOVs of rays that miss are 0 and the box filter averages over all samples, so
+    the average over the skin samples is the pixel value divided by the coverage.
+    """
+    coverage = aovs["cov"][..., 0]
+    seen = coverage > 1e-6
+    safe = np.where(seen, coverage, 1.0)[..., None]
+    position = aovs["pos"] / safe
+    origin, right, up, forward = _camera_frame(config)
+    depth = np.where(seen, (position - origin) @ forward, 0.0)
+    world_normal = aovs["nn"] / safe
+    normal = np.stack([world_normal @ right, world_normal @ up, -(world_normal @ forward)], axis=-1)
+    length = np.linalg.norm(normal, axis=-1, keepdims=True)
+    normal = np.where(seen[..., None], normal / np.where(length > 0, length, 1.0), 0.0)
+    return depth, normal
+
+
+def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
+    """``{file name: writer(path)}`` for :meth:`invsss.result_dir.ResultDir.commit`."""
+    text = json.dumps(result.info, indent=2) + "\n"
+    return {
+        "source.exr": lambda path: write_image(path, result.source),
+        "target.exr": lambda path: write_image(path, result.target),
+        "depth.exr": lambda path: write_image(path, result.depth),
+        "mask.png": lambda path: write_image(path, result.mask),
+        "normal.exr": lambda path: write_image(path, result.normal),
+        "coverage.exr": lambda path: write_image(path, result.coverage),
+        "scene.json": lambda path: write_text_atomic(path, text),
+    }
+
+
+def write_scene(result: SceneRender, out, *, overwrite: bool = False) -> list[str]:
+    """Write a rendered scene into the folder ``out`` as one result (all files or none).
+
+    Returns the paths written. A folder that already holds a result is refused
+    unless ``overwrite`` (see :class:`invsss.result_dir.ResultDir`).
+    """
+    with ResultDir(os.fspath(out), overwrite=overwrite, names=SCENE_FILES, option="overwrite=True") as folder:
+        return folder.commit(scene_writers(result), {"command": "scene"})
