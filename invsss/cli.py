@@ -323,7 +323,7 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
     # into a finished result or a busy directory is refused at once.
     with ResultDir(args.out, overwrite=args.overwrite, names=names) as out:
         pairs = [
-            load_pair(s, t, d, m, depth_scale=args.depth_scale)
+            load_pair(s, t, d, m, depth_scale=args.depth_scale, linear_codes=args.linear_codes)
             for s, t, d, m in zip(args.source, args.target, args.depth, args.mask)
         ]
         options = dict(

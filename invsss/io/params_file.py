@@ -27,6 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from ..params import PARAM_NAMES, SSSParams
 from ..passes import TAP_WEIGHTS
+from ..result_dir import MANIFEST_NAME, result_state
 from ..screen_space import MODELS
 from ..validation import InvalidInputError, number_array
 from .images import _one_line, write_text_atomic
@@ -44,10 +45,6 @@ __all__ = [
 
 #: The version :func:`write_params` writes and the newest :func:`read_params` reads.
 SCHEMA_VERSION = 1
-
-#: The file a result directory keeps beside params.json; its ``state`` says
-#: whether the run that wrote the directory finished.
-MANIFEST_NAME = "invsss-manifest.json"
 
 #: The keys every params JSON file must have (the fields of :class:`SSSParams`).
 PARAMS_KEYS = PARAM_NAMES
@@ -255,14 +252,8 @@ def _validated(content: Mapping, name: str) -> ParamsFile:
 
 def _check_result_complete(path: str) -> None:
     """Refuse a params file whose result directory says its run did not finish."""
-    manifest = os.path.join(os.path.dirname(os.path.abspath(path)), MANIFEST_NAME)
-    if not os.path.exists(manifest):
-        return  # a hand-written file, or a result written before manifests
-    try:
-        state = json.loads(Path(manifest).read_text(encoding="utf-8")).get("state")
-    except (OSError, UnicodeDecodeError, ValueError, AttributeError):
-        state = None  # an unreadable manifest vouches for nothing
-    if state != "complete":
+    # A hand-written file, or a result written before manifests, has no state to check.
+    if result_state(os.path.dirname(os.path.abspath(path))) == "incomplete":
         raise InvalidInputError(
             f"{path}: belongs to an incomplete result (the run that wrote it was "
             "interrupted); re-run it"
