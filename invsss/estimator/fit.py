@@ -234,6 +234,11 @@ class _Steps:
         return self.stop is not None and bool(self.stop())
 
 
+def _entry(name, index) -> str:
+    """``"weights[2]"`` or ``"weights[2,0]"`` for an entry of an array parameter."""
+    return f"{name}[{','.join(str(int(i)) for i in index)}]"
+
+
 def _check_callback(name, value):
     if value is not None and not callable(value):
         raise InvalidInputError(f"{name}: expected a callable or None, got {type(value).__name__}")
