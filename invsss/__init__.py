@@ -37,6 +37,7 @@ from .screen_space import (
     separable_kernel,
     sog_layers,
 )
+from .models import MODEL_NAMES, ScreenSpaceModel, get_model
 from .stretch import depth_slopes, stretch_factors
 from .validation import InputNotice, InvalidInputError
 
@@ -57,14 +58,21 @@ _LAZY = {
         ),
         ".io",
     ),
-    **dict.fromkeys(("FitResult", "fit_pair", "fit_pairs"), ".estimator"),
+    **dict.fromkeys(
+        ("FitInterrupted", "FitOptions", "FitResult", "build_problem", "fit_pair", "fit_pairs"),
+        ".estimator",
+    ),
+    **dict.fromkeys(("ResultDir", "result_state"), ".result_dir"),
     **dict.fromkeys(("export_params", "shader_constants", "to_hlsl", "to_json"), ".export"),
     **dict.fromkeys(("ProfileFit", "fit_sum_of_gaussians"), ".profile_fit"),
     **dict.fromkeys(("MeasuredProfile", "column_average_gain", "measure_profile"), ".measure"),
 }
 
 # Submodules reachable as attributes (``invsss.io.PARAMS_KEYS``) without an import.
-_SUBMODULES = ("cli", "estimator", "export", "io", "measure", "profile_fit", "report", "torch")
+_SUBMODULES = (
+    "cli", "estimator", "export", "interrupts", "io", "measure", "models", "profile_fit",
+    "report", "result_dir", "torch",
+)
 
 __all__ = [
     name
