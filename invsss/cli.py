@@ -452,6 +452,59 @@ def _run_export(args: argparse.Namespace, stop: StopSignals) -> int:
     return 0
 
 
+# ---------------------------------------------------------------- scene (scenes helper)
+
+
+def _add_scene_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "scene",
+        help="path-trace a source/target pair from a scene description (needs invsss[scenes])",
+        description="Render CONFIG (a TOML scene description: object, camera, lights, "
+        "occluders, medium) with Mitsuba 3 into DIR: source.exr (Lambertian), target.exr "
+        "(scattering medium, reflection removed), depth.exr (eye z, mm), mask.png, "
+        "normal.exr, coverage.exr and scene.json (everything needed to reproduce it, and "
+        "the target's noise estimate).",
+    )
+    parser.add_argument("config", help="scene description (.toml)")
+    parser.add_argument("--out", required=True, metavar="DIR",
+                        help="output directory (created if missing); a directory that already "
+                        "holds a result is refused unless --overwrite is given")
+    parser.add_argument("--overwrite", action="store_true", help="replace the result already in DIR")
+    parser.add_argument("--width", type=int, default=None, metavar="PX",
+                        help="image width (default: the config's; alone, keeps the aspect ratio)")
+    parser.add_argument("--height", type=int, default=None, metavar="PX",
+                        help="image height (default: the config's; alone, keeps the aspect ratio)")
+    parser.add_argument("--spp", type=int, default=None, metavar="N",
+                        help="samples per pixel, even (default: the config's)")
+    parser.add_argument("--seed", type=int, default=None, metavar="N", help="seed (default: the config's)")
+    parser.set_defaults(func=_run_scene)
+
+
+def _run_scene(args: argparse.Namespace, stop: StopSignals) -> int:
+    # Imported here: the scene code needs Mitsuba, which the other commands do not.
+    from .scenes import load_config
+    from .scenes.render import SCENE_FILES, render_scene, scene_writers
+
+    config = load_config(args.config).with_overrides(
+        width=args.width, height=args.height, spp=args.spp, seed=args.seed,
+        name=f"{args.config} with --width/--height/--spp/--seed",
+    )
+    with ResultDir(args.out, overwrite=args.overwrite, names=SCENE_FILES) as out:
+        result = render_scene(config, progress=lambda text: print(text, file=sys.stderr, flush=True))
+        try:
+            written = out.commit(scene_writers(result), {"command": "scene"})
+        except ResultWriteError as err:
+            print(f"invsss: error: {err}", file=sys.stderr)
+            return 1
+    noise = result.info["noise"]
+    print(
+        f"scene: {config.camera.width}x{config.camera.height}, {config.spp} spp, "
+        f"{result.info['render_seconds']['total']:.1f} s; target noise ceiling "
+        f"{noise['noise_ceiling_db']:.1f} dB; wrote {', '.join(written)}"
+    )
+    return 0
+
+
 # ------------------------------------------------------------------------ main
 
 
@@ -466,6 +519,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_render_parser(subparsers)
     _add_fit_parser(subparsers)
     _add_export_parser(subparsers)
+    _add_scene_parser(subparsers)
     return parser
 
 

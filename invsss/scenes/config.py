@@ -279,11 +279,13 @@ class SceneConfig(_Strict):
         return spp
 
     def with_overrides(self, *, width: int | None = None, height: int | None = None,
-                       spp: int | None = None, seed: int | None = None) -> "SceneConfig":
+                       spp: int | None = None, seed: int | None = None,
+                       name: str = "overrides") -> "SceneConfig":
         """A copy with another resolution, spp or seed, checked like the file.
 
         Giving only one of ``width``, ``height`` keeps the aspect ratio. The view
         stays the same: a camera given by ``focal_px`` has it scaled with the width.
+        ``name`` says where the overrides came from, in messages.
 
         Examples
         --------
@@ -312,7 +314,7 @@ class SceneConfig(_Strict):
             content["spp"] = spp
         if seed is not None:
             content["seed"] = seed
-        return parse_config(content, "command line")
+        return parse_config(content, name)
 
 
 # ------------------------------------------------------------------ reading
