@@ -505,6 +505,72 @@ def _run_scene(args: argparse.Namespace, stop: StopSignals) -> int:
     return 0
 
 
+# ------------------------------------------------------------------ sweep (experiments helper)
+
+
+def _add_sweep_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "sweep",
+        help="run the trials of an experiment file (batch fits, render matrices, sweeps)",
+        description="Expand EXPERIMENT.toml into trials and run those not yet done into DIR: "
+        "DIR/results.sqlite (one row per trial) and DIR/trials/<id>/ (its files). Running the "
+        "same command again resumes after a crash or Ctrl-C. Then see `invsss sweep-report DIR`.",
+    )
+    parser.add_argument("experiment", metavar="EXPERIMENT.toml", help="experiment file")
+    parser.add_argument("--out", required=True, metavar="DIR", help="results folder (created if missing)")
+    parser.add_argument("--executor", choices=("local", "dask"), default="local",
+                        help="local: this process or a process pool (default); dask: a Dask cluster")
+    parser.add_argument("--jobs", type=int, default=None, metavar="N",
+                        help="local worker processes (default 1: this process), or the workers of "
+                        "the Dask LocalCluster started without --scheduler (default 2)")
+    parser.add_argument("--scheduler", default=None, metavar="ADDR",
+                        help="address of a running Dask scheduler (tcp://host:8786)")
+    parser.set_defaults(func=_run_sweep)
+    # `invsss sweep-report` is the sweep's other half: registered with it.
+    _add_sweep_report_parser(subparsers)
+
+
+def _run_sweep(args: argparse.Namespace, stop: StopSignals) -> int:
+    from .experiments import load, run
+
+    experiment = load(args.experiment)
+
+    def stopping(signum):
+        print(f"invsss: {signal.Signals(signum).name}: no new trials will start; stopping after the "
+              "running ones (send it again to quit now)", file=sys.stderr, flush=True)
+
+    with stop.deferred(stopping):
+        summary = run(experiment, args.out, executor=args.executor, jobs=args.jobs,
+                      scheduler=args.scheduler, stop=stop)
+    print(f"sweep: {summary.done} done, {summary.failed} failed, {summary.remaining} not run "
+          f"({summary.ran} run now, {summary.seconds:.1f}s); report: invsss sweep-report {args.out}")
+    if summary.interrupted:
+        return stop.exit_status or 130
+    return 0
+
+
+def _add_sweep_report_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "sweep-report",
+        help="tabulate and plot the results of a sweep",
+        description="Print a table of the trials in DIR and write DIR/report/results.csv and "
+        "PNG plots (metrics and fitted parameters against each axis; for a render sweep a "
+        "contact sheet of the renders).",
+    )
+    parser.add_argument("out", metavar="DIR", help="a sweep's results folder")
+    parser.add_argument("--no-plots", action="store_true", help="only the table and the CSV file")
+    parser.set_defaults(func=_run_sweep_report)
+
+
+def _run_sweep_report(args: argparse.Namespace, stop: StopSignals) -> int:
+    from .experiments.report import write_report
+
+    table, written = write_report(args.out, plots=not args.no_plots)
+    print(table)
+    print(f"wrote {', '.join(written)}")
+    return 0
+
+
 # ------------------------------------------------------------------------ main
 
 
@@ -519,6 +585,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_render_parser(subparsers)
     _add_fit_parser(subparsers)
     _add_export_parser(subparsers)
+    _add_sweep_parser(subparsers)
     _add_scene_parser(subparsers)
     return parser
 

@@ -1,0 +1,84 @@
+"""Reading a sweep's results back: :func:`results`.
+
+One flat row per trial, the shape a table or a plot wants: ``id``,
+``status``, one column per varied key (``sss_level``, ``fix.maxdd``, ``pair``),
+the metrics (``loss``, ``psnr``, ``ssim``, and for fits ``sigma``,
+``converged``, ``iterations``), the parameters (``param.sss_level``,
+``param.weights``...), their standard errors (``stderr.sss_level``...),
+``seconds`` (the trial's total time), ``compute_seconds`` (the fit or render
+alone), ``host``, ``attempts``, ``warnings`` and ``error``. A pandas
+``DataFrame`` when pandas is installed (``pip install 'invsss[report]'``),
+else a list of dicts with the same keys.
+"""
+
+from __future__ import annotations
+
+import os
+
+from ..params import PARAM_NAMES
+from ..validation import InvalidInputError
+from .store import DATABASE_NAME, ResultsStore
+
+__all__ = ["results", "flat_rows"]
+
+
+def flat_rows(out) -> tuple[list[dict], dict]:
+    """The trials of the sweep in ``out`` as flat dicts, and the sweep's metadata."""
+    out = os.fspath(out)
+    if not os.path.isfile(os.path.join(out, DATABASE_NAME)):
+        raise InvalidInputError(f"{out}: no sweep results here (no {DATABASE_NAME}); run invsss sweep first")
+    with ResultsStore(out, readonly=True) as store:
+        stored, meta = store.rows(), store.meta()
+    # The file's order (grid keys first, then zip, sample, pair), then any key of older trials.
+    axes = list(dict.fromkeys([*meta.get("axes", []), "pair", *(k for row in stored for k in row["axes"])]))
+    axes = [key for key in axes if any(key in row["axes"] for row in stored)]
+    rows = []
+    for row in stored:
+        flat = {"id": row["id"], "status": row["status"]}
+        flat.update({key: row["axes"].get(key) for key in axes})
+        metrics = row["metrics"] or {}
+        for key in ("loss", "psnr", "ssim", "sigma", "converged", "iterations"):
+            if key in metrics or row["task"] != "render":
+                flat[key] = metrics.get(key)
+        for name in PARAM_NAMES:
+            flat[f"param.{name}"] = (row["params"] or {}).get(name)
+        if row["task"] != "render":
+            for name in PARAM_NAMES:
+                flat[f"stderr.{name}"] = (row["stderr"] or {}).get(name)
+        timings = row["timings"] or {}
+        flat["seconds"] = timings.get("total")
+        flat["compute_seconds"] = timings.get("compute")
+        flat["host"] = row["host"]
+        flat["attempts"] = row["attempts"]
+        flat["warnings"] = row["warnings"] or []
+        flat["error"] = row["error"]
+        rows.append(flat)
+    return rows, meta
+
+
+def results(out, *, frame: bool | None = None):
+    """The results of the sweep in ``out``, one row per trial (see the module docstring).
+
+    Parameters
+    ----------
+    out : str or os.PathLike
+        A sweep's output folder.
+    frame : bool, optional
+        True: a pandas DataFrame (pandas must be installed); False: a list of
+        dicts; None (default): a DataFrame if pandas is installed.
+
+    Raises
+    ------
+    InvalidInputError
+        ``out`` holds no sweep, or ``frame=True`` without pandas.
+    """
+    rows, _ = flat_rows(out)
+    if frame is False:
+        return rows
+    try:
+        import pandas
+    except ImportError:
+        if frame:
+            raise InvalidInputError("results(frame=True): pandas is not installed; pip install 'invsss[report]'") from None
+        return rows
+    return pandas.DataFrame(rows)

@@ -1,0 +1,110 @@
+"""One trial from start to finish, in whichever process runs it: :func:`execute`.
+
+The runner reads the pair(s), runs the task (:mod:`.tasks`), refuses a result
+whose loss is not finite, and commits the trial's files to ``OUT/trials/<id>/``
+through :class:`invsss.result_dir.ResultDir` (all files or none). Only then
+does it return ``status: "done"``; the sweep marks the trial done in the
+database after that, so a done row always has its files. Any exception becomes
+``status: "failed"`` with a one-line message: one bad trial never ends a sweep.
+
+:func:`execute` takes and returns plain dicts, so it can be sent to a process
+pool or a Dask worker as it is. Each worker process keeps JAX's compiled
+functions between calls: trials of the same shapes and options compile once
+per worker.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import socket
+import time
+import warnings
+
+from ..result_dir import ResultDir
+from ..validation import InvalidInputError
+from .tasks import TrialInterrupted, run_task
+from .trials import Trial
+
+__all__ = ["execute", "trial_folder"]
+
+
+def trial_folder(out: str, trial_id: str) -> str:
+    """Where a trial's files go: ``OUT/trials/<id>``."""
+    return os.path.join(os.fspath(out), "trials", trial_id)
+
+
+def _one_line(err: BaseException) -> str:
+    text = " ".join(str(err).split())
+    if isinstance(err, InvalidInputError):
+        return text or type(err).__name__
+    return f"{type(err).__name__}: {text}" if text else type(err).__name__
+
+
+def _load(trial: Trial) -> list:
+    from ..io import load_pair
+
+    return [
+        load_pair(*(os.path.join(trial.root, pair[role]) for role in ("source", "target", "depth", "mask")),
+                  depth_scale=trial.depth_scale, linear_codes=trial.linear_codes)
+        for pair in trial.pairs
+    ]
+
+
+def execute(trial: dict, out: str, stop=None) -> dict:
+    """Run one trial (a :meth:`Trial.to_dict`) and commit its files under ``out``.
+
+    Parameters
+    ----------
+    trial : dict
+    out : str
+        The sweep's output folder.
+    stop : callable, optional
+        Polled by a fit between solver steps; True abandons the trial
+        (``status: "interrupted"``, nothing written).
+
+    Returns
+    -------
+    dict
+        ``id``, ``status`` (``"done"``, ``"failed"`` or ``"interrupted"``),
+        ``params``, ``stderr``, ``metrics``, ``warnings``, ``error``,
+        ``timings`` (seconds: ``load``, ``compute`` (the fit or render),
+        ``write``, ``total``), ``host``, ``pid``, ``started``, ``finished``
+        (Unix times).
+    """
+    started = time.time()
+    outcome = {
+        "id": trial["id"], "status": "failed", "params": None, "stderr": None, "metrics": None,
+        "warnings": [], "error": None, "timings": {}, "host": socket.gethostname(),
+        "pid": os.getpid(), "started": started,
+    }
+    clock = time.perf_counter()
+    timings = outcome["timings"]
+    try:
+        spec = Trial.from_dict(trial)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            pairs = _load(spec)
+            timings["load"] = time.perf_counter() - clock
+            clock = time.perf_counter()
+            result = run_task(spec.task, spec.options, pairs, stop)
+            timings["compute"] = time.perf_counter() - clock
+        notes = [" ".join(str(w.message).split()) for w in caught]
+        outcome["warnings"] = list(dict.fromkeys(notes + result.warnings))
+        loss = result.metrics.get("loss")
+        if loss is None or not math.isfinite(loss):
+            raise FloatingPointError(f"the loss is {loss if loss is not None else 'NaN'}; nothing written")
+        clock = time.perf_counter()
+        folder = trial_folder(out, spec.id)
+        with ResultDir(folder, overwrite=True, names=list(result.files),
+                       description=f"invsss sweep trial {spec.id}") as directory:
+            directory.commit(result.files, info={"trial": spec.id, "task": spec.task})
+        timings["write"] = time.perf_counter() - clock
+        outcome.update(status="done", params=result.params, stderr=result.stderr, metrics=result.metrics)
+    except TrialInterrupted:
+        outcome.update(status="interrupted", error="interrupted")
+    except Exception as err:  # noqa: BLE001 -- any failure is the trial's, recorded, not raised
+        outcome["error"] = _one_line(err)
+    outcome["finished"] = time.time()
+    timings["total"] = outcome["finished"] - started
+    return outcome

@@ -1,0 +1,226 @@
+"""The experiment file's schema: strict pydantic models and one-line errors.
+
+An experiment file is TOML with these top-level keys (only ``task`` and ``data``
+are required)::
+
+    name = "render-matrix"            # a label for reports (default: the file name)
+    description = "..."
+    task = "render"                   # "fit", "fit-joint" or "render"
+
+    [data]                            # the pairs
+    pairs = ["../data_synthetic/*/"]  # folders or globs, relative to this file
+    depth_scale = 1.0                 # multiplies every depth map
+    linear_codes = false              # 8-bit images hold linear codes
+    [[data.files]]                    # and/or explicit file sets
+    name = "card"
+    source = "a.exr"; target = "b.exr"; depth = "d.exr"; mask = "m.png"
+
+    [base]                            # the task's options, shared by every trial
+    n_starts = 1
+
+    [grid]                            # Cartesian product of value lists
+    profile = ["thesis-nir", "deon-skin"]
+    fix.maxdd = [0.05, 0.5]           # dotted keys reach into a table option
+
+    [zip]                             # value lists walked in step
+    solver = ["lm", "bfgs"]
+    max_steps = [50, 200]
+
+    [sample]                          # quasi-random or random points in boxes
+    method = "sobol"                  # or "random"
+    n = 8
+    seed = 0
+    log = ["sss_level"]               # keys sampled uniformly in log space
+    ranges.sss_level = [300.0, 1200.0]
+
+Every table refuses keys it does not know; :func:`check_keys` names the
+unknown key and the closest known one, on one line, before pydantic sees the
+content (pydantic's own message for an extra key does not say what was meant).
+"""
+
+from __future__ import annotations
+
+import difflib
+from typing import Literal, Optional, Union
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from ..validation import InvalidInputError
+
+__all__ = [
+    "TASKS",
+    "FileSet",
+    "DataSpec",
+    "SampleSpec",
+    "ExperimentSpec",
+    "FitTaskOptions",
+    "RenderTaskOptions",
+    "FIX_NAMES",
+    "check_keys",
+    "first_error",
+    "nearest",
+]
+
+#: The tasks an experiment can run.
+TASKS = ("fit", "fit-joint", "render")
+
+#: Parameters ``fix`` accepts (:func:`invsss.fit_pair`).
+FIX_NAMES = ("sss_level", "correction", "maxdd", "weights", "variances")
+
+_STRICT = ConfigDict(extra="forbid", strict=True)
+
+_Numbers = list[float]
+# A profile: a name (thesis-nir, deon-skin, jensen-skin1), a JSON file, or numbers.
+_Profile = Union[str, dict[str, Union[_Numbers, list[_Numbers]]]]
+# Tap weights: a set's name or 7 numbers.
+_Taps = Optional[Union[str, _Numbers]]
+
+
+class FileSet(BaseModel):
+    """One pair given file by file (``[[data.files]]``)."""
+
+    model_config = _STRICT
+    name: Optional[str] = None
+    source: str
+    target: str
+    depth: str
+    mask: str
+
+
+class DataSpec(BaseModel):
+    """The ``[data]`` table: pair folders or globs, and/or explicit file sets."""
+
+    model_config = _STRICT
+    pairs: list[str] = []
+    files: list[FileSet] = []
+    depth_scale: float = Field(1.0, gt=0)
+    linear_codes: bool = False
+
+
+class SampleSpec(BaseModel):
+    """The ``[sample]`` table: ``n`` points in the box given by ``ranges``."""
+
+    model_config = _STRICT
+    method: Literal["sobol", "random"] = "sobol"
+    n: int = Field(ge=1)
+    seed: int = 0
+    ranges: dict = {}
+    log: list[str] = []
+
+
+class ExperimentSpec(BaseModel):
+    """The whole file; ``base``, ``grid``, ``zip`` are checked against the task's options."""
+
+    model_config = _STRICT
+    name: Optional[str] = None
+    description: str = ""
+    task: Literal["fit", "fit-joint", "render"]
+    data: DataSpec
+    base: dict = {}
+    grid: dict = {}
+    zip: dict = {}
+    sample: Optional[SampleSpec] = None
+
+
+class FitTaskOptions(BaseModel):
+    """Options of a ``fit`` / ``fit-joint`` trial: those of :func:`invsss.fit_pair`.
+
+    ``robust = "none"`` turns the robust loss off (TOML has no null).
+    """
+
+    model_config = _STRICT
+    model: str = "sog"
+    profile: _Profile = "thesis-nir"
+    fix: dict[str, Union[float, _Numbers, list[_Numbers]]] = {}
+    gauge: str = "variances"
+    solver: str = "lm"
+    n_starts: int = 4
+    max_steps: int = 200
+    tap_weights: _Taps = None
+    robust: str = "pseudo-huber"
+
+
+class RenderTaskOptions(BaseModel):
+    """Options of a ``render`` trial: the parameters to render with.
+
+    ``weights`` and ``variances`` default to the named ``profile``'s.
+    """
+
+    model_config = _STRICT
+    model: str = "sog"
+    tap_weights: _Taps = None
+    profile: _Profile = "thesis-nir"
+    sss_level: float
+    correction: float
+    maxdd: float
+    weights: Optional[Union[_Numbers, list[_Numbers]]] = None
+    variances: Optional[_Numbers] = None
+
+
+def nearest(key: str, known) -> str:
+    """`` (did you mean 'x'?)`` for the closest of ``known``, or the list of them.
+
+    Examples
+    --------
+    >>> nearest("sss_levle", ["sss_level", "maxdd"])
+    " (did you mean 'sss_level'?)"
+    """
+    known = list(known)
+    close = difflib.get_close_matches(key, known, n=1, cutoff=0.5)
+    if close:
+        return f" (did you mean {close[0]!r}?)"
+    return f" (expected one of {', '.join(known)})"
+
+
+def _submodel(annotation):
+    """The pydantic model a field holds directly or as list items, else None."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation, False
+    for arg in getattr(annotation, "__args__", ()) or ():
+        if isinstance(arg, type) and issubclass(arg, BaseModel):
+            return arg, getattr(annotation, "__origin__", None) is list
+    return None, False
+
+
+def check_keys(content, model: type[BaseModel], where: str, name: str) -> None:
+    """Refuse the first key of ``content`` (a mapping) that ``model`` does not know.
+
+    ``where`` is the dotted location of ``content`` in the file (``""`` at the
+    top), ``name`` the file, for the message. Nested models are walked.
+
+    Examples
+    --------
+    >>> check_keys({"task": "fit", "dta": {}}, ExperimentSpec, "", "e.toml")
+    Traceback (most recent call last):
+    ...
+    invsss.validation.InvalidInputError: e.toml: unknown key 'dta' (did you mean 'data'?)
+    """
+    if not isinstance(content, dict):
+        return
+    fields = model.model_fields
+    for key, value in content.items():
+        dotted = f"{where}{key}"
+        if key not in fields:
+            raise InvalidInputError(f"{name}: unknown key {dotted!r}{nearest(str(key), fields)}")
+        sub, many = _submodel(fields[key].annotation)
+        if sub is None:
+            continue
+        if many and isinstance(value, list):
+            for i, item in enumerate(value):
+                check_keys(item, sub, f"{dotted}[{i}].", name)
+        else:
+            check_keys(value, sub, f"{dotted}.", name)
+
+
+def first_error(err: ValidationError, name: str, prefix: str = "") -> InvalidInputError:
+    """One line for pydantic's first error: where, what was expected, what was given."""
+    error = err.errors()[0]
+    loc = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in error["loc"]).lstrip(".")
+    where = f"{prefix}{loc}" if loc else prefix.rstrip(".") or "file"
+    if error["type"] == "missing":
+        return InvalidInputError(f"{name}: {where} is missing")
+    message = error["msg"][0].lower() + error["msg"][1:]
+    shown = repr(error.get("input"))
+    if len(shown) > 60:
+        shown = shown[:57] + "..."
+    return InvalidInputError(f"{name}: {where}: {message}, got {shown}")

@@ -1,0 +1,141 @@
+"""Trials: the resolved configurations of a sweep, each with a stable id.
+
+A trial is everything one run needs: the task, its options with every default
+filled in, the pair(s) it uses (paths relative to the experiment file), the
+depth scale and whether 8-bit codes are linear. Its id is the first 12 hex
+digits of the SHA-256 of that configuration as canonical JSON (sorted keys, no
+spaces), so the same configuration gets the same id in every run, on every
+machine, whatever order the file lists its axes in; that is what lets a sweep
+resume, and what keeps a result from being attributed to a changed
+configuration.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import hashlib
+import json
+
+from pydantic import ValidationError
+
+from ..validation import InvalidInputError
+from .axes import set_path
+from .schema import FIX_NAMES, FitTaskOptions, RenderTaskOptions, first_error, nearest
+
+__all__ = ["Trial", "trial_id", "task_options_model", "check_option_key", "resolve_options"]
+
+
+def task_options_model(task: str):
+    """The pydantic model of a task's options."""
+    return RenderTaskOptions if task == "render" else FitTaskOptions
+
+
+def trial_id(config: dict) -> str:
+    """First 12 hex digits of the SHA-256 of ``config`` as canonical JSON.
+
+    Examples
+    --------
+    >>> trial_id({"b": 1, "a": [1.0, "x"]}) == trial_id({"a": [1.0, "x"], "b": 1})
+    True
+    >>> len(trial_id({}))
+    12
+    """
+    text = json.dumps(config, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+@dataclasses.dataclass(frozen=True)
+class Trial:
+    """One run of a sweep.
+
+    Attributes
+    ----------
+    id : str
+        :func:`trial_id` of :attr:`config`.
+    index : int
+        Position in the expansion (the order trials are started in).
+    task : str
+        ``"fit"``, ``"fit-joint"`` or ``"render"``.
+    options : dict
+        The task's options, every default filled in.
+    pairs : tuple of dict
+        ``{"name", "source", "target", "depth", "mask"}``, paths relative to ``root``.
+    axes : dict
+        The values this trial varies (``{"fix.maxdd": 0.05, "pair": "fran_front"}``):
+        what reports plot against.
+    root : str
+        The experiment file's folder (absolute); not part of the id.
+    depth_scale : float
+    linear_codes : bool
+    """
+
+    id: str
+    index: int
+    task: str
+    options: dict
+    pairs: tuple
+    axes: dict
+    root: str
+    depth_scale: float = 1.0
+    linear_codes: bool = False
+
+    @property
+    def config(self) -> dict:
+        """What the id hashes: the trial without its position, axes and root."""
+        return {
+            "task": self.task,
+            "options": self.options,
+            "pairs": [dict(p) for p in self.pairs],
+            "depth_scale": self.depth_scale,
+            "linear_codes": self.linear_codes,
+        }
+
+    def to_dict(self) -> dict:
+        """A plain mapping (for another process, or JSON); :meth:`from_dict` reverses it."""
+        return {**dataclasses.asdict(self), "pairs": [dict(p) for p in self.pairs]}
+
+    @classmethod
+    def from_dict(cls, content: dict) -> "Trial":
+        return cls(**{**content, "pairs": tuple(content["pairs"])})
+
+
+def check_option_key(path: str, task: str, where: str, name: str) -> None:
+    """Refuse an axis key that names no option of ``task`` (nearest valid key in the message)."""
+    fields = task_options_model(task).model_fields
+    head, _, rest = path.partition(".")
+    known = [*fields] + ([] if task == "fit-joint" else ["pair"])
+    if head not in known:
+        raise InvalidInputError(f"{name}: unknown key '{where}.{path}'{nearest(head, known)}")
+    if head == "fix":
+        if not rest or rest not in FIX_NAMES:
+            raise InvalidInputError(
+                f"{name}: unknown key '{where}.{path}'{nearest(rest, ['fix.' + n for n in FIX_NAMES]) if rest else ''}"
+                + ("" if rest else f": fix takes one of {', '.join(FIX_NAMES)}")
+            )
+    elif rest and head != "profile":
+        raise InvalidInputError(f"{name}: '{where}.{path}': {head} is a single option, not a table")
+
+
+def resolve_options(task: str, base: dict, row: dict, name: str, label: str, sampled=()) -> dict:
+    """``base`` with the row's axis values set, validated, every default filled in.
+
+    Keys in ``sampled`` come from ``[sample]``: a sampled count (``n_starts``) is
+    rounded to the nearest integer.
+    """
+    options = copy.deepcopy(base)
+    integers = {k for k, f in task_options_model(task).model_fields.items() if f.annotation is int}
+    for path, value in row.items():
+        if path == "pair":
+            continue
+        if path in integers and path in sampled:
+            value = int(round(value))
+        set_path(options, path, value)
+    for key in options.get("fix", {}) if isinstance(options.get("fix"), dict) else ():
+        if key not in FIX_NAMES:
+            raise InvalidInputError(f"{name}: {label}: unknown key 'fix.{key}'{nearest(key, FIX_NAMES)}")
+    try:
+        validated = task_options_model(task).model_validate(options)
+    except ValidationError as err:
+        raise first_error(err, name, f"{label}: ") from None
+    return validated.model_dump()
