@@ -70,7 +70,7 @@ _LAZY = {
 
 # Submodules reachable as attributes (``invsss.io.PARAMS_KEYS``) without an import.
 _SUBMODULES = (
-    "cli", "estimator", "export", "interrupts", "io", "measure", "models", "profile_fit",
+    "cli", "estimator", "experiments", "export", "interrupts", "io", "measure", "models", "profile_fit",
     "report", "result_dir", "torch",
 )
 

@@ -26,7 +26,10 @@ from __future__ import annotations
 
 import concurrent.futures
 import multiprocessing
+import os
 import signal
+import threading
+import time
 
 from ..validation import InvalidInputError
 from .runner import execute
@@ -37,8 +40,23 @@ __all__ = ["EXECUTORS", "LocalExecutor", "DaskExecutor", "make_executor"]
 EXECUTORS = ("local", "dask")
 
 
-def _ignore_sigint() -> None:
+def _worker_start() -> None:
+    """Set up a pool worker: ignore SIGINT, and exit when the sweep's process is gone.
+
+    A pool worker blocks reading its task queue, whose write end it holds
+    itself; if the sweep is killed (SIGKILL, OOM) nothing would ever wake it.
+    A watchdog thread notices the new parent process id and exits instead of
+    leaving orphans that hold trial folders.
+    """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="invsss-parent-watchdog", daemon=True).start()
 
 
 def _check_jobs(jobs) -> int:
@@ -76,7 +94,7 @@ class LocalExecutor:
         if not self.in_process:
             self._pool = concurrent.futures.ProcessPoolExecutor(
                 max_workers=self.jobs, mp_context=multiprocessing.get_context("spawn"),
-                initializer=_ignore_sigint,
+                initializer=_worker_start,
             )
         return self
 
