@@ -27,7 +27,9 @@ from .solve import SOLVERS
 __all__ = ["FitOptions"]
 
 
-@dataclasses.dataclass(frozen=True)
+# eq=False: ``fix`` holds arrays, whose == is elementwise, so value equality
+# would raise for a fixed weight or variance list; options compare by identity.
+@dataclasses.dataclass(frozen=True, eq=False)
 class FitOptions:
     """How to fit: the keyword options of :func:`invsss.fit_pair`, checked once.
 
