@@ -118,10 +118,15 @@ def medium_dict(sigma_s_prime, sigma_a) -> dict:
     s = np.asarray(sigma_s_prime, np.float64)
     a = np.asarray(sigma_a, np.float64)
     sigma_t = s + a
+    # Mitsuba reads an RGB sigma_t as a reflectance (each value <= 1): give it as
+    # sigma_t / max times the medium's scale, max.
+    scale = float(sigma_t.max())
+    relative = sigma_t / scale
     return {
         "type": "homogeneous",
+        "scale": scale,
+        "sigma_t": _colour(relative.tolist()) if sigma_t.size > 1 else 1.0,
         # With an isotropic phase function sigma_s is sigma_s' (no anisotropy to reduce).
-        "sigma_t": _colour(sigma_t.tolist() if sigma_t.size > 1 else float(sigma_t.item())),
         "albedo": _colour((s / sigma_t).tolist() if sigma_t.size > 1 else float((s / sigma_t).item())),
         "phase": {"type": "isotropic"},
     }

@@ -19,7 +19,8 @@ one unit through :class:`invsss.result_dir.ResultDir`:
 ==============  ==========================================================
 
 Images are one channel when the medium and every light are grey (a NIR-like
-pair), else RGB.
+pair), else RGB. A medium whose channels differ (Jensen's skin1) is rendered as
+one grey medium per channel, each channel taken from its own render.
 
 Depth is taken from Mitsuba's ``position`` AOV, not its ``depth`` AOV: the
 latter is the ray distance from the near-clip-shifted origin, not eye z.
@@ -100,6 +101,14 @@ def _is_grey(config: SceneConfig, coefficients: dict) -> bool:
     return len(coefficients["sigma_s_prime"]) == 1 and not any(isinstance(c, list) for c in colours)
 
 
+def _grey_media(coefficients: dict) -> list[dict]:
+    """The medium as one grey medium, or one grey medium per channel when the channels differ."""
+    s, a = coefficients["sigma_s_prime"], coefficients["sigma_a"]
+    if len(set(s)) == 1 and len(set(a)) == 1:
+        return [{**coefficients, "sigma_s_prime": s[:1], "sigma_a": a[:1]}]
+    return [{**coefficients, "sigma_s_prime": [s[c]], "sigma_a": [a[c]]} for c in range(len(s))]
+
+
 def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = None) -> SceneRender:
     """Render every pass of ``config`` and return the pair, its geometry and ``scene.json``.
 
@@ -150,22 +159,34 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
             raise InvalidInputError("camera: sees no skin (no pixel is at least half covered by the object)")
         depth, normal = _depth_and_normal(config, geometry)
 
-        albedo, albedo_error = timed("calibration", lambda: slab_albedo(
-            mi, coefficients["sigma_s_prime"], coefficients["sigma_a"], coefficients["eta"],
+        # A chromatic medium is rendered one channel at a time as a grey medium:
+        # volpath's sampling of a chromatic medium follows one channel per path and
+        # leaves the others (here the far-reaching red) with heavy fireflies.
+        media = _grey_media(coefficients)
+        calibrated = [timed(f"calibration {c + 1}/{len(media)}", lambda: slab_albedo(
+            mi, medium["sigma_s_prime"], medium["sigma_a"], medium["eta"],
             config.medium.roughness, max_depth=config.max_depth, seed=seeds["calibration"]))
+            for c, medium in enumerate(media)]
+        albedo = np.concatenate([value for value, _ in calibrated])
+        albedo_error = np.concatenate([error for _, error in calibrated])
         albedo_list = albedo.tolist()
         source_scene = mi.load_dict(build("source", albedo=albedo_list if albedo.size > 1 else albedo_list[0]))
         source = timed("source", lambda: _channels(mi.render(source_scene, spp=config.spp, seed=seeds["source"]),
                                                    channels))
-        target_scene = mi.load_dict(build("target"))
-        specular_scene = mi.load_dict(build("specular"))
+        scenes = [(mi.load_dict(scene_dict(mi, config, "target", mesh_ply=mesh_ply, coefficients=medium)),
+                   mi.load_dict(scene_dict(mi, config, "specular", mesh_ply=mesh_ply, coefficients=medium)))
+                  for medium in media]
         halves = []
         for k in range(2):
-            full = timed(f"target half {k + 1}", lambda: _channels(
-                mi.render(target_scene, spp=half_spp, seed=seeds["target_halves"][k]), channels))
-            mirror = timed(f"specular half {k + 1}", lambda: _channels(
-                mi.render(specular_scene, spp=half_spp, seed=seeds["specular_halves"][k]), channels))
-            halves.append(full - mirror)
+            parts = []
+            for c, (target_scene, specular_scene) in enumerate(scenes):
+                full = timed(f"target half {k + 1}, channel {c + 1}/{len(media)}", lambda: _channels(
+                    mi.render(target_scene, spp=half_spp, seed=seeds["target_halves"][k]), channels))
+                mirror = timed(f"specular half {k + 1}, channel {c + 1}/{len(media)}", lambda: _channels(
+                    mi.render(specular_scene, spp=half_spp, seed=seeds["specular_halves"][k]), channels))
+                parts.append(full - mirror)
+            # One grey medium: all channels at once; one per channel: channel c from render c.
+            halves.append(parts[0] if len(parts) == 1 else np.stack([p[..., c] for c, p in enumerate(parts)], -1))
     target = 0.5 * (halves[0] + halves[1])
     noise = half_render_noise(halves[0], halves[1], mask)
     dipole = np.asarray(jensen_dipole_total(np.asarray(coefficients["sigma_s_prime"]),
@@ -192,6 +213,7 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
             "spp": CALIBRATION_SPP,
             "pixels": CALIBRATION_PIXELS,
             "dipole_total": np.atleast_1d(dipole).tolist(),
+            "renders": len(media),
         },
         "spp": {"source": config.spp, "target": config.spp, "target_per_half": half_spp,
                 "specular_per_half": half_spp, "geometry": config.geometry_spp},
