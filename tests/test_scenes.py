@@ -1,0 +1,251 @@
+"""invsss.scenes and `invsss scene`: path-traced pairs checked against geometry and physics.
+
+The renders are tiny (24-32 px) so that the file runs in well under a minute on
+two cores with Mitsuba's scalar_rgb variant. Expected values are computed here
+independently of Mitsuba: rays through a sub-pixel grid of the pinhole camera,
+intersected analytically with the plane or sphere.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+import numpy as np
+import pytest
+
+import invsss
+from invsss.cli import main
+from invsss.scenes import MEDIUM_PRESETS, load_config, parse_config
+from invsss.scenes.media import dipole_fit_to_thesis_profile
+
+mitsuba = pytest.importorskip("mitsuba", reason='the scene tests need pip install "invsss[scenes]"')
+from invsss.scenes import render_scene  # noqa: E402  (needs Mitsuba)
+
+CAMERA = {"position": [0.0, 0.0, 300.0], "look_at": [0.0, 0.0, 0.0], "fov": 20.0}
+POINT_LIGHT = {"type": "point", "position": [150.0, 150.0, 300.0], "intensity": 1e5}
+
+
+def _config(**changes):
+    content = {
+        "object": {"primitive": "sphere", "radius": 40.0},
+        "camera": {**CAMERA, "width": 32, "height": 32},
+        "lights": [POINT_LIGHT],
+        "medium": {"preset": "thesis-940"},
+        "spp": 2,
+    }
+    content.update(changes)
+    return parse_config(content, "test scene")
+
+
+def _pixel_rays(config, n: int = 8):
+    """Unnormalised ray directions (H, W, n, n, 3) through an n x n grid in each pixel.
+
+    Built from the camera's definition, not Mitsuba: pixel (row i, column j)
+    spans [j, j + 1] x [i, i + 1], image right is camera right, image down is
+    camera down, and a direction has unit component along the optical axis, so
+    the ray parameter of a hit is its eye z.
+    """
+    camera = config.camera
+    origin = np.asarray(camera.position, float)
+    forward = np.asarray(camera.look_at, float) - origin
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, camera.up)
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    f = camera.focal_length_px
+    sub = (np.arange(n) + 0.5) / n
+    u = np.arange(camera.width)[None, :, None, None] + sub[None, None, None, :]
+    v = np.arange(camera.height)[:, None, None, None] + sub[None, None, :, None]
+    x = (u - camera.width / 2) / f
+    y = -(v - camera.height / 2) / f
+    x, y = np.broadcast_arrays(x, y)
+    directions = forward + x[..., None] * right + y[..., None] * up
+    return origin, directions, (right, up, forward)
+
+
+# ------------------------------------------------------------------ geometry
+
+
+def test_depth_of_tilted_plane_is_analytic_eye_z():
+    tilt = -35.0
+    config = _config(object={"primitive": "slab", "size": [2000.0, 2000.0, 200.0],
+                             "pose": {"rotate": [tilt, 0.0, 0.0]}},
+                     camera={**CAMERA, "width": 32, "height": 24})
+    result = render_scene(config)
+    origin, directions, _ = _pixel_rays(config)
+    # The slab's front face: through the origin, normal R_x(tilt) (0, 0, 1).
+    normal = np.array([0.0, -np.sin(np.radians(tilt)), np.cos(np.radians(tilt))])
+    eye_z = (-(origin @ normal) / (directions @ normal)).mean(axis=(2, 3))
+    assert result.mask.all()
+    np.testing.assert_allclose(result.depth, eye_z, rtol=5e-4)
+    # The depth is eye z, not the ray length: at the corners they differ by several %.
+    ray_length = (-(origin @ normal) / (directions @ normal) * np.linalg.norm(directions, axis=-1)).mean(axis=(2, 3))
+    assert np.abs(result.depth / ray_length - 1).max() > 0.01
+    camera_normal = np.array([0.0, normal[1], normal[2]])  # camera frame = world frame here
+    np.testing.assert_allclose(result.normal, np.broadcast_to(camera_normal, result.normal.shape), atol=1e-3)
+
+
+def test_mask_and_coverage_match_the_silhouette_minus_occluder():
+    radius = 40.0
+    stripe = {"center": [0.0, 20.0, 100.0], "normal": [0.0, 0.0, 1.0], "along": [1.0, 0.0, 0.0],
+              "width": 10.0, "length": 300.0, "count": 1, "duty": 0.5}
+    config = _config(occluders=[stripe])
+    result = render_scene(config)
+    origin, directions, (right, up, forward) = _pixel_rays(config, n=16)
+    # Sphere about the origin: a ray hits it where its distance to the centre is < radius.
+    unit = directions / np.linalg.norm(directions, axis=-1, keepdims=True)
+    along = -(unit @ origin)
+    closest = origin + along[..., None] * unit
+    on_sphere = np.linalg.norm(closest, axis=-1) < radius
+    # The stripe: the plane z = 100, 5 mm (duty 0.5 of 10 mm) tall about y = 20, long in x.
+    t_plane = (100.0 - origin[2]) / directions[..., 2]
+    hit = origin + t_plane[..., None] * directions
+    blocked = (np.abs(hit[..., 1] - 20.0) < 2.5) & (np.abs(hit[..., 0]) < 150.0)
+    coverage = (on_sphere & ~blocked).mean(axis=(2, 3))
+    assert blocked.any(axis=(2, 3)).sum() >= 32  # the stripe crosses the sphere's image
+    assert np.abs(result.coverage - coverage).max() < 0.1
+    clear = np.abs(coverage - 0.5) > 0.1
+    np.testing.assert_array_equal(result.mask[clear], (coverage[clear] >= 0.5).astype(np.float32))
+    # Depth and normals exist where skin is seen (behind the stripe too) and nowhere else.
+    # (A pixel the silhouette only grazes may be caught by one sampling grid and not the other.)
+    sphere_share = on_sphere.mean(axis=(2, 3))
+    assert np.all(result.depth[sphere_share > 0.05] > 0)
+    assert np.all(result.depth[sphere_share == 0] == 0)
+    inside = on_sphere.all(axis=(2, 3))
+    # Normals of fully covered pixels: the pixel-average sphere normal, in camera space.
+    t_hit = along - np.sqrt(np.maximum(radius**2 - np.sum(closest**2, axis=-1), 0.0))
+    world = (origin + t_hit[..., None] * unit) / radius
+    expected = np.stack([world @ right, world @ up, -(world @ forward)], -1).mean(axis=(2, 3))
+    expected /= np.linalg.norm(expected, axis=-1, keepdims=True)
+    assert np.min(np.sum(result.normal[inside] * expected[inside], axis=-1)) > 0.999
+
+
+# ------------------------------------------------------------------- physics
+
+
+@pytest.mark.parametrize("medium", [{"preset": "thesis-940"}, {"sigma_s_prime": 2.4, "sigma_a": 0.1}])
+def test_flat_slab_target_and_source_reflect_the_same_energy(medium):
+    # Lit at 30 degrees, seen at 20 degrees: not the straight-down, uniform-sky
+    # set-up the source albedo was calibrated in.
+    light, view = np.radians(30.0), np.radians(20.0)
+    config = _config(
+        object={"primitive": "slab", "size": [2000.0, 2000.0, 300.0]},
+        camera={"position": [300.0 * np.sin(view), 0.0, 300.0 * np.cos(view)], "look_at": [0.0, 0.0, 0.0],
+                "fov": 4.0, "width": 24, "height": 24},
+        lights=[{"type": "directional", "direction": [0.0, -np.sin(light), -np.cos(light)], "irradiance": 1.0}],
+        medium=medium,
+        spp=512,
+        seed=3,
+    )
+    result = render_scene(config)
+    ratio = float(result.target.mean() / result.source.mean())
+    assert abs(ratio - 1.0) < 0.05, ratio
+    # The dipole's closed form would have missed by far more: the calibration matters.
+    albedo = result.info["source_albedo"]
+    assert albedo["dipole_total"][0] / albedo["value"][0] > 1.08
+
+
+def test_two_seeds_give_the_stated_noise():
+    first, second = (render_scene(_config(spp=16, seed=seed)) for seed in (0, 1))
+    on = first.mask > 0
+    measured = np.sqrt(np.mean((first.target - second.target)[on] ** 2))
+    # Each target's noise_rms is the noise of its mean; independent, they add in quadrature.
+    stated = np.hypot(first.info["noise"]["noise_rms"], second.info["noise"]["noise_rms"])
+    assert 0.8 < measured / stated < 1.25, (measured, stated)
+    # The ceiling is the PSNR of a noise-free image against the target: 6 dB above the halves.
+    noise = first.info["noise"]
+    assert noise["noise_ceiling_db"] == pytest.approx(noise["psnr_halves_db"] + 20 * np.log10(2))
+    halves = first.target_halves
+    np.testing.assert_allclose(first.target, 0.5 * (halves[0] + halves[1]), atol=1e-6)
+    assert first.info["seeds"]["target_halves"] != second.info["seeds"]["target_halves"]
+
+
+def test_chromatic_medium_gives_rgb_with_red_scattering_furthest():
+    config = _config(medium={"preset": "jensen-skin1"}, spp=8, camera={**CAMERA, "width": 16, "height": 16})
+    result = render_scene(config)
+    assert result.target.shape == (16, 16, 3) and result.source.shape == (16, 16, 3)
+    value = result.info["source_albedo"]["value"]
+    assert value[0] > value[1] > value[2]  # skin1 absorbs blue most
+
+
+def test_thesis_medium_preset_is_the_dipole_fit_to_the_thesis_profile():
+    sigma_s_prime, sigma_a = dipole_fit_to_thesis_profile()
+    preset = MEDIUM_PRESETS["thesis-940"]
+    assert sigma_s_prime == pytest.approx(preset["sigma_s_prime"], rel=2e-3)
+    assert sigma_a == pytest.approx(preset["sigma_a"], rel=2e-3)
+
+
+# ------------------------------------------------------------------ the command
+
+
+_TOML = """\
+spp = 4
+seed = 2
+
+[object]
+primitive = "sphere"
+radius = 40.0
+
+[camera]
+position = [0.0, 0.0, 300.0]
+look_at = [0.0, 0.0, 0.0]
+{camera_extra}
+width = 24
+height = 24
+
+[[lights]]
+type = "point"
+position = [150.0, 150.0, 300.0]
+intensity = 1e5
+
+[medium]
+preset = "thesis-940"
+"""
+
+
+def _write_toml(tmp_path, camera_extra="fov = 20.0"):
+    path = tmp_path / "scene.toml"
+    path.write_text(_TOML.format(camera_extra=camera_extra))
+    return path
+
+
+def test_scene_command_writes_a_pair_folder(tmp_path, capsys):
+    out = tmp_path / "pair"
+    assert main(["scene", str(_write_toml(tmp_path)), "--out", str(out), "--width", "16"]) == 0
+    files = sorted(os.listdir(out))
+    assert files == sorted(["source.exr", "target.exr", "depth.exr", "mask.png", "normal.exr",
+                            "coverage.exr", "scene.json", "invsss-manifest.json"])
+    info = json.loads((out / "scene.json").read_text())
+    assert info["config"]["camera"]["width"] == 16 and info["config"]["camera"]["height"] == 16
+    assert info["mitsuba_version"] == mitsuba.__version__ and info["spp"]["target_per_half"] == 2
+    assert set(info["noise"]) >= {"psnr_halves_db", "noise_ceiling_db", "noise_rms"}
+    source = invsss.read_image(out / "source.exr")
+    mask = invsss.read_mask(out / "mask.png")
+    assert source.shape == (16, 16, 1) and invsss.read_image(out / "target.exr").shape == (16, 16, 1)
+    assert mask.shape == (16, 16) and 0 < mask.sum() < 256
+    # A second run into the same folder is refused without --overwrite.
+    assert main(["scene", str(_write_toml(tmp_path)), "--out", str(out)]) == 2
+    assert "--overwrite" in capsys.readouterr().err
+
+
+def test_misspelt_key_is_one_line_naming_it_and_the_nearest_key(tmp_path, capsys):
+    path = _write_toml(tmp_path, camera_extra="fvo = 20.0")
+    assert main(["scene", str(path), "--out", str(tmp_path / "never")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0
+    assert "camera.fvo: unknown key" in err and "did you mean 'fov'?" in err
+    assert not (tmp_path / "never").exists()
+    # Strict numbers: true is not 1.
+    bad_light = {"type": "point", "position": [0.0, 0.0, 1.0], "intensity": True}
+    with pytest.raises(invsss.InvalidInputError, match=r"^s: lights\[0\]\.intensity: expected a number"):
+        parse_config({**_config().model_dump(), "lights": [bad_light]}, "s")
+    assert load_config(_write_toml(tmp_path)).camera.fov == 20.0
+
+
+def test_missing_mitsuba_is_one_line_naming_the_extra(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "mitsuba", None)  # what `import mitsuba` sees when it is not installed
+    assert main(["scene", str(_write_toml(tmp_path)), "--out", str(tmp_path / "pair")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and 'pip install "invsss[scenes]"' in err
