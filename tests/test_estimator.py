@@ -451,3 +451,17 @@ def test_report_draws_every_start_and_both_profiles(recovered):
     np.testing.assert_allclose(fitted.get_ydata(), np.maximum(np.asarray(expected), 1e-12), rtol=1e-5)
     assert not np.allclose(fitted.get_ydata(), start.get_ydata())
     assert any("conditional on the chosen profile" in line for line in _parameter_lines(result))
+
+
+def test_an_interrupted_fit_still_reports_a_valid_profile():
+    """The thesis profile's coinciding Gaussians make the unconstrained weights
+    negative; an interrupted fit holds them at 0 (no re-solve) so its estimate
+    renders."""
+    source, target, depth, mask, _ = scene("face", size=32, seed=12)
+    polls = []
+    result = fit_pair(source, target, depth, mask, n_starts=1, stop=lambda: polls.append(1) or len(polls) > 3)
+    assert result.interrupted and result.iterations == 3
+    assert any("held at 0" in w for w in result.warnings)
+    weights = np.asarray(result.to_dict()["estimate"]["weights"])
+    assert np.all(weights >= 0) and weights.sum() > 0
+    invsss.SSSParams(**result.to_dict()["estimate"]).check("estimate")

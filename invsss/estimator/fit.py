@@ -324,12 +324,9 @@ def _solve(problem, solver, options, steps) -> _Path:
             break
     path.extend(best)
     path.interrupted = record.interrupted  # the last start run, not necessarily the best
-    if path.interrupted:
-        path.converged = False
-        return path
 
     # Robust reweighting rounds, warm-started.
-    if options.robust is not None:
+    if options.robust is not None and not path.interrupted:
         masks = [np.asarray(p.mask) for p in problem.data]
         for round_ in range(_ROBUST_ROUNDS):
             preds = _evaluate(path.objective, path.z, jnp.asarray(False))["predictions"]
@@ -339,28 +336,35 @@ def _solve(problem, solver, options, steps) -> _Path:
             path.objective = eqx.tree_at(lambda o: o.robust, path.objective, u)
             path.extend(run(f"robust {round_ + 1}", path.z))
             if path.interrupted:
-                return path
-
-    # Active set: weights are ratios on the simplex; hold negative ones at 0.
-    nb = int(path.objective.active.shape[0])
-    if problem.linear_weights and nb > 1:
-        for round_ in range(nb):
-            coef = np.asarray(_evaluate(path.objective, path.z, jnp.asarray(False))["coef"])
-            active = np.asarray(path.objective.active)
-            negative = (coef * np.sign(coef.sum(axis=0)) < 0) & (active > 0)
-            if not negative.any():
                 break
-            active = jnp.asarray(np.where(negative, 0.0, active))
-            path.objective = eqx.tree_at(lambda o: o.active, path.objective, active)
-            path.extend(run(f"active set {round_ + 1}", path.z))
-            if path.interrupted:
-                break
-        held = np.asarray(path.objective.active) == 0
-        held = held[:, 0] if problem.channels == 1 else held
-        if held.any():
-            names = ", ".join(_entry("weights", i) for i in zip(*np.nonzero(held)))
-            path.messages.append(f"{names}: held at 0 (the unconstrained least squares made them negative)")
+    _active_set(problem, path, run)
     return path
+
+
+def _active_set(problem, path, run) -> None:
+    """Weights are ratios on the simplex: hold negative ones at 0, re-solving
+    after each change. An interrupted fit still gets this pass, without the
+    re-solves (only the linear unknowns are projected again): its estimate must
+    be a valid profile too, ready to render."""
+    nb = int(path.objective.active.shape[0])
+    if not problem.linear_weights or nb < 2:
+        return
+    for round_ in range(nb):
+        coef = np.asarray(_evaluate(path.objective, path.z, jnp.asarray(False))["coef"])
+        active = np.asarray(path.objective.active)
+        negative = (coef * np.sign(coef.sum(axis=0)) < 0) & (active > 0)
+        if not negative.any():
+            break
+        active = jnp.asarray(np.where(negative, 0.0, active))
+        path.objective = eqx.tree_at(lambda o: o.active, path.objective, active)
+        if not path.interrupted:
+            path.extend(run(f"active set {round_ + 1}", path.z))
+    held = np.asarray(path.objective.active) == 0
+    held = held[:, 0] if problem.channels == 1 else held
+    if held.any():
+        names = ", ".join(_entry("weights", i) for i in zip(*np.nonzero(held)))
+        path.messages.append(f"{names}: held at 0 (the unconstrained least squares made them negative)")
+
 
 def _report(problem, path, single, steps) -> FitResult:
     """The estimate, its uncertainty and diagnostics (step 5 above)."""
