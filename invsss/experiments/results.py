@@ -6,7 +6,7 @@ the metrics (``loss``, ``psnr``, ``ssim``, and for fits ``sigma``,
 ``converged``, ``iterations``), the parameters (``param.sss_level``,
 ``param.weights``...), their standard errors (``stderr.sss_level``...),
 ``seconds`` (the trial's total time), ``compute_seconds`` (the fit or render
-alone), ``host``, ``attempts``, ``warnings`` and ``error``. A pandas
+alone), ``host``, ``pid``, ``attempts``, ``warnings`` and ``error``. A pandas
 ``DataFrame`` when pandas is installed (``pip install 'invsss[report]'``),
 else a list of dicts with the same keys.
 """
@@ -37,9 +37,9 @@ def flat_rows(out) -> tuple[list[dict], dict]:
         flat = {"id": row["id"], "status": row["status"]}
         flat.update({key: row["axes"].get(key) for key in axes})
         metrics = row["metrics"] or {}
-        for key in ("loss", "psnr", "ssim", "sigma", "converged", "iterations"):
-            if key in metrics or row["task"] != "render":
-                flat[key] = metrics.get(key)
+        fit_only = () if row["task"] == "render" else ("sigma", "converged", "iterations")
+        for key in ("loss", "psnr", "ssim", *fit_only):
+            flat[key] = metrics.get(key)
         for name in PARAM_NAMES:
             flat[f"param.{name}"] = (row["params"] or {}).get(name)
         if row["task"] != "render":
@@ -49,6 +49,7 @@ def flat_rows(out) -> tuple[list[dict], dict]:
         flat["seconds"] = timings.get("total")
         flat["compute_seconds"] = timings.get("compute")
         flat["host"] = row["host"]
+        flat["pid"] = row["pid"]
         flat["attempts"] = row["attempts"]
         flat["warnings"] = row["warnings"] or []
         flat["error"] = row["error"]

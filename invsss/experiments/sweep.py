@@ -165,7 +165,7 @@ def run(
     jobs: int | None = None,
     scheduler: str | None = None,
     stop=None,
-    log=sys.stderr,
+    log="stderr",
 ) -> SweepSummary:
     """Run the trials of ``experiment`` not yet done in ``out`` (see the module docstring).
 
@@ -185,8 +185,9 @@ def run(
         A Dask scheduler's address (``executor="dask"`` only).
     stop : callable, optional
         ``stop() -> bool``, polled between trials; True ends the run early.
-    log : file, optional
-        Where progress lines go (None: nowhere).
+    log : file, "stderr" or None
+        Where progress lines go: a file, ``sys.stderr`` as it is when the run
+        starts (default), or nowhere.
 
     Returns
     -------
@@ -208,6 +209,7 @@ def run(
     except OSError as err:
         raise InvalidInputError(f"{out}: cannot create the output folder ({err.strerror})") from None
     stop = stop or (lambda: False)
+    log = sys.stderr if log == "stderr" else log
     chosen = make_executor(executor, jobs, scheduler)
     start = time.monotonic()
     with _SweepLock(out), ResultsStore(out) as store:

@@ -66,7 +66,7 @@ def _render_values(options: dict) -> dict:
 
 
 def _render_params(options: dict) -> SSSParams:
-    return SSSParams.from_dict(_render_values(options), source="options")
+    return SSSParams.from_dict(_render_values(options), source="render options")
 
 
 def check_task_options(task: str, options: dict) -> None:
