@@ -249,3 +249,16 @@ def test_missing_mitsuba_is_one_line_naming_the_extra(tmp_path, capsys, monkeypa
     assert main(["scene", str(_write_toml(tmp_path)), "--out", str(tmp_path / "pair")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and 'pip install "invsss[scenes]"' in err
+
+
+EXAMPLES = os.path.join(os.path.dirname(__file__), "..", "experiments", "scenes")
+
+
+@pytest.mark.parametrize("name", ["face_940.toml", "slab_stripes_940.toml"])
+def test_example_scenes_render(name):
+    config = load_config(os.path.join(EXAMPLES, name)).with_overrides(width=16, spp=2)
+    result = render_scene(config)
+    assert result.mask.sum() >= 64  # the object fills a good part of the view
+    assert result.info["mesh"] is None or len(result.info["mesh"]["sha256"]) == 64
+    # Depth in mm: the camera is 0.5-0.8 m from the object.
+    assert 300.0 < float(np.median(result.depth[result.mask > 0])) < 900.0

@@ -72,6 +72,13 @@ def slab_albedo(mi, sigma_s_prime, sigma_a, eta: float, roughness: float, *, max
     Returns
     -------
     (albedo, standard_error) : two arrays of shape (C,), C the number of coefficients
+
+    Examples
+    --------
+    >>> from invsss.scenes.mitsuba_scene import import_mitsuba
+    >>> albedo, error = slab_albedo(import_mitsuba("scalar_rgb"), [0.7748], [0.02808], 1.3, 0.5)
+    >>> bool(abs(albedo[0] - 0.404) < 5 * error[0]), bool(error[0] < 0.005)  # the dipole says 0.462
+    (True, True)
     """
     s = np.asarray(sigma_s_prime, np.float64)
     a = np.asarray(sigma_a, np.float64)

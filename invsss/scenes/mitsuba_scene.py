@@ -42,6 +42,11 @@ def import_mitsuba(variant: str):
     InvalidInputError
         Mitsuba is not installed (``pip install "invsss[scenes]"``), or the variant
         is not available on this machine.
+
+    Examples
+    --------
+    >>> import_mitsuba("scalar_rgb").variant()
+    'scalar_rgb'
     """
     try:
         import mitsuba as mi
@@ -89,6 +94,19 @@ def load_mesh_ply(mesh_path: str, folder: str) -> str:
     ------
     InvalidInputError
         Unreadable file, or a surface that does not enclose a volume.
+
+    Examples
+    --------
+    >>> import os, tempfile, trimesh
+    >>> folder = tempfile.mkdtemp()
+    >>> _ = trimesh.creation.icosphere().export(os.path.join(folder, "ball.obj"))
+    >>> os.path.basename(load_mesh_ply(os.path.join(folder, "ball.obj"), folder))
+    'object.ply'
+    >>> _ = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]).export(os.path.join(folder, "tri.ply"))
+    >>> load_mesh_ply(os.path.join(folder, "tri.ply"), folder)
+    Traceback (most recent call last):
+    ...
+    invsss.validation.InvalidInputError: object.mesh: ...tri.ply is not closed; the medium needs a surface that encloses a volume (close its holes first)
     """
     try:
         import trimesh
@@ -114,7 +132,14 @@ def load_mesh_ply(mesh_path: str, folder: str) -> str:
 
 
 def medium_dict(sigma_s_prime, sigma_a) -> dict:
-    """A homogeneous, isotropic Mitsuba medium from ``sigma_s'`` and ``sigma_a`` (1/mm, 1 or 3 values)."""
+    """A homogeneous, isotropic Mitsuba medium from ``sigma_s'`` and ``sigma_a`` (1/mm, 1 or 3 values).
+
+    Examples
+    --------
+    >>> medium = medium_dict([0.75], [0.25])
+    >>> medium["scale"], medium["sigma_t"], medium["albedo"]
+    (1.0, 1.0, {'type': 'rgb', 'value': 0.75})
+    """
     s = np.asarray(sigma_s_prime, np.float64)
     a = np.asarray(sigma_a, np.float64)
     sigma_t = s + a
@@ -253,6 +278,19 @@ def scene_dict(mi, config: SceneConfig, kind: str, *, albedo=None, mesh_ply: str
         :meth:`~invsss.scenes.config.Medium.coefficients`, for ``"target"`` and ``"specular"``.
     spp : int
         Samples per pixel (the renders override it per call).
+
+    Examples
+    --------
+    >>> from invsss.scenes import parse_config
+    >>> config = parse_config({"object": {"primitive": "sphere", "radius": 40.0},
+    ...     "camera": {"position": [0.0, 0.0, 300.0], "look_at": [0.0, 0.0, 0.0],
+    ...                "fov": 20.0, "width": 16, "height": 16},
+    ...     "lights": [{"type": "point", "position": [0.0, 100.0, 300.0], "intensity": 1e5}],
+    ...     "medium": {"preset": "thesis-940"}})
+    >>> scene = scene_dict(import_mitsuba("scalar_rgb"), config, "target",
+    ...                    coefficients=config.medium.coefficients())
+    >>> scene["integrator"], scene["object"]["bsdf"]["type"], sorted(scene)
+    ({'type': 'volpath', 'max_depth': 256}, 'roughdielectric', ['integrator', 'light_0', 'object', 'sensor', 'type'])
     """
     if kind not in SCENE_KINDS:
         raise ValueError(f"kind {kind!r}: expected one of {SCENE_KINDS}")

@@ -101,6 +101,17 @@ def _is_grey(config: SceneConfig, coefficients: dict) -> bool:
     return len(coefficients["sigma_s_prime"]) == 1 and not any(isinstance(c, list) for c in colours)
 
 
+def _mesh_record(path: str | None) -> dict | None:
+    """The mesh file's name and SHA-256, so a scene.json pins the exact geometry."""
+    if path is None:
+        return None
+    import hashlib
+
+    with open(path, "rb") as f:
+        digest = hashlib.sha256(f.read()).hexdigest()
+    return {"file": os.path.basename(path), "sha256": digest}
+
+
 def _grey_media(coefficients: dict) -> list[dict]:
     """The medium as one grey medium, or one grey medium per channel when the channels differ."""
     s, a = coefficients["sigma_s_prime"], coefficients["sigma_a"]
@@ -125,6 +136,20 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
     InvalidInputError
         Mitsuba or trimesh missing, an unavailable variant, an unreadable or open mesh,
         or a camera that sees no skin.
+
+    Examples
+    --------
+    >>> from invsss.scenes import parse_config
+    >>> config = parse_config({"object": {"primitive": "sphere", "radius": 40.0},
+    ...     "camera": {"position": [0.0, 0.0, 300.0], "look_at": [0.0, 0.0, 0.0],
+    ...                "fov": 20.0, "width": 16, "height": 16},
+    ...     "lights": [{"type": "point", "position": [0.0, 100.0, 300.0], "intensity": 1e5}],
+    ...     "medium": {"preset": "thesis-940"}, "spp": 2})
+    >>> pair = render_scene(config)
+    >>> pair.source.shape, pair.target.shape, pair.depth.shape
+    ((16, 16, 1), (16, 16, 1), (16, 16))
+    >>> bool(250.0 < pair.depth[8, 8] < 262.0)  # eye z of the sphere's front, 260 mm away
+    True
     """
     say = progress or (lambda text: None)
     started = time.perf_counter()
@@ -197,6 +222,7 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         "variant": config.variant,
         "platform": platform.platform(),
         "config": config.model_dump(),
+        "mesh": _mesh_record(config.object.mesh),
         "focal_px": config.camera.focal_length_px,
         "channels": channels,
         "medium": {
@@ -257,7 +283,16 @@ def _depth_and_normal(config: SceneConfig, aovs: dict) -> tuple[np.ndarray, np.n
 
 
 def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
-    """``{file name: writer(path)}`` for :meth:`invsss.result_dir.ResultDir.commit`."""
+    """``{file name: writer(path)}`` for :meth:`invsss.result_dir.ResultDir.commit`.
+
+    Examples
+    --------
+    >>> image, plane = np.ones((4, 4, 1), np.float32), np.ones((4, 4), np.float32)
+    >>> flat = SceneRender(image, image, 500 * plane, plane, np.zeros((4, 4, 3), np.float32),
+    ...                    plane, {"spp": 2}, (image, image))
+    >>> list(scene_writers(flat)) == list(SCENE_FILES)
+    True
+    """
     text = json.dumps(result.info, indent=2) + "\n"
     return {
         "source.exr": lambda path: write_image(path, result.source),
@@ -275,6 +310,19 @@ def write_scene(result: SceneRender, out, *, overwrite: bool = False) -> list[st
 
     Returns the paths written. A folder that already holds a result is refused
     unless ``overwrite`` (see :class:`invsss.result_dir.ResultDir`).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> from invsss.scenes import parse_config
+    >>> config = parse_config({"object": {"primitive": "sphere", "radius": 40.0},
+    ...     "camera": {"position": [0.0, 0.0, 300.0], "look_at": [0.0, 0.0, 0.0],
+    ...                "fov": 20.0, "width": 8, "height": 8},
+    ...     "lights": [{"type": "point", "position": [0.0, 100.0, 300.0], "intensity": 1e5}],
+    ...     "medium": {"preset": "thesis-940"}, "spp": 2})
+    >>> folder = os.path.join(tempfile.mkdtemp(), "pair")
+    >>> [os.path.basename(p) for p in write_scene(render_scene(config), folder)] == list(SCENE_FILES)
+    True
     """
     with ResultDir(os.fspath(out), overwrite=overwrite, names=SCENE_FILES, option="overwrite=True") as folder:
         return folder.commit(scene_writers(result), {"command": "scene"})
