@@ -2,7 +2,8 @@
 
 A pair folder holds ``source.exr``, ``target.exr``, ``depth.exr`` and ``mask.png``
 (the layout of ``data_synthetic/``); a glob such as ``data_synthetic/*/`` names
-every folder it matches, in sorted order. Paths are relative to the experiment
+every pair folder it matches, in sorted order (other folders it matches, such
+as ``LICENSES/``, are passed over). Paths are relative to the experiment
 file's folder, so an experiment runs the same from any working directory. Each
 pair gets a name (the folder's name, or ``name`` of a file set) that trials and
 reports use; names must be unique.
@@ -59,6 +60,15 @@ def resolve_pairs(data: DataSpec, root: str, name: str) -> list[dict]:
             raise InvalidInputError(
                 f"{name}: data.pairs: {pattern!r} matches no folder (relative to {root})"
             )
+        if glob.has_magic(pattern):
+            # A glob picks the pair folders among its matches (data_synthetic/*/
+            # also matches LICENSES/); a folder named outright must be a pair.
+            folders = [f for f in folders if all(os.path.isfile(os.path.join(f, n)) for n in PAIR_FILES.values())]
+            if not folders:
+                raise InvalidInputError(
+                    f"{name}: data.pairs: {pattern!r} matches no pair folder (one holding "
+                    f"{', '.join(PAIR_FILES.values())})"
+                )
         for folder in folders:
             files = {}
             for role, file in PAIR_FILES.items():
