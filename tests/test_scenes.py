@@ -244,6 +244,21 @@ def test_misspelt_key_is_one_line_naming_it_and_the_nearest_key(tmp_path, capsys
     assert load_config(_write_toml(tmp_path)).camera.fov == 20.0
 
 
+def test_mitsuba_is_imported_only_to_render():
+    import subprocess
+
+    code = (
+        "import sys, invsss.cli, invsss.scenes\n"
+        "invsss.cli.build_parser()\n"
+        "invsss.scenes.parse_config({'object': {'primitive': 'sphere', 'radius': 1.0}, 'camera': {'position': "
+        "[0.0, 0.0, 9.0], 'look_at': [0.0, 0.0, 0.0], 'fov': 30.0, 'width': 4, 'height': 4}, 'lights': "
+        "[{'type': 'point', 'position': [0.0, 0.0, 9.0], 'intensity': 1.0}], 'medium': {'preset': 'thesis-940'}})\n"
+        "print([m for m in ('mitsuba', 'drjit', 'trimesh') if m in sys.modules])"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "[]"
+
+
 def test_missing_mitsuba_is_one_line_naming_the_extra(tmp_path, capsys, monkeypatch):
     monkeypatch.setitem(sys.modules, "mitsuba", None)  # what `import mitsuba` sees when it is not installed
     assert main(["scene", str(_write_toml(tmp_path)), "--out", str(tmp_path / "pair")]) == 2
