@@ -20,6 +20,22 @@ process writes, always says what was started.
 
 Every worker process keeps its compiled JAX functions from one trial to the
 next, so a sweep over same-sized pairs compiles once per worker and options.
+
+Running on a cluster (``pip install "invsss[cluster]"`` on every machine):
+
+* by hand: start ``dask scheduler`` on one machine (it prints
+  ``tcp://HOST:8786``), ``dask worker tcp://HOST:8786 --nthreads 1`` on each
+  compute machine (one thread per worker: JAX already uses the cores), then
+  ``invsss sweep EXP.toml --out DIR --executor dask --scheduler tcp://HOST:8786``
+  from a machine that sees the same file system;
+* on SLURM with ``dask-jobqueue``: in a Python session on the login node,
+  ``cluster = dask_jobqueue.SLURMCluster(cores=8, processes=1, memory="16GB",
+  walltime="02:00:00"); cluster.scale(jobs=10); print(cluster.scheduler_address)``,
+  and pass that address to ``--scheduler`` (or, from Python,
+  ``run(experiment, out, executor="dask", scheduler=cluster.scheduler_address)``).
+
+Stopping (Ctrl-C) or killing the sweep leaves the cluster's workers alone; the
+trials they were running are rerun on resume.
 """
 
 from __future__ import annotations
