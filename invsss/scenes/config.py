@@ -34,6 +34,8 @@ number.
 from __future__ import annotations
 
 import difflib
+import json
+import math
 import os
 import tomllib
 from typing import Annotated, Literal, Union, get_args, get_origin
@@ -136,8 +138,6 @@ class Camera(_Strict):
     @property
     def fov_deg(self) -> float:
         """The horizontal field of view in degrees, whichever way it was given."""
-        import math
-
         if self.fov is not None:
             return self.fov
         return math.degrees(2.0 * math.atan(self.width / 2.0 / self.focal_px))
@@ -145,8 +145,6 @@ class Camera(_Strict):
     @property
     def focal_length_px(self) -> float:
         """The focal length in pixels, whichever way it was given."""
-        import math
-
         if self.focal_px is not None:
             return self.focal_px
         return self.width / 2.0 / math.tan(math.radians(self.fov) / 2.0)
@@ -255,9 +253,11 @@ class Medium(_Strict):
 class SceneConfig(_Strict):
     """A whole scene: object, camera, lights, optional occluders, medium and render settings.
 
-    ``spp`` is split into two independently seeded halves (``seed`` and ``seed + 1``)
-    whose difference gives the noise estimate; ``geometry_spp`` samples the depth,
-    normal and coverage passes (stratified).
+    The target's ``spp`` is split into two independently seeded halves (seeds
+    ``2 seed`` and ``2 seed + 1``, so neighbouring seeds share no samples) whose
+    difference gives the noise estimate; ``geometry_spp`` samples the depth, normal
+    and coverage passes (stratified). ``max_depth`` bounds the path length: for
+    sigma_s' = 2.4/mm, 64 loses about 6 % of the energy, 256 is within 0.2 %.
     """
 
     variant: Literal[VARIANTS] = "scalar_rgb"  # type: ignore[valid-type]
@@ -456,8 +456,6 @@ def _tag(model: type[BaseModel]) -> str | None:
 
 
 def _shown(value) -> str:
-    import json
-
     try:
         return json.dumps(value)
     except (TypeError, ValueError):

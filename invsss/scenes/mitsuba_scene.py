@@ -62,7 +62,24 @@ def import_mitsuba(variant: str):
             f"variant: Mitsuba variant {variant!r} is not available here ({reason}); "
             'scalar_rgb needs nothing else'
         ) from None
+    if variant.startswith("llvm"):
+        _check_llvm(variant)
     return mi
+
+
+def _check_llvm(variant: str) -> None:
+    """Refuse an LLVM that aborts the process on Mitsuba 3.9's kernels, before it does."""
+    import drjit
+
+    version = tuple(drjit.detail.llvm_version())
+    # Seen with the system libLLVM 15: "LLVM ERROR: Cannot select ... fminimum" kills
+    # the interpreter (no exception to catch). Debian's libllvm19 works.
+    if version and version[0] <= 15:
+        raise InvalidInputError(
+            f"variant: {variant} with libLLVM {'.'.join(map(str, version))} aborts on Mitsuba 3.9's "
+            "kernels ('Cannot select ... fminimum'); install a newer libLLVM (e.g. Debian's libllvm19) "
+            "and set DRJIT_LIBLLVM_PATH to it, or use scalar_rgb"
+        )
 
 
 def _colour(value) -> dict:
