@@ -536,8 +536,9 @@ def _run_sweep(args: argparse.Namespace, stop: StopSignals) -> int:
     experiment = load(args.experiment)
 
     def stopping(signum):
-        print(f"invsss: {signal.Signals(signum).name}: no new trials will start; stopping after the "
-              "running ones (send it again to quit now)", file=sys.stderr, flush=True)
+        print(f"invsss: {signal.Signals(signum).name}: no new trials will start; a fit running in "
+              "this process stops at its next step, trials on workers finish; rerun to resume "
+              "(send it again to quit now)", file=sys.stderr, flush=True)
 
     with stop.deferred(stopping):
         summary = run(experiment, args.out, executor=args.executor, jobs=args.jobs,

@@ -41,9 +41,11 @@ trials they were running are rerun on resume.
 from __future__ import annotations
 
 import concurrent.futures
+import ctypes
 import multiprocessing
 import os
 import signal
+import sys
 import threading
 import time
 
@@ -52,20 +54,29 @@ from .runner import execute
 
 __all__ = ["EXECUTORS", "LocalExecutor", "DaskExecutor", "make_executor"]
 
+_PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
+
 #: The executor names ``invsss sweep --executor`` accepts.
 EXECUTORS = ("local", "dask")
 
 
-def _worker_start() -> None:
-    """Set up a pool worker: ignore SIGINT, and exit when the sweep's process is gone.
+def _worker_start(parent: int) -> None:
+    """Set up a pool worker: ignore SIGINT, and die with the sweep's process ``parent``.
 
     A pool worker blocks reading its task queue, whose write end it holds
-    itself; if the sweep is killed (SIGKILL, OOM) nothing would ever wake it.
-    A watchdog thread notices the new parent process id and exits instead of
-    leaving orphans that hold trial folders.
+    itself; if the sweep is killed (SIGKILL, OOM) nothing would ever wake it,
+    and an orphan busy with a trial holds that trial's folder. On Linux the
+    kernel kills the worker when its parent dies (``PR_SET_PDEATHSIG``); a
+    watchdog thread that notices a new parent process id covers other systems.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    parent = os.getppid()
+    if sys.platform.startswith("linux"):
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent:  # died before we could ask
+        os._exit(1)
 
     def watch() -> None:
         while os.getppid() == parent:
@@ -110,7 +121,7 @@ class LocalExecutor:
         if not self.in_process:
             self._pool = concurrent.futures.ProcessPoolExecutor(
                 max_workers=self.jobs, mp_context=multiprocessing.get_context("spawn"),
-                initializer=_worker_start,
+                initializer=_worker_start, initargs=(os.getpid(),),
             )
         return self
 
