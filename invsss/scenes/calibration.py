@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mitsuba_scene import medium_dict
+from .mitsuba_scene import boundary_bsdf, medium_dict
 
 __all__ = ["CALIBRATION_SPP", "CALIBRATION_PIXELS", "slab_albedo"]
 
@@ -33,9 +33,7 @@ CALIBRATION_SPP = 256
 CALIBRATION_PIXELS = 16
 
 
-def _slab_scene(mi, interior: dict, eta: float, roughness: float, thickness: float, max_depth: int) -> dict:
-    boundary = {"type": "roughdielectric", "distribution": "beckmann", "alpha": roughness,
-                "int_ior": eta, "ext_ior": 1.0}
+def _slab_scene(mi, interior: dict, boundary: dict, thickness: float, max_depth: int) -> dict:
     width = 50.0 * thickness  # wide enough that no path that matters reaches the sides
     return {
         "type": "scene",
@@ -54,18 +52,16 @@ def _slab_scene(mi, interior: dict, eta: float, roughness: float, thickness: flo
     }
 
 
-def slab_albedo(mi, sigma_s_prime, sigma_a, eta: float, roughness: float, *, max_depth: int = 256,
-                seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def slab_albedo(mi, medium: dict, *, max_depth: int = 256, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Diffuse albedo of a semi-infinite slab of the medium, path traced, and its standard error.
 
     Parameters
     ----------
     mi : module
         Mitsuba with a variant set.
-    sigma_s_prime, sigma_a : list of float
-        Coefficients in 1/mm (1 or 3 values).
-    eta, roughness : float
-        The boundary's relative index and Beckmann alpha.
+    medium : dict
+        :meth:`~invsss.scenes.config.Medium.coefficients`: ``sigma_s_prime`` and
+        ``sigma_a`` in 1/mm (1 or 3 values), ``eta``, ``boundary``, ``roughness``.
     max_depth, seed : int
         As in the target render.
 
@@ -76,10 +72,14 @@ def slab_albedo(mi, sigma_s_prime, sigma_a, eta: float, roughness: float, *, max
     Examples
     --------
     >>> from invsss.scenes.mitsuba_scene import import_mitsuba
-    >>> albedo, error = slab_albedo(import_mitsuba("scalar_rgb"), [0.7748], [0.02808], 1.3, 0.5)
+    >>> medium = {"sigma_s_prime": [0.7748], "sigma_a": [0.02808], "eta": 1.3,
+    ...           "boundary": "rough-dielectric", "roughness": 0.5}
+    >>> albedo, error = slab_albedo(import_mitsuba("scalar_rgb"), medium)
     >>> bool(abs(albedo[0] - 0.404) < 5 * error[0]), bool(error[0] < 0.005)  # the dipole says 0.462
     (True, True)
     """
+    sigma_s_prime, sigma_a = medium["sigma_s_prime"], medium["sigma_a"]
+    boundary = boundary_bsdf(medium)
     s = np.asarray(sigma_s_prime, np.float64)
     a = np.asarray(sigma_a, np.float64)
     # Semi-infinite: 30 diffusion lengths (1 / sigma_tr) of the most penetrating channel.
@@ -87,10 +87,13 @@ def slab_albedo(mi, sigma_s_prime, sigma_a, eta: float, roughness: float, *, max
     thickness = float(max(30.0 * diffusion_length.max(), 20.0 / (s + a).min()))
     black = {"type": "homogeneous", "sigma_t": 1e4, "albedo": {"type": "rgb", "value": 0.0}}
     channels = s.size
-    total = np.asarray(mi.render(mi.load_dict(_slab_scene(mi, medium_dict(s.tolist(), a.tolist()), eta, roughness,
+    total = np.asarray(mi.render(mi.load_dict(_slab_scene(mi, medium_dict(s.tolist(), a.tolist()), boundary,
                                                           thickness, max_depth)), seed=seed), np.float64)
-    mirror = np.asarray(mi.render(mi.load_dict(_slab_scene(mi, black, eta, roughness, thickness, max_depth)),
-                                  seed=seed + 1), np.float64)
+    if medium["boundary"] == "index-matched":
+        mirror = np.zeros_like(total)  # nothing to reflect
+    else:
+        mirror = np.asarray(mi.render(mi.load_dict(_slab_scene(mi, black, boundary, thickness, max_depth)),
+                                      seed=seed + 1), np.float64)
     diffuse = (total - mirror)[..., :channels].reshape(-1, channels)
     albedo = diffuse.mean(axis=0)
     error = diffuse.std(axis=0, ddof=1) / np.sqrt(diffuse.shape[0])

@@ -216,6 +216,12 @@ class Medium(_Strict):
     ``sigma_s_prime`` and ``sigma_a`` in 1/mm (one number, or three for RGB) with
     ``eta``. ``roughness`` is the boundary's Beckmann alpha: a smooth boundary lets
     no point light into the medium by next-event estimation, about 0.5 works.
+
+    ``boundary = "index-matched"`` drops the dielectric (a Mitsuba ``null``
+    surface, eta 1: no refraction, no Fresnel reflection). Less like skin, but
+    next-event estimation then reaches the light from inside the medium and the
+    target converges about 50 times faster (per-sample noise about 1x the mean
+    instead of 7.5x on a slab of the 940 nm medium); ``eta`` must then be left out.
     """
 
     preset: Literal[tuple(MEDIUM_PRESETS)] | None = None  # type: ignore[valid-type]
@@ -223,9 +229,12 @@ class Medium(_Strict):
     sigma_a: Coefficient | None = None
     eta: Annotated[float, Field(gt=1.0, lt=3.0)] | None = None
     roughness: Annotated[float, Field(gt=0.0, le=1.0)] = 0.5
+    boundary: Literal["rough-dielectric", "index-matched"] = "rough-dielectric"
 
     @model_validator(mode="after")
     def _preset_or_coefficients(self):
+        if self.boundary == "index-matched" and self.eta is not None:
+            raise ValueError('an index-matched boundary has eta 1: leave eta out, or use boundary = "rough-dielectric"')
         given = [k for k in ("sigma_s_prime", "sigma_a", "eta") if getattr(self, k) is not None]
         if self.preset is not None and given:
             raise ValueError(f"give either preset or coefficients, not both (also got {', '.join(given)})")
@@ -234,7 +243,11 @@ class Medium(_Strict):
         return self
 
     def coefficients(self) -> dict:
-        """``{"sigma_s_prime": [...], "sigma_a": [...], "eta": float, "source": str}``, lists of 1 or 3."""
+        """``{"sigma_s_prime": [...], "sigma_a": [...], "eta", "boundary", "roughness", "source"}``.
+
+        The coefficient lists hold 1 or 3 values; ``eta`` is 1 for an index-matched
+        boundary (whatever a preset says) and ``roughness`` is then None.
+        """
         if self.preset is not None:
             preset = MEDIUM_PRESETS[self.preset]
             values = {k: preset[k] for k in ("sigma_s_prime", "sigma_a", "eta")}
@@ -246,8 +259,10 @@ class Medium(_Strict):
         s, a = (v if isinstance(v, list) else [v] for v in (values["sigma_s_prime"], values["sigma_a"]))
         if len(s) != len(a):
             s, a = (v * 3 if len(v) == 1 else v for v in (s, a))
+        matched = self.boundary == "index-matched"
         return {"sigma_s_prime": [float(x) for x in s], "sigma_a": [float(x) for x in a],
-                "eta": float(values["eta"]), "source": source}
+                "eta": 1.0 if matched else float(values["eta"]), "boundary": self.boundary,
+                "roughness": None if matched else self.roughness, "source": source}
 
 
 class SceneConfig(_Strict):

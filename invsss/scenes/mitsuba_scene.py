@@ -25,7 +25,7 @@ import numpy as np
 from ..validation import InvalidInputError
 from .config import SceneConfig
 
-__all__ = ["import_mitsuba", "scene_dict", "medium_dict", "load_mesh_ply", "SCENE_KINDS"]
+__all__ = ["import_mitsuba", "scene_dict", "medium_dict", "boundary_bsdf", "load_mesh_ply", "SCENE_KINDS"]
 
 SCENE_KINDS = ("source", "target", "specular", "geometry", "visible")
 
@@ -174,9 +174,20 @@ def medium_dict(sigma_s_prime, sigma_a) -> dict:
     }
 
 
-def _boundary(eta: float, roughness: float) -> dict:
-    return {"type": "roughdielectric", "distribution": "beckmann", "alpha": roughness,
-            "int_ior": eta, "ext_ior": 1.0}
+def boundary_bsdf(medium: dict) -> dict:
+    """The BSDF of the medium's surface: a rough dielectric (Beckmann), or ``null`` if index-matched.
+
+    ``medium`` is :meth:`~invsss.scenes.config.Medium.coefficients`.
+
+    Examples
+    --------
+    >>> boundary_bsdf({"boundary": "index-matched", "eta": 1.0, "roughness": None})
+    {'type': 'null'}
+    """
+    if medium["boundary"] == "index-matched":
+        return {"type": "null"}
+    return {"type": "roughdielectric", "distribution": "beckmann", "alpha": medium["roughness"],
+            "int_ior": medium["eta"], "ext_ior": 1.0}
 
 
 def _object_shape(mi, config: SceneConfig, mesh_ply: str | None) -> dict:
@@ -324,7 +335,7 @@ def scene_dict(mi, config: SceneConfig, kind: str, *, albedo=None, mesh_ply: str
             shape["bsdf"] = {"type": "diffuse", "reflectance": _colour(albedo)}
             integrator = {"type": "path", "max_depth": config.max_depth}
         else:
-            shape["bsdf"] = _boundary(coefficients["eta"], config.medium.roughness)
+            shape["bsdf"] = boundary_bsdf(coefficients)
             if kind == "target":
                 shape["interior"] = medium_dict(coefficients["sigma_s_prime"], coefficients["sigma_a"])
             else:

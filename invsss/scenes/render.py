@@ -189,8 +189,7 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         # leaves the others (here the far-reaching red) with heavy fireflies.
         media = _grey_media(coefficients)
         calibrated = [timed(f"calibration {c + 1}/{len(media)}", lambda: slab_albedo(
-            mi, medium["sigma_s_prime"], medium["sigma_a"], medium["eta"],
-            config.medium.roughness, max_depth=config.max_depth, seed=seeds["calibration"]))
+            mi, medium, max_depth=config.max_depth, seed=seeds["calibration"]))
             for c, medium in enumerate(media)]
         albedo = np.concatenate([value for value, _ in calibrated])
         albedo_error = np.concatenate([error for _, error in calibrated])
@@ -207,8 +206,11 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
             for c, (target_scene, specular_scene) in enumerate(scenes):
                 full = timed(f"target half {k + 1}, channel {c + 1}/{len(media)}", lambda: _channels(
                     mi.render(target_scene, spp=half_spp, seed=seeds["target_halves"][k]), channels))
-                mirror = timed(f"specular half {k + 1}, channel {c + 1}/{len(media)}", lambda: _channels(
-                    mi.render(specular_scene, spp=half_spp, seed=seeds["specular_halves"][k]), channels))
+                if coefficients["boundary"] == "index-matched":
+                    mirror = 0.0  # a null surface reflects nothing
+                else:
+                    mirror = timed(f"specular half {k + 1}, channel {c + 1}/{len(media)}", lambda: _channels(
+                        mi.render(specular_scene, spp=half_spp, seed=seeds["specular_halves"][k]), channels))
                 parts.append(full - mirror)
             # One grey medium: all channels at once; one per channel: channel c from render c.
             halves.append(parts[0] if len(parts) == 1 else np.stack([p[..., c] for c, p in enumerate(parts)], -1))
@@ -227,8 +229,7 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         "channels": channels,
         "medium": {
             **coefficients,
-            "roughness": config.medium.roughness,
-            "boundary": "roughdielectric, Beckmann",
+            "boundary_bsdf": "roughdielectric, Beckmann" if coefficients["boundary"] != "index-matched" else "null",
             "phase": "isotropic (sigma_s = sigma_s')",
         },
         "source_albedo": {
