@@ -71,7 +71,7 @@ _LAZY = {
 # Submodules reachable as attributes (``invsss.io.PARAMS_KEYS``) without an import.
 _SUBMODULES = (
     "cli", "estimator", "experiments", "export", "interrupts", "io", "measure", "models", "profile_fit",
-    "report", "result_dir", "torch",
+    "report", "result_dir", "scenes", "torch",
 )
 
 __all__ = [
