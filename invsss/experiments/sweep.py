@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import dataclasses
 import fcntl
-import json
 import os
 import shutil
 import socket
@@ -116,9 +115,8 @@ def _duration(seconds: float) -> str:
 class _Progress:
     """``sweep: 5/12 done, 1 failed, 6 remaining, ETA 2m10s`` lines on ``log``."""
 
-    def __init__(self, log, total: int, done: int, failed: int, slots: int):
+    def __init__(self, log, total: int, done: int, failed: int):
         self.log, self.total, self.done, self.failed = log, total, done, failed
-        self.slots = slots
         self.ran = 0
         self.start = time.monotonic()
 
@@ -222,7 +220,7 @@ def run(
         statuses = {row["id"]: row["status"] for row in store.rows()}
         by_id = {t.id: t.to_dict() for t in experiment.trials}
         stale = sum(store.counts().values()) - len(ids)
-        progress = _Progress(log, len(ids), counts["done"], counts["failed"], 1)
+        progress = _Progress(log, len(ids), counts["done"], counts["failed"])
         progress.say(
             f"{experiment.name}: {len(ids)} trials, {counts['done']} already done, {len(todo)} to run"
             + (f" ({stale} older trials in {out} kept)" if stale > 0 else "")
