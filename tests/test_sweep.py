@@ -283,3 +283,44 @@ profile = {PROFILE}
         assert os.path.isfile(os.path.join(trial_folder(root / "fit_dask", trial_id), "fit.exr"))
     table = ex.results(root / "fit_dask")
     assert list(table["pair"]) == ["a", "b"]
+
+
+def test_pair_axis_per_task(root):
+    # fit and render: one trial per pair unless the file names the pairs itself.
+    chosen = ex.load(_experiment(root, "pairs.toml", RENDER + 'pair = ["c", "a"]\n'))
+    assert len(chosen.trials) == 8 and {t.axes["pair"] for t in chosen.trials} == {"a", "c"}
+    assert [p["name"] for p in chosen.trials[0].pairs] == ["c"]
+    with pytest.raises(InvalidInputError, match=r"pair 'd' is not one of the data's pairs \(a, b, c\)"):
+        ex.load(_experiment(root, "pairs2.toml", RENDER + 'pair = ["d"]\n'))
+    # fit-joint: every pair in each trial; the pair is not an axis.
+    joint = f'task = "fit-joint"\n[data]\npairs = ["data/*/"]\n[base]\nprofile = {PROFILE}\n[grid]\nfix.maxdd = [0.5, 1.0]\n'
+    experiment = ex.load(_experiment(root, "joint.toml", joint))
+    assert len(experiment.trials) == 2 and experiment.axes == ("fix.maxdd",)
+    assert all([p["name"] for p in t.pairs] == ["a", "b", "c"] for t in experiment.trials)
+    assert [t.options["fix"] for t in experiment.trials] == [{"maxdd": 0.5}, {"maxdd": 1.0}]
+    with pytest.raises(InvalidInputError, match="unknown key 'grid.pair'"):
+        ex.load(_experiment(root, "joint2.toml", joint + 'pair = ["a"]\n'))
+
+
+def test_sweep_report_table_csv_and_plots(root, capsys):
+    import csv
+
+    path = _experiment(root, "report.toml", RENDER.replace('"data/*/"', '"data/a/"'))
+    out = root / "report_out"
+    ex.run(path, out, log=None)
+    assert invsss.cli.main(["sweep-report", str(out)]) == 0
+    table = capsys.readouterr().out.splitlines()
+    assert table[0].split()[:5] == ["id", "status", "sss_level", "correction", "pair"]
+    rows = _rows(out)
+    with open(out / "report" / "results.csv", newline="") as f:
+        written = {r["id"]: r for r in csv.DictReader(f)}
+    assert set(written) == set(rows) and len(rows) == 4
+    for trial_id, row in rows.items():
+        assert float(written[trial_id]["psnr"]) == pytest.approx(row["psnr"], rel=1e-12)
+        assert json.loads(written[trial_id]["param.weights"]) == row["param.weights"]
+        assert any(line.startswith(trial_id) and " done " in line for line in table)
+    for name in ("metrics_vs_sss_level.png", "metrics_vs_correction.png", "contact_a.png"):
+        assert os.path.getsize(out / "report" / name) > 1000
+    # The render at the parameters the pair was made with scores best.
+    best = max(rows.values(), key=lambda r: r["psnr"])
+    assert (best["sss_level"], best["correction"]) == (600, 800)
