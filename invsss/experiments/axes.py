@@ -159,5 +159,5 @@ def set_path(options: dict, path: str, value) -> None:
     for part in parents:
         table = table.setdefault(part, {})
         if not isinstance(table, dict):
-            raise InvalidInputError(f"{path}: {part} is not a table of options")
+            raise InvalidInputError(f"{path}: the base value of {part} is {table!r}, not a table to set {leaf} in")
     table[leaf] = value

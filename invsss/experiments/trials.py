@@ -130,7 +130,10 @@ def resolve_options(task: str, base: dict, row: dict, name: str, label: str, sam
             continue
         if path in integers and path in sampled:
             value = int(round(value))
-        set_path(options, path, value)
+        try:
+            set_path(options, path, value)
+        except InvalidInputError as err:
+            raise InvalidInputError(f"{name}: {label}: {err}") from None
     for key in options.get("fix", {}) if isinstance(options.get("fix"), dict) else ():
         if key not in FIX_NAMES:
             raise InvalidInputError(f"{name}: {label}: unknown key 'fix.{key}'{nearest(key, FIX_NAMES)}")
