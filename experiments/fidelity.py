@@ -1,0 +1,186 @@
+"""How close does the screen-space model come to a path tracer? (issue 7, item 6)
+
+For every path-traced pair folder (written by ``invsss scene``: source, target,
+depth, mask and ``scene.json``) this prints one table of PSNR and SSIM against the
+target over the eroded mask, one row per way of predicting the target:
+
+``source``
+    the Lambertian source itself: no scattering at all;
+``thesis L=0.5 c=2000`` (and 0.7/7500, 0.4/4500)
+    the thesis's hand-set values in its ``thesis`` pipeline (Table 5.1 variances,
+    its 7-tap weights). They were set in Unity, whose linear eye depth is in metres;
+    the pairs' depth is in mm. ``s = L / (d + c min(|dd/dx|, maxdd))`` keeps its value
+    when ``d`` and ``dd/dx`` are both multiplied by 1000 if ``L`` is too, so
+    ``sss_level = 1000 sssLevel`` and ``correction`` is unchanged. The thesis gives
+    no ``maxdd``; these rows use 1000 mm per pixel, which never clamps;
+``fit (thesis-nir profile)``
+    ``invsss.fit_pair`` with its defaults;
+``fit (medium's dipole)``
+    the same with the profile fixed to a 5-Gaussian fit of the medium's dipole
+    (``scene.json``'s sigma_s', sigma_a, eta);
+``fit from <other pair>``
+    the default fit of another pair of the same medium, applied to this one (does
+    a fit carry over to another view?);
+``noise ceiling``
+    the best PSNR a noise-free prediction can reach against this Monte Carlo target
+    (``scene.json``, from the two half renders).
+
+Every prediction gets the per-channel gain and offset that match it best to the
+target on the mask (linear least squares), as the fit does, so the rows differ
+only in the blur. The mask is eroded by ``--erode`` pixels so that silhouette
+pixels, where the path tracer and the screen-space model see different geometry,
+do not dominate. Residual maps (target minus prediction) are saved as PNG under
+``--out``; the table also goes to ``--out/fidelity.json``.
+
+    python experiments/fidelity.py [PAIR_DIR ...] [--out runs/fidelity] [--quick]
+
+Without PAIR_DIR, every folder of ``data_synthetic/`` that holds a ``scene.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import pathlib
+import time
+
+import numpy as np
+from scipy import ndimage
+
+import invsss
+from invsss.estimator.diagnostics import masked_psnr, masked_ssim
+
+THESIS_HAND_VALUES = ((0.5, 2000.0), (0.7, 7500.0), (0.4, 4500.0))
+#: The thesis gives no maxdd; this one (mm per pixel) never clamps a slope.
+THESIS_MAXDD_MM = 1000.0
+
+
+def load_scene_pair(folder: pathlib.Path) -> dict:
+    """A pair folder's images, mask, depth and scene.json.
+
+    Off the object the depth is 0 (``invsss scene`` writes renderer-style depth);
+    the screen-space model reads depth slopes at the silhouette, so the depth is
+    extended outward from the nearest covered pixel.
+    """
+    depth = invsss.read_image(folder / "depth.exr")[..., 0].astype(np.float64)
+    seen = depth > 0
+    _, (rows, cols) = ndimage.distance_transform_edt(~seen, return_indices=True)
+    return {
+        "name": folder.name,
+        "source": invsss.read_image(folder / "source.exr"),
+        "target": invsss.read_image(folder / "target.exr"),
+        "mask": invsss.read_mask(folder / "mask.png"),
+        "depth": depth[rows, cols].astype(np.float32),
+        "info": json.loads((folder / "scene.json").read_text()),
+    }
+
+
+def eroded(mask: np.ndarray, pixels: int) -> np.ndarray:
+    inside = mask > 0.5
+    return (ndimage.binary_erosion(inside, iterations=pixels) if pixels > 0 else inside).astype(np.float32)
+
+
+def photometric_match(prediction: np.ndarray, target: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``gain * prediction + offset`` per channel, least squares on the mask."""
+    on = mask > 0
+    matched = np.empty_like(target)
+    for c in range(target.shape[-1]):
+        p = prediction[..., min(c, prediction.shape[-1] - 1)]
+        design = np.stack([p[on], np.ones(int(on.sum()))], axis=1)
+        (gain, offset), *_ = np.linalg.lstsq(design, target[..., c][on], rcond=None)
+        matched[..., c] = gain * p + offset
+    return matched
+
+
+def dipole_profile(info: dict) -> invsss.SumOfGaussians:
+    """A 5-Gaussian fit of the dipole of the pair's medium."""
+    medium = info["medium"]
+    r = np.linspace(0.0, 12.0, 161)
+    values = np.asarray(invsss.jensen_dipole(r, np.asarray(medium["sigma_s_prime"]),
+                                              np.asarray(medium["sigma_a"]), medium["eta"]))
+    values = values.reshape(len(r), -1)
+    return invsss.fit_sum_of_gaussians(r, values if values.shape[1] > 1 else values[:, 0], 5,
+                                       source="dipole of the scene's medium").profile
+
+
+def medium_key(info: dict) -> tuple:
+    medium = info["medium"]
+    return (tuple(medium["sigma_s_prime"]), tuple(medium["sigma_a"]), medium["eta"], medium.get("boundary"))
+
+
+def score(prediction, pair, mask) -> dict:
+    matched = photometric_match(np.asarray(prediction, np.float32), pair["target"], mask)
+    return {"psnr": masked_psnr(matched, pair["target"], mask),
+            "ssim": masked_ssim(matched, pair["target"], mask),
+            "residual": pair["target"] - matched}
+
+
+def save_residual(path: pathlib.Path, residual: np.ndarray, mask: np.ndarray) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    grey = np.where(mask > 0, residual.mean(axis=-1), np.nan)
+    limit = float(np.nanpercentile(np.abs(grey), 99)) or 1.0
+    plt.imsave(path, grey, cmap="RdBu_r", vmin=-limit, vmax=limit)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("pairs", nargs="*", type=pathlib.Path, help="pair folders (default: data_synthetic/*)")
+    parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("runs/fidelity"))
+    parser.add_argument("--erode", type=int, default=2, help="mask erosion in pixels (default 2)")
+    parser.add_argument("--quick", action="store_true", help="1 start and 50 steps per fit (a smoke run)")
+    args = parser.parse_args()
+    folders = args.pairs or sorted(p.parent for p in pathlib.Path("data_synthetic").glob("*/scene.json"))
+    if not folders:
+        parser.error("no path-traced pair folders (with scene.json) found")
+    fit_options = {"n_starts": 1, "max_steps": 50} if args.quick else {}
+    pairs = [load_scene_pair(folder) for folder in folders]
+    table: dict[str, dict[str, dict]] = {}
+    fits = {}
+    for pair in pairs:
+        started = time.perf_counter()
+        mask = eroded(pair["mask"], args.erode)
+        rows: dict[str, dict] = {"source": score(pair["source"], pair, mask)}
+        for level, correction in THESIS_HAND_VALUES:
+            params = invsss.SSSParams(sss_level=1000.0 * level, correction=correction, maxdd=THESIS_MAXDD_MM,
+                                      weights=list(invsss.THESIS_NIR_940["weights"]),
+                                      variances=list(invsss.THESIS_NIR_940["variances"]))
+            prediction = invsss.render(pair["source"], pair["depth"], pair["mask"], params, model="thesis")
+            rows[f"thesis L={level} c={correction:g}"] = score(prediction, pair, mask)
+        fit = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"], **fit_options)
+        fits[pair["name"]] = fit
+        rows["fit (thesis-nir profile)"] = score(fit.fitted[0], pair, mask)
+        dipole = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"],
+                                 profile=dipole_profile(pair["info"]), **fit_options)
+        rows["fit (medium's dipole)"] = score(dipole.fitted[0], pair, mask)
+        rows["noise ceiling"] = {"psnr": pair["info"]["noise"]["noise_ceiling_db"], "ssim": None, "residual": None}
+        table[pair["name"]] = rows
+        print(f"{pair['name']}: {time.perf_counter() - started:.0f} s", flush=True)
+    for a, b in itertools.permutations(pairs, 2):
+        if medium_key(a["info"]) == medium_key(b["info"]):
+            mask = eroded(b["mask"], args.erode)
+            prediction = invsss.render(b["source"], b["depth"], b["mask"], fits[a["name"]].params, model="sog")
+            table[b["name"]][f"fit from {a['name']}"] = score(prediction, b, mask)
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    summary = {}
+    for name, rows in table.items():
+        print(f"\n{name}\n\n| prediction | PSNR (dB) | SSIM |\n|---|---|---|")
+        (args.out / name).mkdir(exist_ok=True)
+        for row, result in rows.items():
+            ssim = "" if result["ssim"] is None else f"{result['ssim']:.4f}"
+            print(f"| {row} | {result['psnr']:.2f} | {ssim} |")
+            if result["residual"] is not None:
+                slug = "".join(ch if ch.isalnum() else "_" for ch in row).strip("_")
+                save_residual(args.out / name / f"residual_{slug}.png", result["residual"],
+                              eroded(next(p for p in pairs if p["name"] == name)["mask"], args.erode))
+        summary[name] = {row: {"psnr": r["psnr"], "ssim": r["ssim"]} for row, r in rows.items()}
+    (args.out / "fidelity.json").write_text(json.dumps(summary, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()
