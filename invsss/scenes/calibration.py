@@ -16,7 +16,8 @@ slab of the medium under a uniform white sky, looked at straight down, with the
 boundary's own reflection subtracted (rendered separately with a black interior).
 Under uniform light of radiance 1 the reflected radiance is the directional albedo,
 which a Lambertian surface of that albedo reproduces. The standard error of the
-mean comes with it.
+mean comes with it. An index-matched boundary (``null`` surface) reflects nothing,
+so there is nothing to subtract.
 """
 
 from __future__ import annotations
