@@ -213,6 +213,29 @@ def test_sweep_killed_mid_run_resumes_to_one_done_row_per_trial(root):
     assert ex.run(path, out, log=None).ran == 0
 
 
+def test_ctrl_c_stops_between_trials_and_a_rerun_resumes(root):
+    path = _experiment(root, "sigint.toml", RENDER)
+    out = root / "sigint"
+    env = {**os.environ, "INVSSS_TEST_PAUSE_IN_COMMIT": "0.4"}
+    process = subprocess.Popen(
+        [sys.executable, "-m", "invsss", "sweep", str(path), "--out", str(out)],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    deadline = time.monotonic() + 120
+    while _done_count(out / "results.sqlite") < 2 and time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.1)
+    process.send_signal(signal.SIGINT)
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 130
+    assert "run the same command again to resume" in err and "Traceback" not in err
+    rows = _rows(out)
+    statuses = [r["status"] for r in rows.values()]
+    assert 2 <= statuses.count("done") < 12 and set(statuses) == {"done", "pending"}
+    _check_artefacts_match(str(out), rows)
+    assert invsss.cli.main(["sweep", str(path), "--out", str(out)]) == 0
+    assert all(r["status"] == "done" for r in _rows(out).values())
+
+
 # ------------------------------------------------------------ failing trials
 
 
