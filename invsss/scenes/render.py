@@ -82,10 +82,6 @@ def _channels(image, count: int) -> np.ndarray:
     return np.asarray(image, np.float64)[..., :count]
 
 
-def _aov(bitmap_channels: dict, name: str) -> np.ndarray:
-    return np.asarray(bitmap_channels[name], np.float64)
-
-
 def _render_aovs(mi, scene: dict) -> dict:
     loaded = mi.load_dict(scene)
     mi.render(loaded)
