@@ -179,7 +179,21 @@ def test_two_seeds_give_the_stated_noise():
     assert first.info["seeds"]["target_halves"] != second.info["seeds"]["target_halves"]
 
 
-def test_chromatic_medium_gives_rgb_with_red_scattering_furthest():
+def test_a_camera_that_sees_no_skin_is_one_line():
+    away = {**CAMERA, "look_at": [0.0, 0.0, 600.0], "width": 8, "height": 8}
+    with pytest.raises(invsss.InvalidInputError, match="^camera: sees no skin"):
+        render_scene(_config(camera=away))
+
+
+def test_coloured_light_gives_rgb_even_for_a_grey_medium():
+    light = {**POINT_LIGHT, "intensity": [1e5, 5e4, 2e4]}
+    result = render_scene(_config(lights=[light], camera={**CAMERA, "width": 8, "height": 8}))
+    assert result.source.shape == (8, 8, 3)
+    red, green, blue = result.source[result.mask > 0].mean(axis=0)
+    assert red > green > blue
+
+
+def test_chromatic_medium_gives_rgb_with_an_albedo_per_channel():
     config = _config(medium={"preset": "jensen-skin1"}, spp=8, camera={**CAMERA, "width": 16, "height": 16})
     result = render_scene(config)
     assert result.target.shape == (16, 16, 3) and result.source.shape == (16, 16, 3)

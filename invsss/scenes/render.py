@@ -90,10 +90,8 @@ def _render_aovs(mi, scene: dict) -> dict:
 
 
 def _is_grey(config: SceneConfig, coefficients: dict) -> bool:
-    colours = []
-    for light in config.lights:
-        colours.append(getattr(light, "intensity", None) or getattr(light, "radiance", None)
-                       or getattr(light, "irradiance", None))
+    colours = [getattr(light, field) for light in config.lights
+               for field in ("intensity", "radiance", "irradiance") if hasattr(light, field)]
     return len(coefficients["sigma_s_prime"]) == 1 and not any(isinstance(c, list) for c in colours)
 
 
