@@ -271,8 +271,10 @@ class SceneConfig(_Strict):
     The target's ``spp`` is split into two independently seeded halves (seeds
     ``2 seed`` and ``2 seed + 1``, so neighbouring seeds share no samples) whose
     difference gives the noise estimate; ``geometry_spp`` samples the depth, normal
-    and coverage passes (stratified). ``max_depth`` bounds the path length: for
-    sigma_s' = 2.4/mm, 64 loses about 6 % of the energy, 256 is within 0.2 %.
+    and coverage passes (stratified). ``max_depth`` bounds the path length: with
+    sigma_s' = 2.4/mm a slab's diffuse albedo at 64 is 1 % (sigma_a = 0.1/mm) to 7 %
+    (sigma_a = 0.01/mm) below its value at 256, and 256 and 1024 agree (measured with
+    Mitsuba 3.9.1): keep 256 for low-absorption media.
     """
 
     variant: Literal[VARIANTS] = "scalar_rgb"  # type: ignore[valid-type]
