@@ -137,7 +137,7 @@ def _plot_spread(plt, rows, folder) -> str:
                       if r["pair"] == pair and _is_number(r.get(f"param.{name}"))]
             if values:
                 y, err = zip(*values)
-                panel.errorbar([k] * len(y), y, yerr=err, fmt="o", capsize=3, markersize=4)
+                panel.errorbar([k] * len(y), y, yerr=err, fmt="o", capsize=3, markersize=4, color=f"C{k}")
         panel.set_xticks(range(len(pairs)), pairs, rotation=30, fontsize=7)
         panel.set_ylabel(name)
     figure.tight_layout()
