@@ -347,3 +347,20 @@ def test_sweep_report_table_csv_and_plots(root, capsys):
     # The render at the parameters the pair was made with scores best.
     best = max(rows.values(), key=lambda r: r["psnr"])
     assert (best["sss_level"], best["correction"]) == (600, 800)
+
+
+def test_a_nan_loss_fails_the_trial_and_writes_nothing(root, monkeypatch):
+    from invsss.experiments import runner
+    from invsss.experiments.tasks import TaskOutput
+
+    def diverged(task, options, pairs, stop=None):
+        # What a diverging solver hands back: numbers, but a NaN loss.
+        return TaskOutput(params={}, stderr=None, metrics={"loss": float("nan")}, warnings=[],
+                          files={"params.json": lambda path: open(path, "w").write("{}")})
+
+    monkeypatch.setattr(runner, "run_task", diverged)
+    trial = ex.load(_experiment(root, "nan.toml", RENDER)).trials[0]
+    out = root / "nan"
+    outcome = runner.execute(trial.to_dict(), str(out))
+    assert outcome["status"] == "failed" and "loss is nan" in outcome["error"]
+    assert not os.path.exists(trial_folder(out, trial.id))
