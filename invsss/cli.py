@@ -119,6 +119,8 @@ def _add_render_parser(subparsers) -> None:
     )
     _add_model_arguments(parser)
     parser.add_argument("--out", required=True, help="output image (.exr, .png, .tif, .jpg, .npy)")
+    parser.add_argument("--no-cache", action="store_true",
+                        help="do not use the persistent compilation cache (also INVSSS_NO_CACHE=1)")
     parser.set_defaults(func=_run_render)
 
 
@@ -220,6 +222,8 @@ def _add_fit_parser(subparsers) -> None:
     parser.add_argument("--overwrite", action="store_true",
                         help="replace the result already in DIR (its files only; other "
                         "files in DIR are kept)")
+    parser.add_argument("--no-cache", action="store_true",
+                        help="do not use the persistent compilation cache (also INVSSS_NO_CACHE=1)")
     parser.set_defaults(func=_run_fit)
 
 
@@ -525,6 +529,8 @@ def _add_sweep_parser(subparsers) -> None:
                         "the Dask LocalCluster started without --scheduler (default 2)")
     parser.add_argument("--scheduler", default=None, metavar="ADDR",
                         help="address of a running Dask scheduler (tcp://host:8786)")
+    parser.add_argument("--no-cache", action="store_true",
+                        help="do not use the persistent compilation cache (also INVSSS_NO_CACHE=1)")
     parser.set_defaults(func=_run_sweep)
     # `invsss sweep-report` is the sweep's other half: registered with it.
     _add_sweep_report_parser(subparsers)
@@ -605,6 +611,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with warnings.catch_warnings(), StopSignals() as stop:
             warnings.showwarning = _show_warning
+            _use_compile_cache(args)
             return args.func(args, stop)
     except InvalidInputError as err:
         print(f"invsss: error: {err}", file=sys.stderr)
@@ -613,6 +620,19 @@ def main(argv: list[str] | None = None) -> int:
         # A signal outside the fit (reading, rendering): nothing to keep.
         print(f"invsss: interrupted ({interrupt}); nothing written", file=sys.stderr)
         return interrupt.exit_status
+
+
+def _use_compile_cache(args: argparse.Namespace) -> None:
+    """JAX's persistent compilation cache for the commands that compile (those with --no-cache)."""
+    if not hasattr(args, "no_cache"):
+        return
+    if args.no_cache:
+        # Through the environment, so that a sweep's worker processes see it too.
+        os.environ["INVSSS_NO_CACHE"] = "1"
+        return
+    from .compile_cache import enable_compile_cache
+
+    enable_compile_cache()
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):

@@ -84,6 +84,10 @@ def _worker_start(parent: int) -> None:
         os._exit(1)
 
     threading.Thread(target=watch, name="invsss-parent-watchdog", daemon=True).start()
+    # Workers of one sweep share the on-disk compilation cache (off with INVSSS_NO_CACHE=1).
+    from ..compile_cache import enable_compile_cache
+
+    enable_compile_cache()
 
 
 def _check_jobs(jobs) -> int:

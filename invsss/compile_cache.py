@@ -1,0 +1,192 @@
+"""JAX's persistent compilation cache for invsss: where it lives and how to switch it on.
+
+Most of a fit's wall time on a CPU is XLA compiling the estimator's jitted
+functions, and a new process compiles them again. JAX can keep compiled
+executables on disk, keyed by the program, its shapes and the jax/XLA versions,
+so that a second process with the same image size loads them instead.
+
+The command line (``invsss fit``, ``render``, ``sweep``) and the workers of a
+local sweep switch it on; a library user calls :func:`enable_compile_cache`.
+Where it lives, first match wins:
+
+1. the ``directory`` argument;
+2. ``$INVSSS_CACHE_DIR``;
+3. ``$XDG_CACHE_HOME/invsss/jax``;
+4. ``~/.cache/invsss/jax``.
+
+``INVSSS_NO_CACHE=1`` (or ``--no-cache`` on the command line) leaves it off,
+even where a program asks for it.
+
+Several processes may share one directory (a sweep's workers do). JAX 0.10's
+file cache writes an entry with a plain ``write_bytes`` (not a rename), so
+without a lock a reader can see half a file. It takes a lock file
+(``filelock.FileLock``, an ``fcntl`` lock) around every read and write only
+when a size bound is set, to keep its least-recently-used bookkeeping
+consistent; so :func:`enable_compile_cache` always sets one
+(:data:`MAX_CACHE_BYTES`), which is what makes sharing safe. A lock that cannot
+be had within JAX's 10 s, or an unreadable entry, costs a compilation and a
+warning, never a wrong result: JAX checks every cache read and compiles
+afresh on failure.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from .validation import InvalidInputError
+
+__all__ = [
+    "MAX_CACHE_BYTES",
+    "MIN_COMPILE_SECONDS",
+    "cache_directory",
+    "cache_disabled",
+    "enable_compile_cache",
+]
+
+#: Bound on the cache directory's size; least recently used entries go first.
+#: Setting any bound is also what turns on JAX's cross-process file lock.
+MAX_CACHE_BYTES = 2 * 1024**3
+
+#: Compilations quicker than this are not written. JAX's default (1 s) would
+#: skip most of the estimator's functions, each 0.1-1 s to compile on a CPU,
+#: while caching the many tiny eager operations (a few ms each) would only
+#: trade a compilation for a file read.
+MIN_COMPILE_SECONDS = 0.05
+
+_FALSE_WORDS = ("", "0", "false", "no", "off")
+
+
+def cache_disabled() -> bool:
+    """True when ``$INVSSS_NO_CACHE`` asks for no persistent compilation cache.
+
+    Any value other than empty, ``0``, ``false``, ``no`` or ``off`` (any case)
+    switches the cache off.
+
+    Examples
+    --------
+    >>> import os
+    >>> os.environ["INVSSS_NO_CACHE"] = "1"
+    >>> cache_disabled()
+    True
+    >>> os.environ["INVSSS_NO_CACHE"] = "0"
+    >>> cache_disabled()
+    False
+    >>> del os.environ["INVSSS_NO_CACHE"]
+    """
+    return os.environ.get("INVSSS_NO_CACHE", "").strip().lower() not in _FALSE_WORDS
+
+
+def cache_directory(directory: str | os.PathLike | None = None) -> Path:
+    """The cache directory: ``directory``, else ``$INVSSS_CACHE_DIR``, else
+    ``$XDG_CACHE_HOME/invsss/jax``, else ``~/.cache/invsss/jax``.
+
+    Nothing is created; the result is absolute.
+
+    Parameters
+    ----------
+    directory : str or os.PathLike, optional
+
+    Returns
+    -------
+    pathlib.Path
+
+    Examples
+    --------
+    >>> cache_directory("/tmp/somewhere")
+    PosixPath('/tmp/somewhere')
+    >>> cache_directory(3)
+    Traceback (most recent call last):
+    ...
+    invsss.validation.InvalidInputError: directory: expected a path (str or os.PathLike), got int
+    """
+    if directory is None:
+        for variable, tail in (("INVSSS_CACHE_DIR", ()), ("XDG_CACHE_HOME", ("invsss", "jax"))):
+            value = os.environ.get(variable, "")
+            # XDG: a relative value is invalid and is to be ignored.
+            if value and (variable == "INVSSS_CACHE_DIR" or os.path.isabs(value)):
+                return Path(value, *tail).expanduser().absolute()
+        return Path.home() / ".cache" / "invsss" / "jax"
+    if not isinstance(directory, (str, os.PathLike)) or directory == "":
+        raise InvalidInputError(
+            f"directory: expected a path (str or os.PathLike), got {type(directory).__name__}"
+        )
+    return Path(directory).expanduser().absolute()
+
+
+_enabled: Path | None = None
+
+
+def enable_compile_cache(
+    directory: str | os.PathLike | None = None,
+    *,
+    min_compile_seconds: float = MIN_COMPILE_SECONDS,
+) -> Path | None:
+    """Keep JAX's compiled functions on disk, so a new process with the same
+    shapes skips most compilation.
+
+    Call it before the first fit; calling it again with the same directory does
+    nothing. It sets process-wide JAX options (``jax_compilation_cache_dir``
+    and the cache's thresholds and size bound).
+
+    Parameters
+    ----------
+    directory : str or os.PathLike, optional
+        Where to keep the cache (see :func:`cache_directory` for the default).
+        Created if missing.
+    min_compile_seconds : float
+        Compilations quicker than this are not written (default
+        :data:`MIN_COMPILE_SECONDS`).
+
+    Returns
+    -------
+    pathlib.Path or None
+        The directory in use, or None when ``$INVSSS_NO_CACHE`` is set or the
+        directory cannot be created (then a warning says why; fitting works as
+        before, only slower to start).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> os.environ["INVSSS_NO_CACHE"] = "1"
+    >>> print(enable_compile_cache(tempfile.mkdtemp()))
+    None
+    >>> del os.environ["INVSSS_NO_CACHE"]
+    >>> enable_compile_cache(tempfile.mkdtemp(), min_compile_seconds=-1)
+    Traceback (most recent call last):
+    ...
+    invsss.validation.InvalidInputError: min_compile_seconds: expected a number >= 0, got -1
+    """
+    global _enabled
+    path = cache_directory(directory)
+    if isinstance(min_compile_seconds, bool) or not isinstance(min_compile_seconds, (int, float)) \
+            or not min_compile_seconds >= 0:
+        raise InvalidInputError(
+            f"min_compile_seconds: expected a number >= 0, got {min_compile_seconds!r}"
+        )
+    if cache_disabled():
+        return None
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        import warnings
+
+        warnings.warn(f"compilation cache {path}: cannot create it ({err.strerror}); not caching")
+        return None
+
+    import jax
+    from jax.experimental.compilation_cache import compilation_cache
+
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_seconds))
+    # -1: no size floor (0 would let JAX substitute its own default).
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
+    jax.config.update("jax_compilation_cache_max_size", MAX_CACHE_BYTES)
+    if _enabled == path and jax.config.jax_compilation_cache_dir == str(path):
+        return path
+    jax.config.update("jax_compilation_cache_dir", str(path))
+    # JAX decides once per process, at the first compilation, whether a cache is
+    # in use (and opens it once); anything compiled before this call (an
+    # import-time constant) would otherwise leave it off or on the old directory.
+    compilation_cache.reset_cache()
+    _enabled = path
+    return path

@@ -1,0 +1,43 @@
+"""Suite-wide settings: keep JAX's persistent compilation cache out of the user's home.
+
+The command line switches the cache on (``invsss.compile_cache``), and the CLI
+tests call it in this process and in subprocesses that inherit the environment,
+so the whole session points ``INVSSS_CACHE_DIR`` at a temporary directory, set
+before any test runs and removed at the end. ``invsss ... --no-cache`` sets
+``INVSSS_NO_CACHE`` in the process environment (for a sweep's workers); the
+autouse fixture puts both variables back after every test so one test's flag
+does not switch the cache off for the next.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+
+import pytest
+
+_VARIABLES = ("INVSSS_CACHE_DIR", "INVSSS_NO_CACHE")
+_session_cache: str | None = None
+
+
+def pytest_configure(config):
+    global _session_cache
+    _session_cache = tempfile.mkdtemp(prefix="invsss-test-jax-cache-")
+    os.environ["INVSSS_CACHE_DIR"] = _session_cache
+
+
+def pytest_unconfigure(config):
+    if _session_cache is not None:
+        shutil.rmtree(_session_cache, ignore_errors=True)
+
+
+@pytest.fixture(autouse=True)
+def _restore_cache_variables():
+    saved = {name: os.environ.get(name) for name in _VARIABLES}
+    yield
+    for name, value in saved.items():
+        if value is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = value

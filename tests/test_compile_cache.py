@@ -1,0 +1,162 @@
+"""invsss.compile_cache: where the persistent compilation cache lives, that a second
+process loads what the first compiled, that concurrent processes share one
+directory cleanly, and the command line's --no-cache."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import jax
+import pytest
+
+from invsss import InvalidInputError
+from invsss.cli import build_parser, main
+from invsss.compile_cache import cache_directory, enable_compile_cache
+
+# A child process: switch the cache on in argv[1], compile three functions of
+# distinct shapes, and print JAX's cache hit/miss counts and a checksum.
+_CHILD = r"""
+import json, sys
+import jax, jax.numpy as jnp
+from jax import monitoring
+from invsss.compile_cache import enable_compile_cache
+
+counts = {"hits": 0, "misses": 0}
+def listen(event, **kwargs):
+    if event == "/jax/compilation_cache/cache_hits":
+        counts["hits"] += 1
+    elif event == "/jax/compilation_cache/cache_misses":
+        counts["misses"] += 1
+monitoring.register_event_listener(listen)
+
+used = enable_compile_cache(sys.argv[1], min_compile_seconds=0)
+
+@jax.jit
+def work(x):
+    for k in range(6):
+        x = jnp.tanh(x @ x.T + k) * jnp.cos(x)
+    return jnp.sum(x)
+
+total = sum(float(work(jnp.linspace(0.0, 1.0, n * n).reshape(n, n))) for n in (8, 9, 10))
+print(json.dumps({"used": str(used), "total": round(total, 6), **counts}))
+"""
+
+
+def _child(directory, env_extra=None):
+    env = dict(os.environ)
+    env.pop("INVSSS_NO_CACHE", None)
+    env.update(env_extra or {})
+    return subprocess.Popen([sys.executable, "-c", _CHILD, str(directory)], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _finish(process):
+    out, err = process.communicate(timeout=240)
+    assert process.returncode == 0, err
+    return json.loads(out.strip().splitlines()[-1]), err
+
+
+def _entries(directory: Path) -> list[Path]:
+    # JAX names an entry by its key, with "-cache" (and "-atime" beside it).
+    return sorted(directory.glob("*-cache"))
+
+
+def test_directory_precedence(monkeypatch, tmp_path):
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.delenv("INVSSS_CACHE_DIR", raising=False)
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    assert cache_directory() == tmp_path / "home" / ".cache" / "invsss" / "jax"
+    monkeypatch.setenv("XDG_CACHE_HOME", "relative/ignored")
+    assert cache_directory() == tmp_path / "home" / ".cache" / "invsss" / "jax"
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert cache_directory() == tmp_path / "xdg" / "invsss" / "jax"
+    monkeypatch.setenv("INVSSS_CACHE_DIR", str(tmp_path / "mine"))
+    assert cache_directory() == tmp_path / "mine"
+    assert cache_directory(tmp_path / "given") == tmp_path / "given"
+
+
+def test_the_suite_does_not_use_the_home_cache():
+    # tests/conftest.py points the cache at a temporary directory for the session.
+    assert not cache_directory().is_relative_to(Path.home() / ".cache")
+
+
+def test_no_cache_variable_leaves_jax_untouched(monkeypatch, tmp_path):
+    monkeypatch.setenv("INVSSS_NO_CACHE", "1")
+    before = jax.config.jax_compilation_cache_dir
+    assert enable_compile_cache(tmp_path / "c") is None
+    assert jax.config.jax_compilation_cache_dir == before
+    assert not (tmp_path / "c").exists()
+
+
+def test_bad_inputs(tmp_path):
+    with pytest.raises(InvalidInputError, match="directory"):
+        enable_compile_cache(42)
+    with pytest.raises(InvalidInputError, match="min_compile_seconds"):
+        enable_compile_cache(tmp_path, min_compile_seconds="fast")
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a directory")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert enable_compile_cache(blocker / "jax") is None
+    assert any("cannot create it" in str(w.message) for w in caught)
+
+
+def test_a_second_process_loads_instead_of_compiling(tmp_path):
+    first, _ = _finish(_child(tmp_path))
+    assert first["used"] == str(tmp_path)
+    assert first["misses"] >= 3 and first["hits"] == 0
+    assert len(_entries(tmp_path)) >= 3
+    second, _ = _finish(_child(tmp_path))
+    assert second["hits"] >= 3 and second["misses"] == 0
+    assert second["total"] == first["total"]
+
+
+def test_no_cache_in_a_child_process(tmp_path):
+    result, _ = _finish(_child(tmp_path / "c", {"INVSSS_NO_CACHE": "1"}))
+    assert result["used"] == "None" and result["hits"] == 0
+    assert not (tmp_path / "c").exists()
+
+
+def test_concurrent_processes_share_one_directory(tmp_path):
+    # Three processes start together on an empty directory and write the same
+    # entries; none may fail or read a half-written entry (JAX would warn).
+    outcomes = [_finish(p) for p in [_child(tmp_path) for _ in range(3)]]
+    for result, err in outcomes:
+        assert "persistent compilation cache" not in err, err
+        assert result["total"] == outcomes[0][0]["total"]
+    after, err = _finish(_child(tmp_path))
+    assert after["hits"] >= 3 and after["misses"] == 0, err
+
+
+@pytest.mark.parametrize("command", [
+    ["render", "--image", "i.exr", "--depth", "d.exr", "--mask", "m.png", "--params", "p.json",
+     "--out", "o.exr"],
+    ["fit", "--source", "s.exr", "--target", "t.exr", "--depth", "d.exr", "--mask", "m.png",
+     "--out", "dir"],
+    ["sweep", "e.toml", "--out", "dir"],
+])
+def test_cli_no_cache_flag(command):
+    parser = build_parser()
+    assert parser.parse_args(command).no_cache is False
+    assert parser.parse_args(command + ["--no-cache"]).no_cache is True
+
+
+def test_cli_switches_the_cache_on_or_off(tmp_path, monkeypatch):
+    session = os.environ["INVSSS_CACHE_DIR"]
+    monkeypatch.setenv("INVSSS_CACHE_DIR", str(tmp_path / "cli"))
+    missing = ["render", "--image", str(tmp_path / "none.exr"), "--depth", "d.exr", "--mask",
+               "m.png", "--params", "p.json", "--out", str(tmp_path / "o.exr")]
+    # The command fails on its missing input, after the cache was set up.
+    assert main(missing + ["--no-cache"]) == 2
+    assert os.environ["INVSSS_NO_CACHE"] == "1"
+    assert not (tmp_path / "cli").exists()
+    del os.environ["INVSSS_NO_CACHE"]
+    assert main(missing) == 2
+    assert jax.config.jax_compilation_cache_dir == str(tmp_path / "cli")
+    assert (tmp_path / "cli").is_dir()
+    enable_compile_cache(session)  # later tests compile into the session's directory again
