@@ -72,6 +72,21 @@ def results(out, *, frame: bool | None = None):
     ------
     InvalidInputError
         ``out`` holds no sweep, or ``frame=True`` without pandas.
+
+    Examples
+    --------
+    >>> import os, tempfile, numpy as np, invsss, invsss.experiments as ex
+    >>> root = tempfile.mkdtemp(); pair = os.path.join(root, "face"); os.mkdir(pair)
+    >>> for name, image in [("source.exr", np.ones((8, 8, 3))), ("target.exr", np.ones((8, 8))),
+    ...         ("depth.exr", np.full((8, 8), 500.0)), ("mask.png", np.ones((8, 8)))]:
+    ...     invsss.write_image(os.path.join(pair, name), image.astype(np.float32))
+    >>> with open(os.path.join(root, "e.toml"), "w") as f:
+    ...     _ = f.write('task = "render"\\n[data]\\npairs = ["face/"]\\n[base]\\ncorrection = 0.0\\n'
+    ...                 'maxdd = 0.5\\n[grid]\\nsss_level = [300.0, 600.0]\\n')
+    >>> _ = ex.run(os.path.join(root, "e.toml"), os.path.join(root, "out"), log=None)
+    >>> rows = results(os.path.join(root, "out"), frame=False)
+    >>> [(row["sss_level"], row["pair"], row["status"]) for row in rows]
+    [(300.0, 'face', 'done'), (600.0, 'face', 'done')]
     """
     rows, _ = flat_rows(out)
     if frame is False:

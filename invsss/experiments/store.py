@@ -23,6 +23,7 @@ writes; workers return their results to it.
 from __future__ import annotations
 
 import json
+import math
 import os
 import sqlite3
 
@@ -60,8 +61,20 @@ CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 _JSON_COLUMNS = ("config", "axes", "params", "stderr", "metrics", "warnings", "timings")
 
 
+def _finite(value):
+    """``value`` with NaN and infinities as None: JSON has no such numbers (a perfect
+    match's PSNR is infinite, the SSIM of a flat image undefined)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    return value
+
+
 def _dumps(value) -> str | None:
-    return None if value is None else json.dumps(value, sort_keys=True, allow_nan=False)
+    return None if value is None else json.dumps(_finite(value), sort_keys=True, allow_nan=False)
 
 
 class ResultsStore:

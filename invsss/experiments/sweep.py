@@ -196,6 +196,29 @@ def run(
     InvalidInputError
         A bad experiment file, an unusable output folder, another sweep running
         into it, a bad executor choice.
+
+    Examples
+    --------
+    A render matrix on one generated pair, run twice: the second run has nothing to do.
+
+    >>> import os, tempfile, numpy as np, invsss, invsss.experiments as ex
+    >>> root = tempfile.mkdtemp(); pair = os.path.join(root, "pair"); os.mkdir(pair)
+    >>> rng = np.random.default_rng(0)
+    >>> for name, image in [("source.exr", rng.uniform(0.2, 1, (16, 16, 3))), ("target.exr",
+    ...         rng.uniform(0.2, 1, (16, 16))), ("depth.exr", np.full((16, 16), 500.0)),
+    ...         ("mask.png", np.ones((16, 16)))]:
+    ...     invsss.write_image(os.path.join(pair, name), image.astype(np.float32))
+    >>> with open(os.path.join(root, "e.toml"), "w") as f:
+    ...     _ = f.write('task = "render"\\n[data]\\npairs = ["pair/"]\\n[base]\\nmaxdd = 0.5\\n'
+    ...                 '[grid]\\nsss_level = [300, 600]\\ncorrection = [0, 800]\\n')
+    >>> out = os.path.join(root, "out")
+    >>> summary = ex.run(os.path.join(root, "e.toml"), out, log=None)
+    >>> summary.done, summary.failed, summary.ran
+    (4, 0, 4)
+    >>> ex.run(os.path.join(root, "e.toml"), out, log=None).ran
+    0
+    >>> sorted(os.listdir(os.path.join(out, "trials", ex.results(out, frame=False)[0]["id"])))
+    ['invsss-manifest.json', 'params.json', 'render.exr']
     """
     if not isinstance(experiment, Experiment):
         experiment = load(experiment)
