@@ -42,7 +42,7 @@ import invsss
 from invsss.models import MODEL_NAMES, get_model, resolve_tap_weights
 from invsss.screen_space import LAYOUT_RENDERERS
 
-# The thesis's 940 nm forearm fit (its Table 5.1, MODEL.md section 4).
+# The thesis's 940 nm forearm fit (its Table 5.1, docs/model.md, section 4).
 THESIS_VARIANCES = [8.749, 2.099, 0.549, 0.5574, 1.194]
 THESIS_WEIGHTS = [0.1478, 0.1323, 0.0004, 0.0527, 0.090]
 

@@ -45,7 +45,7 @@ SHARED_DATA = REPO.parent / "shared" / "data"
 IMAGE_SIZE = 224  # pixels, square
 NOISE_FRACTION = 0.01  # noise std as a fraction of the mean masked target
 
-# The thesis's 940 nm forearm fit (its Table 5.1; "8,749" read as 8.749), MODEL.md section 4.
+# The thesis's 940 nm forearm fit (its Table 5.1; "8,749" read as 8.749), docs/model.md, section 4.
 TABLE_5_1_VARIANCES = [8.749, 2.099, 0.549, 0.5574, 1.194]
 TABLE_5_1_WEIGHTS = [0.1478, 0.1323, 0.0004, 0.0527, 0.090]
 
@@ -546,7 +546,7 @@ def card_scene(spec: dict, rng: np.random.Generator) -> tuple[Rendering, dict]:
 
 
 def slope_fractions(depth: np.ndarray, mask: np.ndarray, maxdd: float) -> dict:
-    """Fraction of masked pixels whose |dd/dx| (|dd/dy|) exceeds ``maxdd`` (MODEL.md s. 2)."""
+    """Fraction of masked pixels whose |dd/dx| (|dd/dy|) exceeds ``maxdd`` (docs/model.md, section 2)."""
     dy, dx = np.gradient(depth)
     skin = mask > 0.5
     return {
@@ -653,7 +653,7 @@ def _table_5_1(sss_level: float, correction: float, maxdd: float) -> dict:
 
 
 # sss_level equals the focal length in pixels: with depth in mm that makes the
-# variances true mm^2 (MODEL.md section 2). correction and maxdd are chosen so that a
+# variances true mm^2 (docs/model.md, section 2). correction and maxdd are chosen so that a
 # sizeable share of skin pixels has slopes on each side of maxdd (printed when run).
 SCENES = {
     "fran_front": {

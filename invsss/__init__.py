@@ -1,6 +1,6 @@
 """invsss: differentiable inverse rendering of screen-space subsurface scattering.
 
-The forward model (:func:`render`, MODEL.md section 5) and its pieces are pure
+The forward model (:func:`render`, docs/model.md, section 5) and its pieces are pure
 JAX functions; :mod:`invsss.torch` is the PyTorch twin used to cross-check them.
 
 Importing :mod:`invsss` loads only the forward model. The file readers

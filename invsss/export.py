@@ -7,7 +7,7 @@ kernel of the ``separable`` model. :func:`shader_constants` computes them,
 :func:`to_hlsl` and :func:`to_json` write them out, and :func:`export_params`
 does both for a params JSON file (``invsss export``).
 
-How a shader uses the constants (MODEL.md sections 2, 3 and 5):
+How a shader uses the constants (docs/model.md, sections 2, 3 and 5):
 
 * stretch ``s = sssLevel / (depth + correction * min(|ddx(depth)|, maxdd))`` in
   pixels per scene unit (``ddy`` for vertical passes);

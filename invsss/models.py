@@ -1,4 +1,4 @@
-"""The table of screen-space models (MODEL.md section 5): one entry per model.
+"""The table of screen-space models (docs/model.md, section 5): one entry per model.
 
 Every place that behaves differently per model (the JAX and PyTorch renderers,
 the estimator's basis images and parameter roles, the shader-constant export)

@@ -20,7 +20,7 @@ __all__ = [
     "parameter_arrays",
 ]
 
-#: The five parameters of the model, in the order of MODEL.md section 6. Every
+#: The five parameters of the model, in the order of docs/model.md, section 6. Every
 #: module that lists them (params files, the estimator, the report, the torch
 #: twin) uses this tuple.
 PARAM_NAMES = ("sss_level", "correction", "maxdd", "weights", "variances")
@@ -32,7 +32,7 @@ def _as_float(x) -> Array:
 
 
 class SSSParams(eqx.Module):
-    """Stretch factors and sum-of-Gaussians profile (MODEL.md sections 2, 4, 6).
+    """Stretch factors and sum-of-Gaussians profile (docs/model.md, sections 2, 4, 6).
 
     Parameters
     ----------
@@ -152,7 +152,7 @@ def check_plausible(params: SSSParams, depth, name: str = "params") -> list[str]
 
     Valid but absurd values (``sss_level: 1e30`` or ``1e-30``, a huge correction)
     render an image that is all one colour or unchanged, with no
-    error to say why. At the image's median depth ``d`` (MODEL.md section 2),
+    error to say why. At the image's median depth ``d`` (docs/model.md, section 2),
     the widest Gaussian blurs with a standard deviation of ``L sqrt(v_max) / d``
     pixels on a flat surface, and the narrowest with ``L sqrt(v_min) /
     (d + c min(g, delta))`` on the image's steepest depth slope ``g`` (``v_min``

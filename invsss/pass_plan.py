@@ -1,4 +1,4 @@
-"""The sequence of 7-tap passes a model runs, and each pass's width (MODEL.md section 5).
+"""The sequence of 7-tap passes a model runs, and each pass's width (docs/model.md, section 5).
 
 Written once against an array namespace (``jax.numpy``, ``numpy`` or ``torch``)
 so that the JAX renderer, the PyTorch twin and the shader export derive the

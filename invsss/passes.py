@@ -1,4 +1,4 @@
-"""One directional pass of a screen-space blur (MODEL.md section 3).
+"""One directional pass of a screen-space blur (docs/model.md, section 3).
 
 A pass reads each pixel's row (or column) at a few real-valued positions with
 linear interpolation and clamp-to-edge addressing, and mixes the samples. The
@@ -24,7 +24,7 @@ __all__ = [
 #: Tap positions ``t_k = k / 3``, ``k = -3..3``, as fractions of the footprint.
 TAP_OFFSETS = tuple(k / 3.0 for k in range(-3, 4))
 
-#: The two published 7-tap weight sets (MODEL.md section 3).
+#: The two published 7-tap weight sets (docs/model.md, section 3).
 TAP_WEIGHTS = {
     # Jimenez 2009 demo shader: unit-normal mass over unit bins.
     "jimenez": (0.006, 0.061, 0.242, 0.382, 0.242, 0.061, 0.006),

@@ -1,4 +1,4 @@
-"""Radial diffusion profiles R(r) (MODEL.md section 4).
+"""Radial diffusion profiles R(r) (docs/model.md, section 4).
 
 A diffusion profile ``R(r)`` is the light leaving a surface at distance ``r`` from a
 point of entry, per unit area and per unit of entering power (thesis 3.2.4). Its
@@ -7,7 +7,7 @@ reflectance. Three analytic families live here:
 
 * the sum of Gaussians (thesis eq. 4.1-4.2, d'Eon & Luebke 2007), the form every
   screen-space model uses, with its published tables and a small pytree type;
-* Jensen et al.'s 2001 dipole (thesis eq. 3.4, written as in MODEL.md);
+* Jensen et al.'s 2001 dipole (thesis eq. 3.4, written as in docs/model.md);
 * Christensen & Burley's 2015 normalized diffusion.
 
 Distances are in millimetres throughout (so variances are in mm^2 and profiles in
@@ -95,7 +95,7 @@ def _diffuse_fresnel_boundary(eta):
 def jensen_dipole(
     r: Float[Array, "*N"], sigma_s_prime, sigma_a, eta=1.3
 ) -> Float[Array, "*N *C"]:
-    """Jensen et al. 2001 dipole diffuse reflectance ``R_d(r)`` (MODEL.md section 4).
+    """Jensen et al. 2001 dipole diffuse reflectance ``R_d(r)`` (docs/model.md, section 4).
 
     ``sigma_t' = sigma_s' + sigma_a``, ``alpha' = sigma_s' / sigma_t'``,
     ``sigma_tr = sqrt(3 sigma_a sigma_t')``, ``z_r = 1 / sigma_t'``,

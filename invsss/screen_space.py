@@ -1,4 +1,4 @@
-"""The three screen-space subsurface-scattering models (MODEL.md section 5).
+"""The three screen-space subsurface-scattering models (docs/model.md, section 5).
 
 ``sog`` (default)
     The sum-of-Gaussians profile realised as d'Eon & Luebke do: blur layers of

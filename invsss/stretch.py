@@ -1,4 +1,4 @@
-"""Jimenez's depth stretch factors (MODEL.md section 2, thesis eq. 3.8-3.9)."""
+"""Jimenez's depth stretch factors (docs/model.md, section 2, thesis eq. 3.8-3.9)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ def depth_slopes(depth: Float[Array, "H W"]) -> tuple[Float[Array, "H W"], Float
     """``(|dd/dx|, |dd/dy|)`` with ``numpy.gradient``'s stencil.
 
     Central differences inside, one-sided differences on the border: the
-    convention MODEL.md fixes so that every implementation agrees.
+    convention docs/model.md fixes so that every implementation agrees.
     """
     ddy, ddx = jnp.gradient(depth)
     return jnp.abs(ddx), jnp.abs(ddy)

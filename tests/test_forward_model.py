@@ -1,6 +1,6 @@
-"""The JAX forward model against MODEL.md and independent plain-NumPy references.
+"""The JAX forward model against docs/model.md and independent plain-NumPy references.
 
-The references below are written from the text of MODEL.md and the thesis's
+The references below are written from the text of docs/model.md and the thesis's
 Listing 4.1 with explicit loops, not from the JAX code, so an error in the
 vectorised implementation (an index, an edge rule, a sort) shows up as a
 mismatch. Comparisons that should agree to rounding run in float64 under
@@ -26,7 +26,7 @@ from invsss import (
 )
 from invsss.passes import directional_pass
 
-# Published 7-tap weight sets, typed in again from MODEL.md section 3.
+# Published 7-tap weight sets, typed in again from docs/model.md, section 3.
 JIMENEZ_TAPS = np.array([0.006, 0.061, 0.242, 0.382, 0.242, 0.061, 0.006])
 THESIS_TAPS = np.array([0.1053, 0.1402, 0.1664, 0.1762, 0.1664, 0.1402, 0.1053])
 
@@ -117,7 +117,7 @@ def np_sample(line, u):
 
 
 def np_directional_pass(image, footprint, mask, taps, axis):
-    """MODEL.md section 3: ``sum_k W_k I(x + (k/3) f)``, blended ``m P + (1 - m) I``."""
+    """docs/model.md, section 3: ``sum_k W_k I(x + (k/3) f)``, blended ``m P + (1 - m) I``."""
     h, w, _ = image.shape
     out = np.empty_like(image)
     for y in range(h):
@@ -135,7 +135,7 @@ def np_spread(taps):
 
 
 def np_render_sog(image, depth, mask, sss_level, correction, maxdd, weights, variances, taps=JIMENEZ_TAPS):
-    """MODEL.md section 5, ``sog``, straight from the text."""
+    """docs/model.md, section 5, ``sog``, straight from the text."""
     s_x, s_y = np_stretch(depth, sss_level, correction, maxdd)
     c_w = np_spread(taps)
     order = np.argsort(variances, kind="stable")
@@ -158,7 +158,7 @@ def np_listing_4_1_pass(main_tex, depth, mesh_mask, sss_level, correction, maxdd
     coordinates; its bilinear clamp-to-edge sampler at texture coordinate
     ``(x + 0.5) / W`` reads pixel centre ``x``, so pixel coordinates with
     clamping to ``[0, n - 1]`` and linear interpolation are the same lookup.
-    ``ddx``/``ddy`` of the depth are numpy.gradient's stencil (MODEL.md section 2).
+    ``ddx``/``ddy`` of the depth are numpy.gradient's stencil (docs/model.md, section 2).
     """
     w = [0.1053, 0.1402, 0.1664, 0.1762, 0.1664, 0.1402, 0.1053]
     kernel_width = 7.0
@@ -184,7 +184,7 @@ def np_listing_4_1_pass(main_tex, depth, mesh_mask, sss_level, correction, maxdd
 
 
 def np_separable_kernel(weights, variances, taps, strength):
-    """Jimenez et al. 2015's kernel as MODEL.md section 5 describes it, with loops."""
+    """Jimenez et al. 2015's kernel as docs/model.md, section 5 describes it, with loops."""
     radius = 3.0 if taps > 20 else 2.0
     step = 2.0 * radius / (taps - 1)
     offsets = []

@@ -4,7 +4,7 @@ What the table claims about a model is checked against what the model does:
 its parameter set against which parameters change the rendered image, its
 default tap set against ``render`` with no tap set, its layout against the
 JAX renderer, the PyTorch twin and the export. The pass widths are checked
-against MODEL.md's formulas written out here with plain Python loops.
+against docs/model.md's formulas written out here with plain Python loops.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from invsss.params import PARAM_NAMES
 from invsss.pass_plan import pass_plan
 from invsss.validation import InvalidInputError
 
-# MODEL.md section 3, typed in again.
+# docs/model.md, section 3, typed in again.
 TAPS = {
     "jimenez": [0.006, 0.061, 0.242, 0.382, 0.242, 0.061, 0.006],
     "thesis": [0.1053, 0.1402, 0.1664, 0.1762, 0.1664, 0.1402, 0.1053],
@@ -60,7 +60,7 @@ def test_table_names_and_lookup():
     assert invsss.MODELS == invsss.screen_space.MODELS == MODEL_NAMES
     for name in MODEL_NAMES:
         assert get_model(name).name == name
-    # MODEL.md sections 3 and 5: jimenez is the default set, the thesis shipped its own.
+    # docs/model.md, sections 3 and 5: jimenez is the default set, the thesis shipped its own.
     defaults = {name: m.default_tap_weights for name, m in MODELS.items()}
     assert defaults == {"sog": "jimenez", "thesis": "thesis", "separable": None}
     with pytest.raises(InvalidInputError, match=r"^model: expected one of sog, thesis, separable, got 'x'$"):
@@ -126,7 +126,7 @@ def test_a_bad_entry_is_caught_when_written():
 
 
 def expected_plan(layout, variances, c_w):
-    """MODEL.md section 5 with loops: (axes, widths, order or None)."""
+    """docs/model.md, section 5 with loops: (axes, widths, order or None)."""
     k = len(variances)
     if layout == "layered":
         order = sorted(range(k), key=lambda i: variances[i])  # Python's sort is stable
@@ -175,7 +175,7 @@ def test_pass_plan_matches_the_formulas(layout, variances, taps):
 
 
 def test_tap_spread_matches_model_md():
-    # MODEL.md section 3: c_W = 0.34641 (jimenez) and 0.61008 (thesis).
+    # docs/model.md, section 3: c_W = 0.34641 (jimenez) and 0.61008 (thesis).
     assert spread("jimenez") == pytest.approx(0.34641, abs=5e-6)
     assert spread("thesis") == pytest.approx(0.61008, abs=5e-6)
     for name in TAPS:
@@ -217,7 +217,7 @@ def test_every_model_renders_in_both_frameworks_and_exports(name):
     if entry.layout == "kernel":
         assert "passWidths" not in constants and constants["numTaps"] == 17
     else:
-        # One width per Gaussian, in pass order, from MODEL.md's formula.
+        # One width per Gaussian, in pass order, from docs/model.md's formula.
         _, widths, _ = expected_plan(entry.layout, BASE["variances"], spread(entry.default_tap_weights))
         np.testing.assert_allclose(constants["passWidths"], widths[1::2] if entry.layout == "layered"
                                    else widths[: len(BASE["variances"])], rtol=1e-14)

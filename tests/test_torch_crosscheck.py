@@ -1,6 +1,6 @@
 """Cross-check of the JAX forward model against its PyTorch twin (invsss.torch).
 
-Both implement MODEL.md independently where it matters (JAX: flat gather with
+Both implement docs/model.md independently where it matters (JAX: flat gather with
 explicit clamping; torch: kornia remap / grid_sample with border padding), so
 agreement to rounding in float64, of the outputs and of the gradients with
 respect to every parameter and the image, checks each against the other. The

@@ -1,4 +1,4 @@
-"""Estimate the screen-space SSS parameters from image pairs (MODEL.md section 7).
+"""Estimate the screen-space SSS parameters from image pairs (docs/model.md, section 7).
 
 Public entry points: :func:`fit_pair`, :func:`fit_pairs` and their
 :class:`FitResult`; :class:`FitOptions` (the fit's settings, checked once) and

@@ -8,7 +8,7 @@ where the basis images ``X_pi`` depend nonlinearly on the free parameters and
 ``beta``, ``b`` are eliminated by least squares (:mod:`.projection`). The basis is
 
 * a model whose weights are linear (``sog``), with weights eliminated: the K
-  blurred layers ``B_i`` (MODEL.md section 5) in the profile's order, so
+  blurred layers ``B_i`` (docs/model.md, section 5) in the profile's order, so
   ``beta_ij = a_j w_ij`` (gain times weight);
 * otherwise the model's output, so ``beta_j = a_j`` is the gain.
 

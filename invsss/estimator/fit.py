@@ -69,7 +69,7 @@ def fit_pair(
     """Estimate the screen-space SSS parameters that turn ``source`` into ``target``.
 
     Minimises a robust masked residual between ``target`` and ``gain * out + offset``
-    (``out`` the model applied to ``source``; MODEL.md section 7) with the gains,
+    (``out`` the model applied to ``source``; docs/model.md, section 7) with the gains,
     offsets, RGB -> grey mix and, for ``sog``, the profile weights solved in closed
     form inside the residual (variable projection).
 

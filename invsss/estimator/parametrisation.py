@@ -1,6 +1,6 @@
 """Which parameters are solved, fixed or eliminated, and the unconstrained unknowns.
 
-Every parameter of the model (MODEL.md section 6) gets one *role*:
+Every parameter of the model (docs/model.md, section 6) gets one *role*:
 
 ``"free"``
     solved by the nonlinear solver through an unconstrained unknown ``z`` of
@@ -36,7 +36,7 @@ smoothly (its floor is 0, reached only in the limit ``z -> -inf``); the logs mak
 multiplicative uncertainty additive, which is what the solver's steps and the
 Gauss-Newton covariance assume.
 
-The gauge (MODEL.md section 6): scaling every variance by ``a^2`` and ``L`` by
+The gauge (docs/model.md, section 6): scaling every variance by ``a^2`` and ``L`` by
 ``1 / a`` gives the same image, so one of them must be fixed: ``gauge="variances"``
 takes the variances from a profile, ``gauge="sss_level"`` takes ``L`` from ``fix``.
 """

@@ -26,7 +26,7 @@ A parameter is reported *undetermined* (value null) when
    uncertainty), more than ``max(c, c_ref)`` for the correction (``c_ref`` halves
    the stretch at a typical slope), more than :data:`WEIGHT_VAGUE` for a weight (a
    fraction of the profile); or
-3. one of the structural reasons of MODEL.md section 6 applies (see
+3. one of the structural reasons of docs/model.md, section 6 applies (see
    :func:`structural_reasons`): flat depth, ``maxdd`` above every masked slope
    or below all of them, a variance whose weight is ~0 (below
    :data:`ZERO_WEIGHT`), a parameter the model does not use, or two Gaussians
@@ -180,7 +180,7 @@ def gauss_newton_uncertainty(objective, lin: dict, correction_ref: float, robust
 
 
 def _coinciding(natural, scales, flags, msgs, roles):
-    """Gaussians whose layers differ by a blur far below a pixel (MODEL.md 6: two
+    """Gaussians whose layers differ by a blur far below a pixel (docs/model.md, section 6: two
     Gaussians with equal variance): only the sum of their weights is determined."""
     v = np.asarray(natural["variances"], np.float64)
     s_max = scales.max_stretch(float(natural["sss_level"]), float(natural["correction"]), float(natural["maxdd"]))
@@ -206,7 +206,7 @@ def _coinciding(natural, scales, flags, msgs, roles):
 def structural_reasons(
     roles: dict, model: str, scales, natural: dict, weights, active, correction_stderr=None
 ) -> tuple[dict, list]:
-    """Undetermined entries for the reasons MODEL.md section 6 names, with messages.
+    """Undetermined entries for the reasons docs/model.md, section 6 names, with messages.
 
     ``maxdd`` acts through the kink of ``min(|dd|, maxdd)``: a Gauss-Newton standard
     error only sees the pixels next to the kink, so the extremes are checked by

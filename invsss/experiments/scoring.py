@@ -2,7 +2,7 @@
 
 A render uses the source's units; the target was taken by another camera with
 its own exposure and, for a NIR photograph, one channel. As in the estimator
-(MODEL.md section 7) the render is first mapped to the target with the
+(docs/model.md, section 7) the render is first mapped to the target with the
 least-squares gain and offset per target channel (for an RGB render and a grey
 target: a mix of the three channels plus an offset), weighted by the mask.
 The loss is then the mask-weighted mean squared residual over pixels and

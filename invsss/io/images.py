@@ -1,7 +1,7 @@
 """Reading and writing images, depth and masks.
 
 Pixels go through OpenImageIO (EXR, PNG, TIFF, JPEG) or NumPy (``.npy``). The
-model works on *linear* values (MODEL.md section 1), so every reader returns
+model works on *linear* values (docs/model.md, section 1), so every reader returns
 linear float32 arrays and every writer encodes them for the file format. How an
 integer file is decoded:
 
@@ -314,7 +314,7 @@ def read_depth(path, scale: float = 1.0) -> np.ndarray:
         cameras store millimetres or fractions of a metre.
     scale : float
         Multiplies the stored values; use it to convert units (millimetres are
-        recommended, MODEL.md section 1).
+        recommended, docs/model.md, section 1).
 
     Returns
     -------

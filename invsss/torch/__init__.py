@@ -1,6 +1,6 @@
 """PyTorch twin of the invsss forward model, used to cross-check the JAX core.
 
-Every function here computes the same thing as its JAX namesake (MODEL.md is the
+Every function here computes the same thing as its JAX namesake (docs/model.md is the
 single definition both follow), module for module:
 
 =====================================  ==========================================

@@ -22,7 +22,7 @@ def _as_float_tensor(x) -> torch.Tensor:
 
 @dataclasses.dataclass(frozen=True)
 class SSSParams:
-    """Stretch factors and sum-of-Gaussians profile (MODEL.md sections 2, 4, 6).
+    """Stretch factors and sum-of-Gaussians profile (docs/model.md, sections 2, 4, 6).
 
     The same fields and constraints as :class:`invsss.SSSParams`; each field is a
     torch tensor (numbers and arrays are converted, tensors kept as given).

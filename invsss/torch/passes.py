@@ -1,4 +1,4 @@
-"""One directional pass (twin of :mod:`invsss.passes`, MODEL.md section 3).
+"""One directional pass (twin of :mod:`invsss.passes`, docs/model.md, section 3).
 
 Sampling is done by :func:`kornia.geometry.transform.remap`, i.e. ``grid_sample``
 with bilinear interpolation, ``padding_mode="border"`` (clamp-to-edge) and

@@ -1,4 +1,4 @@
-"""The three screen-space models (twin of :mod:`invsss.screen_space`, MODEL.md section 5).
+"""The three screen-space models (twin of :mod:`invsss.screen_space`, docs/model.md, section 5).
 
 The ``render_*`` functions take (H, W, C) tensors of one dtype and a
 :class:`~invsss.torch.SSSParams` in that dtype; :func:`render` is the checked
