@@ -34,16 +34,35 @@ The profile has three Gaussians, the distinct variances of the thesis profile
 would make their weight split undetermined and measure that degeneracy instead of
 the solvers.
 
+``--breakdown PAIR_DIR`` instead profiles ``fit_pair`` with the command line's
+defaults on a pair folder (``source.exr``, ``target.exr``, ``depth.exr``,
+``mask.png``, e.g. ``data_synthetic/fran_front``), stage by stage: import,
+reading, building the problem (its start scan apart), every solve (starts, robust
+rounds, active-set rounds), the covariance, the rest of the report, and the
+trace/lowering/XLA compile time of each jitted function with its compile count.
+It runs three fits measured in one run: a fresh process with an empty persistent
+compilation cache (cold), a second fit in that process (what a sweep worker does
+after its first trial), and a fresh process on the cache the first one wrote
+(warm); each child process prints JSON, the parent the table.
+
 Usage::
 
     python experiments/bench_fit.py [--size 128] [--repeats 3] [--max-steps 200]
+    python experiments/bench_fit.py --breakdown data_synthetic/fran_front
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import subprocess
+import sys
+import tempfile
 import time
+from collections import defaultdict
+
+_T_START = time.perf_counter()  # before the imports below: the import stage
 
 import equinox as eqx
 import jax
@@ -181,7 +200,16 @@ def main() -> None:
     parser.add_argument("--size", type=int, default=128, help="image side in pixels (default 128)")
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per method (default 3)")
     parser.add_argument("--max-steps", type=int, default=200, help="solver step limit (default 200)")
+    parser.add_argument("--breakdown", metavar="PAIR_DIR", default=None,
+                        help="profile fit_pair stage by stage on this pair folder, cold and warm")
+    parser.add_argument("--breakdown-child", metavar="CACHE_DIR", default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.breakdown_child is not None:
+        breakdown_child(args.breakdown, args.breakdown_child)
+        return
+    if args.breakdown is not None:
+        breakdown(args.breakdown)
+        return
 
     scene = make_scene(args.size)
     rows = {}
@@ -248,6 +276,163 @@ def main() -> None:
           f"{times['scipy trf 2-point'] / times['invsss LM']:.2f}")
     print(f"scipy trf 2-point time / invsss.fit_pair time = "
           f"{times['scipy trf 2-point'] / times['invsss.fit_pair']:.2f}")
+
+
+# ------------------------------------------------------------------ --breakdown
+
+_COMPILE_EVENTS = {
+    "/jax/core/compile/jaxpr_trace_duration": "trace",
+    "/jax/core/compile/jaxpr_to_mlir_module_duration": "lower",
+    "/jax/core/compile/backend_compile_duration": "xla",
+    "/jax/compilation_cache/cache_retrieval_time_sec": "cache load",
+}
+
+
+class _Stages:
+    """Wall seconds per stage (nested stages are also counted in their parent)."""
+
+    def __init__(self):
+        self.seconds: dict = defaultdict(float)
+        self.counts: dict = defaultdict(int)
+
+    def wrap(self, module, name, stage):
+        """Replace ``module.name`` with a timed wrapper; ``stage`` is a string or
+        a function of the call's arguments giving one."""
+        inner = getattr(module, name)
+
+        def timed_call(*args, **kwargs):
+            label = stage(*args, **kwargs) if callable(stage) else stage
+            t0 = time.perf_counter()
+            try:
+                return inner(*args, **kwargs)
+            finally:
+                self.seconds[label] += time.perf_counter() - t0
+                self.counts[label] += 1
+
+        setattr(module, name, timed_call)
+
+
+def _solve_label(solver, objective, z0, max_steps, on_step=None, stop=None):
+    # fit.py's ``run`` labels each solve ("start 2", "robust 1", "active set 1").
+    label = on_step.stages[-1][0] if on_step is not None and on_step.stages else "solve"
+    return "solve: " + label.rstrip("0123456789").strip()
+
+
+def breakdown_child(pair_dir: str, cache_dir: str) -> None:
+    """One process: import, read, fit twice; print the stages as JSON."""
+    from jax import monitoring
+
+    import invsss.estimator.fit as fit_module
+    import invsss.estimator.problem as problem_module
+    from invsss.compile_cache import enable_compile_cache
+    from invsss.io import load_pair
+
+    imported = time.perf_counter() - _T_START
+    enable_compile_cache(cache_dir)
+    compiles: dict = defaultdict(lambda: defaultdict(float))
+
+    def on_duration(event, duration, fun_name="?", **_):
+        kind = _COMPILE_EVENTS.get(event)
+        if kind is not None:
+            # Tracing names a function "f", lowering and XLA "jit(f)": one row each.
+            if fun_name.startswith("jit(") and fun_name.endswith(")"):
+                fun_name = fun_name[4:-1]
+            if kind == "cache load":
+                fun_name = "(persistent cache reads)"
+            compiles[fun_name][kind] += duration
+            compiles[fun_name][kind + " n"] += 1
+
+    monitoring.register_event_duration_secs_listener(on_duration)
+    stages = _Stages()
+    stages.wrap(fit_module, "build_problem", "build problem (with start scan)")
+    stages.wrap(problem_module, "choose_starts", "  start scan")
+    stages.wrap(fit_module, "run_solver", _solve_label)
+    stages.wrap(fit_module, "_evaluate",
+                lambda objective, z, flag: "evaluate + linearise" if bool(flag) else "evaluate")
+    stages.wrap(fit_module, "gauss_newton_uncertainty", "covariance")
+    stages.wrap(fit_module, "_report", "report (all)")
+
+    t0 = time.perf_counter()
+    pair = load_pair(*(os.path.join(pair_dir, name)
+                       for name in ("source.exr", "target.exr", "depth.exr", "mask.png")))
+    reading = time.perf_counter() - t0
+    runs = []
+    for _ in range(2):
+        stages.seconds.clear()
+        stages.counts.clear()
+        compiles.clear()
+        t0 = time.perf_counter()
+        result = fit_module.fit_pair(pair.source, pair.target, pair.depth, pair.mask)
+        total = time.perf_counter() - t0
+        runs.append({
+            "fit": total, "stages": dict(stages.seconds), "counts": dict(stages.counts),
+            "compiles": {k: dict(v) for k, v in compiles.items()},
+            "iterations": result.iterations, "loss": float(result.loss),
+            "converged": bool(result.converged),
+        })
+    print(json.dumps({"import": imported, "reading": reading, "runs": runs}))
+
+
+def _child_run(pair_dir: str, cache_dir: str) -> dict:
+    command = [sys.executable, __file__, "--breakdown", pair_dir, "--breakdown-child", cache_dir]
+    env = {k: v for k, v in os.environ.items() if k != "INVSSS_NO_CACHE"}
+    done = subprocess.run(command, capture_output=True, text=True, env=env, check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def breakdown(pair_dir: str) -> None:
+    """Cold process, second fit in it, warm-cache process: one table."""
+    with tempfile.TemporaryDirectory(prefix="invsss-bench-cache-") as cache:
+        cold = _child_run(pair_dir, cache)
+        warm = _child_run(pair_dir, cache)
+    columns = {"cold": (cold, cold["runs"][0]), "2nd fit": (cold, cold["runs"][1]),
+               "warm cache": (warm, warm["runs"][0])}
+    stage_names = []
+    for _, run in columns.values():
+        stage_names += [k for k in run["stages"] if k not in stage_names]
+    functions = []
+    for _, run in columns.values():
+        functions += [k for k in run["compiles"] if k not in functions]
+
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"bench_fit --breakdown {pair_dir}: fit_pair with the CLI defaults; {os.cpu_count()} CPUs, "
+          f"load average {load:.1f}; seconds (calls)")
+    header = f"{'stage':<34}" + "".join(f"{name:>16}" for name in columns)
+    print(header)
+    print("-" * len(header))
+
+    def row(label, values):
+        print(f"{label:<34}" + "".join(f"{v:>16}" for v in values))
+
+    row("import", [f"{proc['import']:.2f}" if name != "2nd fit" else "-"
+                   for name, (proc, _) in columns.items()])
+    row("reading", [f"{proc['reading']:.2f}" if name != "2nd fit" else "-"
+                    for name, (proc, _) in columns.items()])
+    row("fit_pair (all)", [f"{run['fit']:.2f}" for _, run in columns.values()])
+    for stage in stage_names:
+        row(stage, [f"{run['stages'].get(stage, 0.0):.2f} ({run['counts'].get(stage, 0)})"
+                    for _, run in columns.values()])
+    row("iterations", [str(run["iterations"]) for _, run in columns.values()])
+    row("loss", [f"{run['loss']:.4e}" for _, run in columns.values()])
+    print("compilation per jitted function: trace+lower+XLA seconds (compilations); "
+          "cache loads seconds (loads)")
+    for fun in sorted(functions, key=lambda f: -sum(
+            v for k, v in cold["runs"][0]["compiles"].get(f, {}).items() if not k.endswith(" n"))):
+        cells = []
+        for _, run in columns.values():
+            c = run["compiles"].get(fun, {})
+            built = c.get("trace", 0.0) + c.get("lower", 0.0) + c.get("xla", 0.0)
+            cells.append(f"{built:.2f} ({int(c.get('xla n', 0))})"
+                         + (f" L{int(c['cache load n'])}" if c.get("cache load n") else ""))
+        row("  " + fun[:32], cells)
+    totals = []
+    for _, run in columns.values():
+        totals.append(sum(v for c in run["compiles"].values() for k, v in c.items()
+                          if k in ("trace", "lower", "xla")))
+    row("compile total (trace+lower+XLA)", [f"{t:.2f}" for t in totals])
+    c, w, s2 = (columns[k][1]["fit"] for k in ("cold", "warm cache", "2nd fit"))
+    print(f"ratios: warm cache / cold = {w / c:.2f}; 2nd fit in process / cold = {s2 / c:.2f}; "
+          f"compile share of the cold fit = {totals[0] / c:.2f}")
 
 
 if __name__ == "__main__":
