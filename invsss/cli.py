@@ -275,11 +275,14 @@ class _ProgressLine:
 
     On a terminal, one line rewritten in place (carriage return), at most ten
     times a second; otherwise (a pipe, a log file) a plain line every few seconds,
-    so logs stay short.
+    so logs stay short. With ``compile_seconds`` (a callable: seconds spent
+    compiling so far in this fit), the first solver step is preceded by one
+    permanent line saying how long compilation took.
     """
 
-    def __init__(self, stream):
+    def __init__(self, stream, compile_seconds=None):
         self._stream = stream
+        self._compile_seconds = compile_seconds
         self._tty = bool(getattr(stream, "isatty", lambda: False)())
         self._interval = 0.1 if self._tty else 5.0
         self._last = -np.inf
@@ -296,6 +299,11 @@ class _ProgressLine:
     def __call__(self, iteration: int, loss: float, stage: str | None = None) -> None:
         """``progress(iteration, loss)`` as the estimator calls it; ``stage`` (e.g.
         ``"start 2/4"``) is shown when given."""
+        if self._compile_seconds is not None:
+            # Everything the first step needs is compiled once it has run.
+            self.close()
+            self._stream.write(f"fit: compiling ... {self._compile_seconds():.1f} s\n")
+            self._compile_seconds = None
         now = time.monotonic()
         if now - self._last < self._interval:
             return
@@ -309,6 +317,25 @@ class _ProgressLine:
             self._stream.write("\r" + " " * self._width + "\r")
             self._stream.flush()
             self._width = 0
+
+
+_COMPILING = {"seconds": 0.0, "listening": False}
+
+
+def _compile_seconds() -> float:
+    """Seconds this process has spent in JAX compilation (tracing, lowering, XLA;
+    an executable loaded from the persistent cache counts its load), from
+    ``jax.monitoring``; the listener is registered on the first call."""
+    if not _COMPILING["listening"]:
+        from jax import monitoring
+
+        def listen(event, duration, **_):
+            if event.startswith("/jax/core/compile/"):
+                _COMPILING["seconds"] += duration
+
+        monitoring.register_event_duration_secs_listener(listen)
+        _COMPILING["listening"] = True
+    return _COMPILING["seconds"]
 
 
 def _fit_file_names(count: int) -> list[str]:
@@ -334,7 +361,8 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
             model=args.model, profile=args.profile, fix=fix or None, gauge=args.gauge,
             solver=args.solver, n_starts=args.starts, max_steps=args.max_steps,
         )
-        progress = _ProgressLine(sys.stderr)
+        compiled_before = _compile_seconds()
+        progress = _ProgressLine(sys.stderr, lambda: _compile_seconds() - compiled_before)
         height, width, _ = pairs[0].source.shape
         progress.show(f"fit: {count} pair(s), {width}x{height}, model {args.model}: searching starting points")
 

@@ -4,6 +4,7 @@ directory cleanly, and the command line's --no-cache."""
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import subprocess
@@ -12,6 +13,7 @@ import warnings
 from pathlib import Path
 
 import jax
+import jax.numpy as jnp
 import pytest
 
 from invsss import InvalidInputError
@@ -160,3 +162,22 @@ def test_cli_switches_the_cache_on_or_off(tmp_path, monkeypatch):
     assert jax.config.jax_compilation_cache_dir == str(tmp_path / "cli")
     assert (tmp_path / "cli").is_dir()
     enable_compile_cache(session)  # later tests compile into the session's directory again
+
+
+def test_fit_progress_says_how_long_compiling_took_once():
+    from invsss.cli import _ProgressLine
+
+    stream = io.StringIO()
+    progress = _ProgressLine(stream, lambda: 3.14)
+    progress(1, 1e-3)
+    progress(2, 5e-4)
+    lines = stream.getvalue().splitlines()
+    assert lines == ["fit: compiling ... 3.1 s", "fit: iter 1  loss 1.000e-03"]
+
+
+def test_compile_seconds_counts_a_new_compilation():
+    from invsss.cli import _compile_seconds
+
+    before = _compile_seconds()
+    jax.jit(lambda x: jnp.sin(x) * 3.0 + jnp.cos(x) ** 2)(jnp.arange(7.0)).block_until_ready()
+    assert _compile_seconds() > before
