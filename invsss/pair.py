@@ -13,7 +13,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-__all__ = ["ImagePair"]
+from .validation import InvalidInputError, depth_is_valid, is_concrete
+
+__all__ = ["ImagePair", "fill_background_depth"]
 
 
 def _as_hwc64(x) -> Array:
@@ -73,3 +75,51 @@ class ImagePair(eqx.Module):
             jnp.asarray(np.asarray(self.mask, dtype=np.float64)),
             target_ndim,
         )
+
+
+def fill_background_depth(depth):
+    """``depth`` with every unusable pixel (0, negative, NaN, inf) set to the nearest usable one.
+
+    Renderers write 0 or +inf depth where nothing was seen. The model must never
+    see those values: the depth slopes at a masked pixel read its neighbours, and
+    the pass ``image + mask * (blurred - image)`` turns a NaN blur into NaN even
+    where the mask is 0. Copying the nearest valid depth continues the surface
+    flat into the background, so a masked pixel beside it gets a small one-sided
+    slope rather than a jump to a far plane. Call it after
+    :func:`invsss.validation.check_depth` has made sure the masked pixels are
+    valid; :func:`invsss.render`, :func:`invsss.load_pair` and the estimator do.
+
+    Parameters
+    ----------
+    depth : array, shape (H, W)
+        A concrete array; a tracer (inside ``jit``) is returned unchanged.
+
+    Returns
+    -------
+    array, shape (H, W)
+        ``depth`` itself when every pixel is valid, else a NumPy copy, same dtype.
+
+    Raises
+    ------
+    InvalidInputError
+        No pixel at all has finite depth > 0.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> depth = np.array([[0.0, 500.0, 510.0, np.inf]])
+    >>> fill_background_depth(depth)
+    array([[500., 500., 510., 510.]])
+    """
+    if not is_concrete(depth):
+        return depth
+    valid = depth_is_valid(depth)
+    if valid.all():
+        return depth
+    if not valid.any():
+        raise InvalidInputError("depth: no pixel has finite depth > 0")
+    from scipy.ndimage import distance_transform_edt  # only needed for renderer-style depth
+
+    d = np.asarray(depth)
+    rows, cols = distance_transform_edt(~valid, return_distances=False, return_indices=True)
+    return d[rows, cols]

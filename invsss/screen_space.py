@@ -29,6 +29,7 @@ from .passes import directional_pass, pixel_coordinates, sample_along, tap_sprea
 from .passes import tap_weights as tap_weight_set
 from .profiles import sum_of_gaussians
 from .stretch import stretch_factors
+from .pair import fill_background_depth
 from .validation import InvalidInputError, check_depth, check_image, check_mask
 
 __all__ = [
@@ -263,7 +264,8 @@ def render(
     image : array, shape (H, W) or (H, W, C), C in {1, 3}
         Linear radiance without scattering.
     depth : array, shape (H, W)
-        Linear eye-space depth, > 0 (mm recommended).
+        Linear eye-space depth, > 0 (mm recommended) where ``mask`` is non-zero;
+        off the mask it may be 0 or infinite, as renderers write it.
     mask : array, shape (H, W)
         1 on skin, 0 elsewhere; fractional values blend.
     params : SSSParams
@@ -295,8 +297,11 @@ def render(
     entry = get_model(model)
     check_image(image)
     hw = tuple(np.shape(image)[:2])
-    check_depth(depth, hw)
     check_mask(mask, hw)
+    check_depth(depth, hw, mask=mask)
+    # Renderer-style background depth (0, inf) must not reach the model: see
+    # fill_background_depth.
+    depth = fill_background_depth(depth)
     if not isinstance(params, SSSParams):
         raise InvalidInputError(f"params: expected invsss.SSSParams, got {type(params).__name__}")
     params.check()

@@ -22,6 +22,7 @@ __all__ = [
     "InvalidInputError",
     "check_image",
     "check_depth",
+    "depth_is_valid",
     "check_mask",
     "check_same_size",
     "check_same_frame",
@@ -138,21 +139,64 @@ def check_image(image, name: str = "image", *, allow_batch: bool = False) -> Non
         raise InvalidInputError(f"{name}: contains NaN or infinite values")
 
 
-def check_depth(depth, shape_hw: tuple[int, int], name: str = "depth") -> None:
-    """Depth is (H, W), finite and strictly positive."""
+def depth_is_valid(depth) -> np.ndarray:
+    """Boolean (H, W): where ``depth`` is usable, i.e. finite and > 0.
+
+    Renderers and depth cameras write 0, a negative sentinel, NaN or +inf where
+    nothing was seen; those pixels are the background, and are only allowed where
+    the mask is 0.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> depth_is_valid(np.array([[500.0, 0.0], [np.inf, -1.0]]))
+    array([[ True, False],
+           [False, False]])
+    """
+    d = np.asarray(depth)
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(d) & (d > 0)
+
+
+def check_depth(depth, shape_hw: tuple[int, int], name: str = "depth", mask=None) -> None:
+    """Depth is (H, W), finite and > 0 wherever the mask is non-zero.
+
+    With ``mask=None`` every pixel counts as masked. Off the mask (the background),
+    depth may be 0, NaN or infinite as renderers write it: the model never uses
+    it there once :func:`invsss.pair.fill_background_depth` has replaced it, which
+    every public entry point does. Pass a mask already checked with
+    :func:`check_mask`.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> depth = np.full((4, 4), 500.0); depth[:, 0] = np.inf
+    >>> mask = np.ones((4, 4)); mask[:, 0] = 0.0
+    >>> check_depth(depth, (4, 4), "depth.exr", mask)  # background only: fine
+    >>> check_depth(depth, (4, 4), "depth.exr")
+    Traceback (most recent call last):
+    ...
+    invsss.validation.InvalidInputError: depth.exr: expected finite depth > 0 on every pixel (no mask given), 4 pixel(s) are not (NaN, infinite or <= 0)
+    """
     shape = _shape(depth)
     if shape != tuple(shape_hw):
         raise InvalidInputError(
             f"{name}: expected shape {tuple(shape_hw)} to match the image, got {shape}"
         )
-    if is_concrete(depth):
-        d = np.asarray(depth)
-        if not np.all(np.isfinite(d)):
-            raise InvalidInputError(f"{name}: contains NaN or infinite values")
-        if not np.all(d > 0):
-            raise InvalidInputError(
-                f"{name}: expected depth > 0 everywhere, min is {float(d.min()):g}"
-            )
+    if not (is_concrete(depth) and (mask is None or is_concrete(mask))):
+        return
+    invalid = ~depth_is_valid(depth)
+    if mask is None:
+        bad, where = int(np.count_nonzero(invalid)), "on every pixel (no mask given)"
+    else:
+        bad = int(np.count_nonzero(invalid & (np.asarray(mask) > 0)))
+        where = "wherever the mask is non-zero"
+    if bad:
+        what = "pixel(s) are" if mask is None else "masked pixel(s) are"
+        raise InvalidInputError(
+            f"{name}: expected finite depth > 0 {where}, {bad} {what} not "
+            "(NaN, infinite or <= 0)"
+        )
 
 
 def check_mask(mask, shape_hw: tuple[int, int], name: str = "mask") -> None:
@@ -235,6 +279,7 @@ def check_mask_background(mask, depth, mask_name: str = "mask") -> None:
     if not (is_concrete(mask) and is_concrete(depth)):
         return
     m, d = np.asarray(mask) > 0, np.asarray(depth)
+    valid = depth_is_valid(d)
     coverage = float(m.mean())
     if coverage > MASK_WHOLE_FRAME:
         warnings.warn(
@@ -243,6 +288,10 @@ def check_mask_background(mask, depth, mask_name: str = "mask") -> None:
             InputNotice,
             stacklevel=3,
         )
+        return
+    if not valid.all():
+        # The background is marked explicitly (0 or inf, as renderers write it):
+        # there is no far plane to guess, and masked pixels are checked valid.
         return
     far = d == d.max()
     on_far_plane = int(np.count_nonzero(m & far))
@@ -269,9 +318,11 @@ def check_pair(source, target, depth, mask, names) -> None:
     arrays = {"source": source, "target": target, "depth": depth, "mask": mask}
     check_same_frame([(names[key], array) for key, array in arrays.items()])
     hw = tuple(np.shape(source)[:2])
-    check_depth(depth, hw, names["depth"])
     channels = lambda x: int(np.shape(x)[-1]) if np.ndim(x) == 3 else 1  # noqa: E731
-    check_target_channels(channels(source), channels(target), names["target"])
     if mask is not None:
         check_mask(mask, hw, names["mask"])
+    # Depth is checked where the mask needs it, so the mask comes first.
+    check_depth(depth, hw, names["depth"], mask)
+    check_target_channels(channels(source), channels(target), names["target"])
+    if mask is not None:
         check_mask_background(mask, depth, names["mask"])

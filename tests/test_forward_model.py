@@ -541,7 +541,7 @@ def _bad_inputs():
     nan_depth = depth.copy()
     nan_depth[2, 3] = np.nan
     zero_depth = depth.copy()
-    zero_depth[0, 0] = 0.0
+    zero_depth[0, 1] = 0.0  # a masked pixel: column 0 is off the mask
     rgb_weights = SSSParams(1.0, 0.0, 1.0, np.ones((2, 3)), [0.5, 1.0])
     return [
         ("image", (image[..., :2], depth, mask, p), {}),

@@ -291,6 +291,9 @@ def test_nan_image_is_named(tmp_path, rgb):
 
 
 def test_bad_depth_is_named(tmp_path):
+    # Invalid depth on a masked pixel is refused by load_pair, naming the depth file
+    # (read_depth alone cannot know the mask: renderers write 0/inf off the skin).
+    paths = _scene_files(tmp_path)
     depth = np.full((H, W), 500.0, np.float32)
     with_nan = depth.copy()
     with_nan[1, 1] = np.nan
@@ -298,22 +301,46 @@ def test_bad_depth_is_named(tmp_path):
     with_zero[2, 3] = 0.0
     with_negative = depth.copy()
     with_negative[0, 0] = -1.0
-    for name, array, expected in [
-        ("nan.exr", with_nan, "NaN"),
-        ("zero.exr", with_zero, "> 0"),
-        ("negative.exr", with_negative, "> 0"),
-    ]:
+    with_inf = depth.copy()
+    with_inf[4, 5] = np.inf
+    for name, array in [("nan.exr", with_nan), ("zero.exr", with_zero),
+                        ("negative.exr", with_negative), ("inf.exr", with_inf)]:
         path = _write_raw(tmp_path / name, array, "float")
-        assert expected in _raises(invsss.read_depth, path, match_file=path)
+        message = _raises(invsss.load_pair, paths["source"], paths["target"], path,
+                          paths["mask"], match_file=path)
+        assert "> 0" in message and "1 masked pixel(s)" in message
 
     hole = np.full((H, W), 1000, np.uint16)
     hole[5, 5] = 0  # a depth camera's "no reading"
     png = _write_raw(tmp_path / "hole.png", hole, "uint16")
-    assert "> 0" in _raises(invsss.read_depth, png, scale=1.0, match_file=png)
+    message = _raises(invsss.load_pair, paths["source"], paths["target"], png, paths["mask"],
+                      match_file=png)
+    assert "1 masked pixel(s)" in message
+
+    for name, array in [("zeros.exr", np.zeros((H, W), np.float32)), ("minus.exr", -depth)]:
+        path = _write_raw(tmp_path / name, array, "float")
+        assert "> 0" in _raises(invsss.read_depth, path, match_file=path)
 
     good = tmp_path / "good.npy"
     np.save(good, depth)
     _raises(invsss.read_depth, good, scale=-1.0, match_file="depth scale")
+
+
+def test_background_depth_of_a_render_is_read_and_filled(tmp_path):
+    # A renderer's depth: 0 or +inf where the mask is 0. Read as stored, then
+    # load_pair hands back finite depth equal to the file's on the mask.
+    paths = _scene_files(tmp_path)
+    mask = np.zeros((H, W), np.float32)
+    mask[3:9, 4:12] = 1.0
+    invsss.write_image(paths["mask"], mask)
+    depth = np.linspace(400.0, 600.0, H * W, dtype=np.float32).reshape(H, W)
+    for background in (0.0, np.inf):
+        stored = np.where(mask > 0, depth, np.float32(background)).astype(np.float32)
+        path = _write_raw(tmp_path / f"render_depth_{background}.exr", stored, "float")
+        np.testing.assert_array_equal(invsss.read_depth(path), stored)
+        pair = invsss.load_pair(paths["source"], paths["target"], path, paths["mask"])
+        assert np.all(np.isfinite(pair.depth)) and np.all(pair.depth > 0)
+        np.testing.assert_array_equal(pair.depth[mask > 0], depth[mask > 0])
 
 
 def test_8bit_depth_is_rejected_with_what_is_expected(tmp_path):

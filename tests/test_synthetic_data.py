@@ -63,8 +63,10 @@ def test_scene_files_have_consistent_shapes_and_ranges(name):
     assert depth.shape == mask.shape == (h, w)
     assert np.all(np.isfinite(source)) and source.min() >= 0.0
     assert np.all(np.isfinite(target))
-    # read_depth already refuses depth <= 0; the camera sits 400-600 mm away.
+    # read_depth keeps a renderer's 0/inf background, so the skin is checked here;
+    # the camera sits 400-600 mm away.
     skin = mask > 0.5
+    assert np.all(np.isfinite(depth[skin])) and depth[skin].min() > 0.0
     assert 400.0 <= np.median(depth[skin]) <= 600.0
     assert set(np.unique(mask)) == {0.0, 1.0}
     assert 0.2 < skin.mean() < 0.9

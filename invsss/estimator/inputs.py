@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..pair import ImagePair
+from ..pair import ImagePair, fill_background_depth
 from ..validation import InvalidInputError, check_pair
 
 __all__ = ["ImagePair", "PairData", "prepare_pair", "prepare_pairs"]
@@ -38,6 +38,8 @@ def prepare_pair(source, target, depth, mask=None, *, name: str = "") -> ImagePa
     check_pair(source, target, depth, mask, names)
     if mask is None:
         mask = np.ones(np.shape(source)[:2])
+    # Renderer-style background depth (0, inf) never reaches the model.
+    depth = fill_background_depth(depth)
     return ImagePair(source, target, depth, mask).as_float64()
 
 

@@ -45,8 +45,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..pair import ImagePair
-from ..validation import InputNotice, InvalidInputError, check_image, check_pair
+from ..pair import ImagePair, fill_background_depth
+from ..validation import InputNotice, InvalidInputError, check_image, check_pair, depth_is_valid
 from .colour import linear_to_srgb, srgb_to_linear
 
 __all__ = [
@@ -318,13 +318,17 @@ def read_depth(path, scale: float = 1.0) -> np.ndarray:
 
     Returns
     -------
-    numpy.ndarray, shape (H, W), float32, finite and > 0
+    numpy.ndarray, shape (H, W), float32
+        As stored: where nothing was seen, renderers write 0 or +inf and depth
+        cameras 0; those values are kept. Whether the skin pixels have usable
+        depth is checked against the mask (:func:`load_pair`,
+        :func:`invsss.validation.check_depth`).
 
     Raises
     ------
     InvalidInputError
-        Missing or corrupt file, 8-bit data (too coarse for depth), NaN or
-        infinite values, depth <= 0 anywhere, a bad ``scale``.
+        Missing or corrupt file, 8-bit data (too coarse for depth), no pixel with
+        finite depth > 0, a bad ``scale``.
 
     Examples
     --------
@@ -346,13 +350,8 @@ def read_depth(path, scale: float = 1.0) -> np.ndarray:
     depth = (codes.astype(np.float64) * scale).astype(np.float32)
     if depth.shape[0] < 2 or depth.shape[1] < 2:
         raise InvalidInputError(f"{name}: expected at least 2x2 pixels, got {depth.shape}")
-    if not np.all(np.isfinite(depth)):
-        raise InvalidInputError(f"{name}: depth contains NaN or infinite values")
-    if not np.all(depth > 0):
-        raise InvalidInputError(
-            f"{name}: expected depth > 0 everywhere, {int(np.sum(~(depth > 0)))} pixel(s) "
-            f"are <= 0 (min {float(depth.min()):g})"
-        )
+    if not depth_is_valid(depth).any():
+        raise InvalidInputError(f"{name}: expected finite depth > 0 on the skin, no pixel has it")
     return depth
 
 
@@ -425,7 +424,9 @@ def load_pair(
     ------
     InvalidInputError
         Anything the readers reject, a file whose size differs from the source's,
-        or a target whose channels do not fit the source's (1 or the same count).
+        a target whose channels do not fit the source's (1 or the same count), or
+        masked pixels without finite depth > 0 (off the mask, 0 or infinite depth
+        is accepted and replaced, see :func:`invsss.pair.fill_background_depth`).
 
     Warns
     -----
@@ -451,7 +452,9 @@ def load_pair(
     names = {"source": source, "target": target, "depth": depth, "mask": mask}
     names = {k: os.fspath(v) for k, v in names.items()}
     check_pair(source_image, target_image, depth_map, mask_map, names)
-    return ImagePair(source_image, target_image, depth_map, mask_map)
+    # Background depth as a renderer writes it (0, inf) is replaced here, so
+    # pair.depth is safe to pass to render() or any other model code.
+    return ImagePair(source_image, target_image, fill_background_depth(depth_map), mask_map)
 
 
 # ------------------------------------------------------------------------ writing
