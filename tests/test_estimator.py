@@ -465,3 +465,27 @@ def test_an_interrupted_fit_still_reports_a_valid_profile():
     weights = np.asarray(result.to_dict()["estimate"]["weights"])
     assert np.all(weights >= 0) and weights.sum() > 0
     invsss.SSSParams(**result.to_dict()["estimate"]).check("estimate")
+
+
+def test_one_compiled_step_serves_starts_rounds_and_refinement():
+    # A size no other test uses, so this fit compiles its own step: the looser
+    # start solves, the robust rounds, the active set and a robust-free refinement
+    # all reuse it (only values, never shapes or static fields, change).
+    from jax import monitoring
+
+    compiled = []
+
+    def listen(event, duration, fun_name="", **_):
+        if event == "/jax/core/compile/backend_compile_duration" and fun_name == "jit(_step)":
+            compiled.append(duration)
+
+    monitoring.register_event_duration_secs_listener(listen)
+    source, target, depth, mask, _ = scene("face", size=29, seed=3)
+    robust = fit_pair(source, target, depth, mask, profile=PROFILE3, n_starts=2)
+    plain = fit_pair(source, target, depth, mask, profile=PROFILE3, n_starts=2, robust=None)
+    assert len(compiled) == 1
+    assert [label for label, _, _ in plain.stages] == ["start 1", "start 2", "refine"]
+    assert plain.converged and robust.converged
+    # The refinement solves the best start again at the full tolerance.
+    best_start = min(plain.history[stop - 1] for _, _, stop in plain.stages[:2])
+    assert plain.loss <= best_start * (1 + 1e-12)

@@ -8,8 +8,10 @@ The fit, step by step (each step its own module):
    local minima, each with the best correction and maxdd of a small grid
    (:mod:`.initial`). Steps 1 and 2 are :func:`build_problem`, public;
 3. from each start, run the solver (:mod:`.solve`) on the residual with the linear
-   unknowns projected out (:mod:`.objective`, :mod:`.projection`); keep the best;
-4. refine from the best: robust reweighting rounds (:mod:`.robust`), and an
+   unknowns projected out (:mod:`.objective`, :mod:`.projection`), to a looser
+   tolerance; keep the best;
+4. refine from the best at the full tolerance: robust reweighting rounds
+   (:mod:`.robust`) or, without them, one more solve; then an
    active-set pass that holds at 0 any ``sog`` weight the unconstrained least
    squares makes negative (the weights are ratios on the simplex: a negative one
    is not a profile), re-solving after each change;
@@ -39,7 +41,7 @@ from .options import FitOptions
 from .problem import build_problem
 from .result import FitResult, masked_list
 from .robust import robust_scale, robust_weights
-from .solve import FitInterrupted, make_solver, run_solver
+from .solve import RTOL, SCREEN_TOL, FitInterrupted, make_solver, run_solver
 from .uncertainty import gauss_newton_uncertainty, linearise, structural_reasons
 
 __all__ = ["fit_pair", "fit_pairs"]
@@ -270,7 +272,7 @@ def _fit(pairs, single, options, progress, stop) -> FitResult:
     problem = build_problem(pairs, options)
     with jax.enable_x64(True):
         steps = _Steps(progress, stop, problem.to_loss)
-        path = _solve(problem, make_solver(options.solver), options, steps)
+        path = _solve(problem, options, steps)
         result = _report(problem, path, single, steps)
     # Rebuild the parameters outside float64 mode: the caller gets arrays of their
     # own default precision, ready for render().
@@ -297,11 +299,17 @@ class _Path:
         self.interrupted = record.interrupted
 
 
-def _solve(problem, solver, options, steps) -> _Path:
+def _solve(problem, options, steps) -> _Path:
     """Multi-start, robust reweighting and the active set (steps 2-4 above).
 
+    The starts stop at the looser :data:`~.solve.SCREEN_TOL` (they only pick the
+    basin); the best is solved again at the full tolerance, by the robust rounds
+    or, without them, by a ``refine`` solve. Both solvers carry their
+    tolerances as arrays, so they share one compiled step.
     Stops early, keeping the best point so far, when ``steps.stop`` asks.
     """
+    screen = make_solver(options.solver, tolerance=SCREEN_TOL)
+    solver = make_solver(options.solver, tolerance=RTOL)
     path = _Path(problem.objective, problem.z_base)
     if not problem.param.size:
         return path
@@ -310,14 +318,14 @@ def _solve(problem, solver, options, steps) -> _Path:
     if steps.stop_requested():
         raise FitInterrupted("stop: the fit was interrupted before its first solver step")
 
-    def run(label, z0):
+    def run(label, z0, with_solver=solver):
         steps.begin(label)
-        return run_solver(solver, path.objective, z0, options.max_steps, steps, steps.stop_requested)
+        return run_solver(with_solver, path.objective, z0, options.max_steps, steps, steps.stop_requested)
 
     # Multi-start from the lowest local minima of the blur scan; keep the best.
     best = None
     for i, z0 in enumerate(problem.starts):
-        record = run(f"start {i + 1}", z0)
+        record = run(f"start {i + 1}", z0, screen)
         if best is None or record.final < best.final:
             best = record
         if record.interrupted:
@@ -337,6 +345,8 @@ def _solve(problem, solver, options, steps) -> _Path:
             path.extend(run(f"robust {round_ + 1}", path.z))
             if path.interrupted:
                 break
+    elif not path.interrupted:
+        path.extend(run("refine", path.z))
     _active_set(problem, path, run)
     return path
 

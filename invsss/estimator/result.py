@@ -139,7 +139,7 @@ class FitResult(eqx.Module):
         >>> fit = invsss.fit_pair(source, source, depth, None, n_starts=2, robust=None,
         ...                       profile={"weights": [1.0], "variances": [1.0]})
         >>> list(fit.history_by_stage())
-        ['start 1', 'start 2']
+        ['start 1', 'start 2', 'refine']
         >>> sum(map(len, fit.history_by_stage().values())) == fit.iterations
         True
         """
