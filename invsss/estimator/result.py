@@ -75,10 +75,12 @@ class FitResult(eqx.Module):
         the curve jumps between stages; split it with ``stages``.
     stages : tuple of (str, int, int)
         ``(label, first, stop)``: ``history[first:stop]`` are the steps of one
-        solve, labelled ``"start 1"`` ... ``"start n"`` (the multi-start; the
-        lowest final loss wins), then ``"robust 1"``, ``"robust 2"``
-        (reweighting rounds) and ``"active set 1"``... (weights held at 0), both
-        warm-started from the winner. See :meth:`history_by_stage`.
+        solve, labelled ``"start 1"`` ... ``"start n"`` (the multi-start, to a
+        looser tolerance; the lowest final loss wins), then ``"robust 1"``,
+        ``"robust 2"`` (reweighting rounds) or, without robust weights,
+        ``"refine"`` (the winner solved to the full tolerance), and
+        ``"active set 1"``... (weights held at 0), all warm-started from the
+        winner. See :meth:`history_by_stage`.
     interrupted : bool
         Whether the ``stop`` callable ended the fit early; the estimate is then
         the best point reached, with its standard errors at that point.
