@@ -32,10 +32,12 @@ look like one result, and a rerun would silently replace an earlier result.
   lock file; the next run treats it as empty.)
 
 Fault injection for tests: when the environment variable
-``INVSSS_TEST_PAUSE_IN_COMMIT`` holds a number of seconds, :meth:`ResultDir.commit`
-prints ``invsss: test hook: pausing in the write phase`` to stderr and sleeps
-that long twice: after marking the directory incomplete, and after moving the
-first file in. Nothing else changes; unset, it costs nothing.
+``INVSSS_TEST_PAUSE_IN_COMMIT`` holds seconds, :meth:`ResultDir.commit` pauses
+twice: after marking the directory incomplete, and after moving the first file
+in. Each pause prints ``invsss: test hook: pausing in the write phase`` to
+stderr and sleeps; ``"60"`` sleeps 60 s both times, ``"0,60"`` passes the first
+pause at once and sleeps at the second. Nothing else changes; unset, it costs
+nothing.
 """
 
 from __future__ import annotations
@@ -161,11 +163,12 @@ def _write_json_atomic(path: str, content: Mapping) -> None:
         raise
 
 
-def _pause_for_tests() -> None:
-    seconds = os.environ.get(_PAUSE_ENV)
-    if seconds:
+def _pause_for_tests(index: int) -> None:
+    setting = os.environ.get(_PAUSE_ENV)
+    if setting:
+        seconds = setting.split(",")
         print("invsss: test hook: pausing in the write phase", file=sys.stderr, flush=True)
-        time.sleep(float(seconds))
+        time.sleep(float(seconds[min(index, len(seconds) - 1)]))
 
 
 class ResultDir:
@@ -367,14 +370,14 @@ class ResultDir:
             # From here until the last rename the directory mixes two runs: say so
             # first, and list what is on its way in so a later overwrite can clean up.
             _write_json_atomic(manifest_path, {**manifest, "incoming": names})
-            _pause_for_tests()
+            _pause_for_tests(0)
             for name in old:
                 with contextlib.suppress(FileNotFoundError):
                     os.remove(os.path.join(self.path, name))
             for i, name in enumerate(names):
                 os.replace(os.path.join(staging, name), os.path.join(self.path, name))
                 if i == 0:
-                    _pause_for_tests()
+                    _pause_for_tests(1)
             _fsync_directory(self.path)
             _write_json_atomic(manifest_path, {**manifest, "state": "complete"})
             _fsync_directory(self.path)

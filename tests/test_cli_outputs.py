@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-import resource
 import signal
 import subprocess
 import sys
@@ -207,7 +206,7 @@ def test_sigkill_in_the_write_phase_leaves_a_result_that_render_refuses(small_pa
     out = tmp_path / "run"
     _fake_result(out)
     proc = _start(["fit", *small_pair, "--out", str(out), "--overwrite"],
-                  env={"INVSSS_TEST_PAUSE_IN_COMMIT": "60"})
+                  env={"INVSSS_TEST_PAUSE_IN_COMMIT": "0,60"})
     seen = []
     _wait_for(proc, "pausing in the write phase", seen)  # marked incomplete, old files going
     _wait_for(proc, "pausing in the write phase", seen)  # the new params.json is in place
@@ -223,19 +222,23 @@ def test_sigkill_in_the_write_phase_leaves_a_result_that_render_refuses(small_pa
 # ----------------------------------------------------------------- write failures
 
 
-def _limit_file_size():
-    # Files larger than 64 KiB cannot be written (as on a full disk): params.json
-    # fits, fit.exr does not. Python ignores SIGXFSZ, so writes fail with EFBIG.
-    resource.setrlimit(resource.RLIMIT_FSIZE, (64 * 1024, 64 * 1024))
+# `python -m invsss` in a process that cannot write files larger than 64 KiB (as on
+# a full disk): params.json fits, fit.exr does not. Python ignores SIGXFSZ, so
+# writes fail with EFBIG. Set in the child itself: a preexec_fn would fork a
+# multithreaded (JAX) process.
+_SMALL_FILES_ONLY = (
+    "import resource, runpy, sys; "
+    "resource.setrlimit(resource.RLIMIT_FSIZE, (64 * 1024, 64 * 1024)); "
+    "sys.argv[0] = 'invsss'; runpy.run_module('invsss', run_name='__main__')"
+)
 
 
 def test_a_write_failure_after_the_fit_keeps_the_estimate(small_pair, tmp_path):
     out = tmp_path / "run"
     env = {"TMPDIR": str(tmp_path)}
     result = subprocess.run(
-        [sys.executable, "-m", "invsss", "fit", *small_pair, "--out", str(out)],
-        capture_output=True, text=True, cwd=ROOT, env={**os.environ, **env},
-        preexec_fn=_limit_file_size, timeout=300,
+        [sys.executable, "-c", _SMALL_FILES_ONLY, "fit", *small_pair, "--out", str(out)],
+        capture_output=True, text=True, cwd=ROOT, env={**os.environ, **env}, timeout=300,
     )
     assert result.returncode == 1, result.stderr
     assert "Traceback" not in result.stderr

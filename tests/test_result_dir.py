@@ -191,7 +191,9 @@ def _wait_for_pause(proc):
 def test_sigkill_inside_the_commit_leaves_a_result_marked_incomplete(tmp_path, pauses):
     out = tmp_path / "run"
     _commit(out, {"params.json": "old", "fit.exr": "old pixels", "report.png": "old report"})
-    writer = _start_holder(out, "commit", env={"INVSSS_TEST_PAUSE_IN_COMMIT": "60"})
+    # Sleep only at the pause where the signal is sent.
+    pause = "60" if pauses == 1 else "0,60"
+    writer = _start_holder(out, "commit", env={"INVSSS_TEST_PAUSE_IN_COMMIT": pause})
     for _ in range(pauses):  # 1: marked incomplete; 2: after the first file moved in
         _wait_for_pause(writer)
     writer.send_signal(signal.SIGKILL)
