@@ -32,7 +32,10 @@ a collimated spot) and the dipole's own error at 1-6 mm. The index-matched run
 (no boundary at all, lit by the spot light itself, noise about 5 % per bin) still
 lies at 0.63-0.66 of the dipole (eta 1) from 1 to 3.5 mm, rising to 0.78-0.86 at
 5-6 mm: most of the gap is between the dipole and the exact transport, not in
-the boundary or the light, so a dipole fit of a path-traced profile cannot give
+the boundary or the light. The totals agree (index-matched slab albedo from
+invsss.scenes.calibration.slab_albedo 0.591 +- 0.002, jensen_dipole_total 0.575),
+so the path tracer keeps more of the energy within 1 mm (single and low-order
+scattering, which the dipole leaves out) and less at 1-6 mm. So a dipole fit of a path-traced profile cannot give
 the medium back within 10 %; a profile fitted directly (sum of Gaussians) can
 still be used as `invsss fit --profile`.
 """
