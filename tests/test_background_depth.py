@@ -126,3 +126,24 @@ def test_cli_render_names_the_depth_file_of_a_masked_hole(files, tmp_path, capsy
     assert _render_cli(files, "holed", tmp_path / "holed_out.exr") == 2
     err = capsys.readouterr().err.strip()
     assert "depth_holed.exr" in err and "1 masked pixel(s)" in err and "\n" not in err
+
+
+@pytest.mark.parametrize("background", [0.0, np.inf])
+def test_torch_twin_accepts_renderer_background_like_the_jax_model(background):
+    torch = pytest.importorskip("torch")
+    import invsss.torch as itorch
+
+    image, depth, mask = _scene()
+    p = PARAMS
+    twin = itorch.SSSParams(
+        float(p.sss_level), float(p.correction), float(p.maxdd),
+        np.asarray(p.weights).tolist(), np.asarray(p.variances).tolist(),
+    )
+    renderer_depth = _renderer_depth(depth, mask, background)
+    expected = itorch.render(torch.as_tensor(image), torch.as_tensor(depth), torch.as_tensor(mask), twin)
+    got = itorch.render(torch.as_tensor(image), torch.as_tensor(renderer_depth), torch.as_tensor(mask), twin)
+    assert torch.isfinite(got).all()
+    np.testing.assert_allclose(got.numpy()[mask > 0], expected.numpy()[mask > 0], rtol=1e-12)
+    # ... and agrees with the JAX model given the same renderer-style depth.
+    jax_out = np.asarray(invsss.render(image, renderer_depth, mask, PARAMS))
+    np.testing.assert_allclose(got.numpy(), jax_out, rtol=1e-4, atol=1e-6)

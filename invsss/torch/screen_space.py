@@ -12,6 +12,7 @@ import torch
 
 from ..models import MODEL_NAMES, get_model, resolve_tap_weights
 from ..pass_plan import pass_plan
+from ..pair import fill_background_depth
 from ..validation import InvalidInputError, check_depth, check_image, check_mask
 from .params import SSSParams
 from .passes import directional_pass, sample_along, tap_spread
@@ -219,8 +220,14 @@ def render(
     entry = get_model(model)
     check_image(_concrete(image))
     hw = tuple(np.shape(image)[:2])
-    check_depth(_concrete(depth), hw)
     check_mask(_concrete(mask), hw)
+    check_depth(_concrete(depth), hw, mask=_concrete(mask))
+    # Renderer-style background depth (0 or inf off the mask), filled by the same
+    # rule as the JAX model; a depth that needs no filling keeps its autograd graph.
+    stored = _concrete(depth)
+    filled = fill_background_depth(stored)
+    if filled is not stored:
+        depth = torch.as_tensor(np.asarray(filled))
     if not isinstance(params, SSSParams):
         raise InvalidInputError(f"params: expected invsss.torch.SSSParams, got {type(params).__name__}")
     params.check()
