@@ -66,6 +66,8 @@ _LAZY = {
     **dict.fromkeys(("export_params", "shader_constants", "to_hlsl", "to_json"), ".export"),
     **dict.fromkeys(("ProfileFit", "fit_sum_of_gaussians"), ".profile_fit"),
     **dict.fromkeys(("MeasuredProfile", "column_average_gain", "measure_profile"), ".measure"),
+    **dict.fromkeys(("DipoleFit", "fit_dipole"), ".dipole_fit"),
+    "fill_background_depth": ".pair",
 }
 
 # Submodules reachable as attributes (``invsss.io.PARAMS_KEYS``) without an import.
