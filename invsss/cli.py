@@ -150,7 +150,7 @@ def _run_render(args: argparse.Namespace, stop: StopSignals) -> int:
     return 0
 
 
-# -------------------------------------------------------------------- fit (estimator helper)
+# -------------------------------------------------------------------- fit
 
 
 #: Parameters ``--fix`` accepts: one number each, or a comma-separated list.
@@ -451,7 +451,7 @@ def _jsonable(value):
     return value.tolist() if hasattr(value, "tolist") else str(value)
 
 
-# ----------------------------------------------------------------- export (export helper)
+# ----------------------------------------------------------------- export
 
 
 def _add_export_parser(subparsers) -> None:
@@ -488,7 +488,7 @@ def _run_export(args: argparse.Namespace, stop: StopSignals) -> int:
     return 0
 
 
-# ---------------------------------------------------------------- scene (scenes helper)
+# ---------------------------------------------------------------- scene
 
 
 def _add_scene_parser(subparsers) -> None:
@@ -541,7 +541,7 @@ def _run_scene(args: argparse.Namespace, stop: StopSignals) -> int:
     return 0
 
 
-# ------------------------------------------------------------------ sweep (experiments helper)
+# ------------------------------------------------------------------ sweep
 
 
 def _add_sweep_parser(subparsers) -> None:
@@ -610,7 +610,7 @@ def _run_sweep_report(args: argparse.Namespace, stop: StopSignals) -> int:
     return 0
 
 
-# ------------------------------------------------------------- profile (measurement helper)
+# ------------------------------------------------------------- profile
 
 
 def _add_profile_parser(subparsers) -> None:
