@@ -68,6 +68,7 @@ _LAZY = {
     **dict.fromkeys(("MeasuredProfile", "column_average_gain", "measure_profile"), ".measure"),
     **dict.fromkeys(("DipoleFit", "fit_dipole"), ".dipole_fit"),
     "fill_background_depth": ".pair",
+    "enable_compile_cache": ".compile_cache",
 }
 
 # Submodules reachable as attributes (``invsss.io.PARAMS_KEYS``) without an import.
