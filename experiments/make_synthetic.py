@@ -630,7 +630,31 @@ def write_scene(folder: Path, rendering: Rendering, target: np.ndarray, truth: d
     write_exr(folder / "depth.exr", rendering.depth)
     write_image(folder / "mask.png", rendering.mask.astype(np.float32))  # 0 and 1 encode exactly
     write_image(folder / "preview.png", preview(rendering, target).astype(np.float32))
-    (folder / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
+    (folder / "truth.json").write_text(json.dumps(with_fit_view(truth, folder), indent=2) + "\n")
+
+
+def with_fit_view(truth: dict, folder: Path) -> dict:
+    """``truth`` plus the keys that compare it with a fit (docs/truth-json.md).
+
+    ``weights_normalised`` is the form a fit writes: per-channel sums of 1, one
+    column per target channel. ``undetermined`` and ``undetermined_why`` are what
+    fits of the scene report; they come from running the estimator, not from the
+    generator, so a regenerated scene keeps the lists of the truth.json it
+    replaces (re-check them with a fit when the scene changes).
+    """
+    weights = np.asarray(truth["weights"], np.float64)
+    channels = 1 if truth.get("channels_mix") is not None else len(np.atleast_1d(truth["gain"]))
+    if weights.ndim == 1 and channels > 1:
+        weights = np.repeat(weights[:, None], channels, axis=1)
+    out = dict(truth)
+    out["weights_normalised"] = np.round(weights / weights.sum(axis=0), 6).tolist()
+    previous = folder / "truth.json"
+    if previous.exists():
+        measured = json.loads(previous.read_text())
+        for key in ("undetermined", "undetermined_why"):
+            if key in measured:
+                out[key] = measured[key]
+    return out
 
 
 # ----------------------------------------------------------------------------- scenes
