@@ -149,18 +149,10 @@ def _fsync_directory(directory: str) -> None:
 
 
 def _write_json_atomic(path: str, content: Mapping) -> None:
-    temporary = f"{path}.{secrets.token_hex(4)}.tmp"
-    try:
-        with open(temporary, "x", encoding="utf-8") as f:
-            json.dump(content, f, indent=2)
-            f.write("\n")
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(temporary, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.remove(temporary)
-        raise
+    # Imported here, not at the top: invsss.io's params reader imports this module.
+    from .io.images import write_text_atomic
+
+    write_text_atomic(path, json.dumps(content, indent=2) + "\n")
 
 
 def _pause_for_tests(index: int) -> None:
