@@ -304,8 +304,10 @@ profile = {PROFILE}
             assert b[trial_id][key] == pytest.approx(a[trial_id][key], rel=1e-9), key
         assert a[trial_id]["param.sss_level"] == pytest.approx(600.0, rel=0.05)
         assert os.path.isfile(os.path.join(trial_folder(root / "fit_dask", trial_id), "fit.exr"))
+    assert [row["pair"] for row in ex.results(root / "fit_dask", frame=False)] == ["a", "b"]
+    pandas = pytest.importorskip("pandas")
     table = ex.results(root / "fit_dask")
-    assert list(table["pair"]) == ["a", "b"]
+    assert isinstance(table, pandas.DataFrame) and list(table["pair"]) == ["a", "b"]
 
 
 def test_pair_axis_per_task(root):
