@@ -1,27 +1,36 @@
-"""Make the bundled synthetic photo pairs in ``data_synthetic/`` (seeded, reproducible).
+"""Make the bundled pairs in ``data_synthetic/`` (seeded, reproducible): one command for all.
 
-Each scene is a face (or a flat card) seen by a pinhole camera, rasterised here in
-plain NumPy, giving
+Two kinds of pair:
 
-* ``source.exr``  linear RGB without scattering: albedo times Lambert shading,
-* ``depth.exr``   linear eye-space depth in mm (the distance along the optical axis),
+**Model-made pairs** (``fran_front``, ``fran_turned``, ``leeperrysmith``, ``flat_card``):
+a face scan (or a flat card) rendered with Mitsuba 3 as albedo x Lambert shading,
+and a target made from it by invsss's own forward model with written-down
+parameters, so an estimator can be checked on exactly known answers:
+
+* ``source.exr``  linear RGB without scattering: textured albedo times Lambert shading,
+* ``depth.exr``   linear eye-space depth in mm (the distance along the optical axis), 0 off the object,
 * ``mask.png``    8-bit skin mask,
 * ``target.exr``  ``gain * (channels_mix . render(source, depth, mask, truth)) + offset`` plus
   Gaussian noise, where ``render`` is :func:`invsss.render` with ``model="sog"``,
 * ``truth.json``  the parameters and everything else needed to rebuild the target,
 * ``preview.png`` source | depth | mask | target, for people.
 
+**Path-traced pairs** (``pt_face_940``, ``pt_face_940_turned``, ``pt_face_skin1``): the
+scene descriptions ``experiments/scenes/<name>.toml`` rendered by :mod:`invsss.scenes`
+(a volumetric path tracer, not invsss's model), the files ``invsss scene`` writes.
+They take minutes each; ``--skip-path-traced`` leaves them alone.
+
 Run from the repository root::
 
-    python experiments/make_synthetic.py            # all scenes into data_synthetic/
+    python experiments/make_synthetic.py            # every pair into data_synthetic/
     python experiments/make_synthetic.py --scenes fran_front --out /tmp/synth
+    python experiments/make_synthetic.py --skip-path-traced
 
-Every random draw comes from ``numpy.random.default_rng`` seeded per scene, so running
-it again writes the same numbers (on the same platform: the blur runs in float32).
-
-Mesh readers: a legacy VTK polydata reader (ASCII or binary, POINTS + POLYGONS +
-TEXTURE_COORDINATES) and a glTF binary (.glb) reader for one triangle primitive; both
-only cover what the two bundled meshes use.
+Every random draw comes from ``numpy.random.default_rng`` seeded per scene and every
+Mitsuba render has a fixed seed, so running it again writes the same numbers (on the
+same platform: the blur runs in float32). Meshes and textures come from
+``experiments/scenes/meshes/`` (see its README for their sources and licences),
+loaded with trimesh.
 """
 
 from __future__ import annotations
@@ -29,21 +38,26 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import struct
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
 import OpenImageIO as oiio
+import trimesh
 from scipy import ndimage
 
 import invsss
 from invsss.io import read_image, srgb_to_linear, write_image
+from invsss.scenes import load_config, render_scene, write_scene as write_scene_folder
+from invsss.scenes.mitsuba_scene import import_mitsuba
 
 REPO = Path(__file__).resolve().parent.parent
-SHARED_DATA = REPO.parent / "shared" / "data"
+MESHES = REPO / "experiments" / "scenes" / "meshes"
+SCENE_CONFIGS = REPO / "experiments" / "scenes"
 IMAGE_SIZE = 224  # pixels, square
 NOISE_FRACTION = 0.01  # noise std as a fraction of the mean masked target
+SOURCE_SPP = 64  # stratified samples per pixel of the Mitsuba source renders
 
 # The thesis's 940 nm forearm fit (its Table 5.1; "8,749" read as 8.749), docs/model.md, section 4.
 TABLE_5_1_VARIANCES = [8.749, 2.099, 0.549, 0.5574, 1.194]
@@ -63,150 +77,6 @@ LEE_PERRY_SMITH_ATTRIBUTION = (
     "Map-COL.jpg) from the three.js examples. Modified: re-rendered with new camera, lighting, "
     "added albedo noise and synthetic scattering."
 )
-
-
-# ----------------------------------------------------------------------------- meshes
-
-
-@dataclasses.dataclass
-class Mesh:
-    """A triangle mesh with per-vertex texture coordinates, positions in mm."""
-
-    vertices: np.ndarray  # (N, 3) float64, mm
-    triangles: np.ndarray  # (M, 3) int64
-    uv: np.ndarray  # (N, 2) float64, v up (row 0 of the texture image is v = 1)
-    normals: np.ndarray | None = None  # (N, 3), unit; computed from the triangles if absent
-
-
-def read_vtk_polydata(path: Path) -> Mesh:
-    """Read a legacy VTK ``DATASET POLYDATA`` file (ASCII or BINARY) with triangles.
-
-    Units are kept as stored; polygons with more than three corners are fanned. Only
-    the classic cell layout (a count before each cell's indices, not the OFFSETS /
-    CONNECTIVITY arrays of file version 5.1) is read. Binary files store big-endian
-    values right after each section's header line.
-    """
-    data = path.read_bytes()
-    lines = data.split(b"\n", 4)
-    if not lines[0].startswith(b"# vtk DataFile"):
-        raise ValueError(f"{path}: not a legacy VTK file")
-    binary = lines[2].strip().upper() == b"BINARY"
-    if lines[3].split()[:2] != [b"DATASET", b"POLYDATA"]:
-        raise ValueError(f"{path}: expected DATASET POLYDATA, got {lines[3]!r}")
-    dtypes = {b"float": ">f4", b"double": ">f8", b"int": ">i4", b"vtktypeint64": ">i8"}
-    pos = len(b"\n".join(lines[:4])) + 1
-    points = polygons = uv = None
-
-    def read_values(pos, count, dtype):
-        # Returns (values, new position); ASCII values are whitespace separated.
-        if binary:
-            dt = np.dtype(dtypes[dtype])
-            end = pos + count * dt.itemsize
-            return np.frombuffer(data[pos:end], dt).astype(np.float64), end
-        values, n = [], 0
-        while n < count:
-            nl = data.index(b"\n", pos)
-            row = data[pos:nl].split()
-            values.extend(row)
-            n += len(row)
-            pos = nl + 1
-        return np.array(values[:count], dtype=np.float64), pos
-
-    while pos < len(data):
-        nl = data.find(b"\n", pos)
-        nl = len(data) if nl < 0 else nl
-        header = data[pos:nl].split()
-        pos = nl + 1
-        if not header:
-            continue
-        key = header[0].upper()
-        if key == b"POINTS":
-            n = int(header[1])
-            flat, pos = read_values(pos, 3 * n, header[2].lower())
-            points = flat.reshape(n, 3)
-        elif key == b"POLYGONS":
-            size = int(header[2])
-            flat, pos = read_values(pos, size, b"int")
-            flat = flat.astype(np.int64)
-            tris, i = [], 0
-            while i < size:
-                k = flat[i]
-                corners = flat[i + 1 : i + 1 + k]
-                tris.extend((corners[0], corners[j], corners[j + 1]) for j in range(1, k - 1))
-                i += k + 1
-            polygons = np.array(tris, dtype=np.int64)
-        elif key == b"TEXTURE_COORDINATES":
-            dim, dtype = int(header[2]), header[3].lower()
-            flat, pos = read_values(pos, dim * len(points), dtype)
-            uv = flat.reshape(len(points), dim)[:, :2]
-        elif key in (b"POINT_DATA", b"CELL_DATA"):
-            continue  # section markers; their arrays follow as their own headers
-        elif binary:
-            raise ValueError(f"{path}: binary section {key!r} is not supported")
-        # other ASCII sections (LINES, NORMALS, ...) are skipped line by line.
-    if points is None or polygons is None or uv is None:
-        raise ValueError(f"{path}: needs POINTS, POLYGONS and TEXTURE_COORDINATES")
-    return Mesh(points, polygons, uv)
-
-
-_GLTF_COMPONENTS = {5120: "i1", 5121: "u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
-_GLTF_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
-
-
-def read_glb_mesh(path: Path) -> Mesh:
-    """Read the first triangle primitive of a glTF 2.0 binary (no node transforms applied).
-
-    Texture coordinates are returned as stored. The glTF specification puts v = 0 at
-    the top of the image, but the three.js LeePerrySmith asset was made for three.js's
-    default ``flipY`` loading, so its v points up as :class:`Mesh` expects (checked in
-    shared/data/leeperrysmith/SOURCE.md and on the previews).
-    """
-    data = path.read_bytes()
-    magic, version, _ = struct.unpack_from("<4sII", data, 0)
-    if magic != b"glTF" or version != 2:
-        raise ValueError(f"{path}: not a glTF 2.0 binary")
-    chunks, pos = {}, 12
-    while pos < len(data):
-        length, kind = struct.unpack_from("<I4s", data, pos)
-        chunks[kind] = data[pos + 8 : pos + 8 + length]
-        pos += 8 + length
-    gltf = json.loads(chunks[b"JSON"])
-    blob = chunks[b"BIN\x00"]
-
-    def accessor(index):
-        acc = gltf["accessors"][index]
-        view = gltf["bufferViews"][acc["bufferView"]]
-        dtype = np.dtype(_GLTF_COMPONENTS[acc["componentType"]])
-        width = _GLTF_WIDTH[acc["type"]]
-        start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
-        stride = view.get("byteStride", dtype.itemsize * width)
-        rows = np.ndarray(
-            (acc["count"], width), dtype, buffer=blob, offset=start,
-            strides=(stride, dtype.itemsize),
-        )
-        return rows.astype(np.float64 if dtype.kind == "f" else np.int64)
-
-    primitive = gltf["meshes"][0]["primitives"][0]
-    if primitive.get("mode", 4) != 4:
-        raise ValueError(f"{path}: only triangle lists are supported")
-    attributes = primitive["attributes"]
-    return Mesh(
-        vertices=accessor(attributes["POSITION"]),
-        triangles=accessor(primitive["indices"]).reshape(-1, 3),
-        uv=accessor(attributes["TEXCOORD_0"]),
-        normals=accessor(attributes["NORMAL"]),
-    )
-
-
-def vertex_normals(mesh: Mesh) -> np.ndarray:
-    """Area-weighted vertex normals from the triangle winding, unit length."""
-    v = mesh.vertices
-    a, b, c = (v[mesh.triangles[:, i]] for i in range(3))
-    face = np.cross(b - a, c - a)  # length = twice the area: area weighting for free
-    normals = np.zeros_like(v)
-    for i in range(3):
-        np.add.at(normals, mesh.triangles[:, i], face)
-    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
 
 
 # ----------------------------------------------------------------------------- textures
@@ -230,6 +100,12 @@ def sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
     return top * (1 - fy) + bottom * fy
 
 
+def texel_uv(shape: tuple[int, int]) -> np.ndarray:
+    """The uv (v up) of every texel centre of an image of ``shape`` (rows, columns)."""
+    rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+    return np.stack([(cols + 0.5) / shape[1], 1.0 - (rows + 0.5) / shape[0]], axis=-1)
+
+
 def skin_detail(rng: np.random.Generator, size: int, strength: float) -> np.ndarray:
     """A multiplicative pore-scale albedo texture (size, size, 1), mean about 1.
 
@@ -243,126 +119,67 @@ def skin_detail(rng: np.random.Generator, size: int, strength: float) -> np.ndar
     return np.exp(strength * field / field.std())[..., None]
 
 
-# ----------------------------------------------------------------------------- camera
+# ----------------------------------------------------------------------------- heads
 
 
 @dataclasses.dataclass
-class Camera:
-    """A pinhole camera: eye axes X right, Y up, Z forward (depth = Z, mm)."""
+class Head:
+    """A textured head scan: the mesh in mm (outward winding), linear albedo, skin map.
 
-    position: np.ndarray  # (3,) mm, world
-    rotation: np.ndarray  # (3, 3), rows are the eye X, Y, Z axes in world coordinates
-    focal_px: float
-    size: int
-
-    @classmethod
-    def look_at(cls, position, target, up, focal_px, size) -> "Camera":
-        position, target, up = (np.asarray(x, np.float64) for x in (position, target, up))
-        forward = target - position
-        forward /= np.linalg.norm(forward)
-        right = np.cross(forward, up)
-        right /= np.linalg.norm(right)
-        true_up = np.cross(right, forward)
-        return cls(position, np.stack([right, true_up, forward]), float(focal_px), size)
-
-    @property
-    def principal_point(self) -> float:
-        return (self.size - 1) / 2.0  # pixel centres at integer coordinates
-
-    def to_eye(self, points: np.ndarray) -> np.ndarray:
-        return (points - self.position) @ self.rotation.T
-
-    def project(self, eye: np.ndarray) -> np.ndarray:
-        """Eye coordinates (N, 3) to pixel coordinates (N, 2) as (column, row)."""
-        c = self.principal_point
-        return np.stack(
-            [c + self.focal_px * eye[:, 0] / eye[:, 2], c - self.focal_px * eye[:, 1] / eye[:, 2]],
-            axis=1,
-        )
-
-
-# ----------------------------------------------------------------------------- rasteriser
-
-
-def rasterise(pixels: np.ndarray, depth: np.ndarray, triangles: np.ndarray, size: int):
-    """Z-buffer rasterisation of triangles sampled at pixel centres.
-
-    Parameters
-    ----------
-    pixels : (N, 2) vertex positions in pixels (column, row)
-    depth : (N,) vertex eye depth, > 0
-    triangles : (M, 3) vertex indices (either winding)
-    size : image height = width
-
-    Returns
-    -------
-    zbuffer : (size, size) linear eye depth (inf where empty)
-    face : (size, size) triangle index (-1 where empty)
-    bary : (size, size, 3) perspective-correct barycentric weights
+    ``mesh.visual.uv`` has v up (row 0 of the textures at v = 1).
     """
-    zbuffer = np.full((size, size), np.inf)
-    face = np.full((size, size), -1, np.int64)
-    bary = np.zeros((size, size, 3))
-    corners = pixels[triangles]  # (M, 3, 2)
-    lo = np.maximum(np.ceil(corners.min(axis=1)), 0).astype(int)
-    hi = np.minimum(np.floor(corners.max(axis=1)), size - 1).astype(int)
-    visible = np.all(hi >= lo, axis=1) & np.all(depth[triangles] > 0, axis=1)
-    for t in np.flatnonzero(visible):
-        (x0, y0), (x1, y1), (x2, y2) = corners[t]
-        area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
-        if abs(area) < 1e-12:
-            continue
-        xs = np.arange(lo[t, 0], hi[t, 0] + 1)
-        ys = np.arange(lo[t, 1], hi[t, 1] + 1)[:, None]
-        # Screen-space barycentrics from edge functions; dividing by the signed area
-        # makes the inside test independent of the winding.
-        b0 = ((x1 - xs) * (y2 - ys) - (x2 - xs) * (y1 - ys)) / area
-        b1 = ((x2 - xs) * (y0 - ys) - (x0 - xs) * (y2 - ys)) / area
-        b2 = 1.0 - b0 - b1
-        inside = (b0 >= 0) & (b1 >= 0) & (b2 >= 0)
-        if not inside.any():
-            continue
-        # Depth is not linear in screen space, its reciprocal is.
-        z = depth[triangles[t]]
-        inv_z = b0 / z[0] + b1 / z[1] + b2 / z[2]
-        z_pix = 1.0 / inv_z
-        window = (slice(lo[t, 1], hi[t, 1] + 1), slice(lo[t, 0], hi[t, 0] + 1))
-        closer = inside & (z_pix < zbuffer[window])
-        if not closer.any():
-            continue
-        zbuffer[window][closer] = z_pix[closer]
-        face[window][closer] = t
-        weights = np.stack([b0 / z[0], b1 / z[1], b2 / z[2]], axis=-1) * z_pix[..., None]
-        bary[window][closer] = weights[closer]
-    return zbuffer, face, bary
+
+    mesh: "trimesh.Trimesh"
+    albedo: np.ndarray  # (H, W, 3) linear
+    skin: np.ndarray  # (H', W', 1), 1 where the texture shows skin
 
 
-def interpolate(attribute: np.ndarray, triangles: np.ndarray, face: np.ndarray, bary: np.ndarray):
-    """Per-pixel attribute (size, size, D) from per-vertex ``attribute`` (N, D); 0 where empty."""
-    out = np.zeros(face.shape + attribute.shape[1:])
-    hit = face >= 0
-    corners = attribute[triangles[face[hit]]]  # (P, 3, D)
-    out[hit] = np.einsum("pk,pkd->pd", bary[hit], corners)
-    return out
+def load_fran() -> Head:
+    """The VTK 'fran' face in mm, its linear albedo and a skin map in texture space.
+
+    The scan is stored in metres with y up; its triangles wind inwards, so they are
+    turned round. The texture is a photograph; the skin map drops texels much darker
+    than their surroundings (eyes, eyebrows, nostrils, the mouth line), found with a
+    local-contrast rule and checked by eye on the preview.
+    """
+    mesh = trimesh.load(MESHES / "fran_cut.ply", process=False)
+    mesh.apply_scale(1000.0)
+    mesh.invert()
+    texture = read_texture(MESHES / "fran_cut.png")
+    luminance = texture @ np.array([0.2126, 0.7152, 0.0722])
+    dark = luminance < 0.5 * ndimage.gaussian_filter(luminance, 6.0)
+    dark = ndimage.binary_closing(ndimage.binary_opening(dark), iterations=2)
+    skin = ~ndimage.binary_dilation(dark) & (luminance > 0.01)
+    return Head(mesh, texture, skin.astype(np.float64)[..., None])
 
 
-# ----------------------------------------------------------------------------- scenes
+def load_lee_perry_smith(mm_per_unit: float) -> Head:
+    """The Lee Perry-Smith bust (y up, face along +z) in mm; its whole texture is skin.
+
+    The asset was made for three.js, which flips images on load: its texture
+    coordinates already have v up.
+    """
+    mesh = trimesh.load(MESHES / "LeePerrySmith.glb", force="mesh", process=False)
+    mesh.apply_scale(mm_per_unit)
+    texture = read_texture(MESHES / "Map-COL.jpg")
+    return Head(mesh, texture, np.ones((4, 4, 1)))
+
+
+# ----------------------------------------------------------------------------- rendering
 
 
 @dataclasses.dataclass
 class Lighting:
-    """Directional lights in eye space plus ambient light."""
+    """Directional lights given in eye space (x right, y up, z away from the camera) plus ambient light.
+
+    An intensity ``k`` gives a white Lambertian surface facing the light a radiance
+    of ``k``; ``ambient`` is the radiance of a uniform sky (occluded where the head
+    hides it).
+    """
 
     directions: list  # of (3,), pointing towards each light; normalised when used
     intensities: list  # of float
     ambient: float
-
-    def shade(self, normals: np.ndarray) -> np.ndarray:
-        total = np.full(normals.shape[:-1], self.ambient)
-        for d, k in zip(self.directions, self.intensities):
-            d = np.asarray(d, np.float64) / np.linalg.norm(d)
-            total += k * np.clip(normals @ d, 0.0, None)
-        return total[..., None]
 
     def to_dict(self) -> dict:
         unit = [list(np.round(np.asarray(d) / np.linalg.norm(d), 6)) for d in self.directions]
@@ -376,79 +193,116 @@ class Lighting:
 @dataclasses.dataclass
 class Rendering:
     source: np.ndarray  # (H, W, 3) linear
-    depth: np.ndarray  # (H, W) mm
+    depth: np.ndarray  # (H, W) mm, 0 off the object
     mask: np.ndarray  # (H, W) 0 or 1
     camera: dict
 
 
-def render_mesh(
-    mesh: Mesh,
-    textures: dict,
-    camera: Camera,
-    lighting: Lighting,
-    background_depth: float,
-    background_rgb,
-    rng: np.random.Generator,
-) -> Rendering:
-    """Rasterise ``mesh`` and shade it: albedo x detail x Lambert, on a flat wall.
+@dataclasses.dataclass(frozen=True)
+class CameraFrame:
+    """A pinhole camera looking from ``position`` at ``look_at`` with y up."""
 
-    ``textures`` holds ``albedo`` (linear RGB), ``detail`` (multiplicative, any
-    resolution, same uv) and ``skin`` (1 where the texture shows skin). The mask is
-    the skin texture >= 0.5 on front-facing surface. The background is a flat,
-    faintly textured wall at ``background_depth`` mm.
+    position: np.ndarray
+    right: np.ndarray
+    up: np.ndarray
+    forward: np.ndarray
+
+    @classmethod
+    def look_at(cls, position, target) -> "CameraFrame":
+        position = np.asarray(position, np.float64)
+        forward = np.asarray(target, np.float64) - position
+        forward /= np.linalg.norm(forward)
+        right = np.cross(forward, [0.0, 1.0, 0.0])
+        right /= np.linalg.norm(right)
+        return cls(position, right, np.cross(right, forward), forward)
+
+    def to_world(self, eye_direction) -> np.ndarray:
+        x, y, z = np.asarray(eye_direction, np.float64) / np.linalg.norm(eye_direction)
+        return x * self.right + y * self.up + z * self.forward
+
+
+def _mitsuba():
+    mi = import_mitsuba("scalar_rgb")
+    mi.set_log_level(mi.LogLevel.Warn)
+    return mi
+
+
+def _write_mitsuba_mesh(mesh, path: Path) -> None:
+    """PLY for Mitsuba, whose bitmap lookup puts v = 0 at the image's top row."""
+    flipped = mesh.copy()
+    uv = np.asarray(mesh.visual.uv, np.float64).copy()
+    uv[:, 1] = 1.0 - uv[:, 1]
+    flipped.visual = trimesh.visual.TextureVisuals(uv=uv)
+    flipped.export(path, file_type="ply", vertex_normal=True)
+
+
+def _bitmap(path: Path) -> dict:
+    return {"type": "bitmap", "filename": str(path), "raw": True, "filter_type": "bilinear", "wrap_mode": "clamp"}
+
+
+def render_head(head: Head, frame: CameraFrame, focal_px: float, lighting: Lighting, seed: int) -> Rendering:
+    """Render ``head`` with Mitsuba 3: albedo x Lambert shading (with shadows), depth and skin mask.
+
+    The albedo texture (already multiplied by the detail texture) is looked up by
+    Mitsuba; each light is rendered on its own (direct light only) and the images
+    are summed, so the directional lights add no Monte Carlo noise. The mask is the
+    front-facing surface whose skin map covers at least half the pixel. Depth is
+    eye-space z averaged over the pixel's samples on the head, 0 off it.
     """
-    normals = mesh.normals if mesh.normals is not None else vertex_normals(mesh)
-    eye = camera.to_eye(mesh.vertices)
-    zbuffer, face, bary = rasterise(camera.project(eye), eye[:, 2], mesh.triangles, camera.size)
-    hit = face >= 0
-    uv = interpolate(mesh.uv, mesh.triangles, face, bary)
-    n_eye = interpolate(normals @ camera.rotation.T, mesh.triangles, face, bary)
-    n_eye /= np.maximum(np.linalg.norm(n_eye, axis=-1, keepdims=True), 1e-12)
-    p_eye = interpolate(eye, mesh.triangles, face, bary)
-    front = hit & (np.einsum("hwc,hwc->hw", n_eye, -p_eye) > 0)
-    # Back faces seen past the cut edge of an open scan get ambient light only.
-    shading = np.where(front[..., None], lighting.shade(n_eye), lighting.ambient)
-    albedo = sample_texture(textures["albedo"], uv) * sample_texture(textures["detail"], uv)
-    size = camera.size
-    wall = np.asarray(background_rgb) * (1.0 + 0.1 * rng.standard_normal((size, size, 1)))
-    source = np.where(hit[..., None], albedo * shading, wall)
-    mask = front & (sample_texture(textures["skin"], uv)[..., 0] >= 0.5)
-    depth = np.where(hit, zbuffer, background_depth)
+    mi = _mitsuba()
+    size = IMAGE_SIZE
+    fov = float(np.degrees(2.0 * np.arctan(size / 2.0 / focal_px)))
+    with tempfile.TemporaryDirectory(prefix="make-synthetic-") as folder:
+        folder = Path(folder)
+        _write_mitsuba_mesh(head.mesh, folder / "head.ply")
+        write_image(folder / "albedo.exr", head.albedo.astype(np.float32))
+        write_image(folder / "skin.exr", np.repeat(head.skin, 3, axis=-1).astype(np.float32))
+
+        def scene(bsdf: dict, integrator: dict, emitter: dict | None = None, spp: int = SOURCE_SPP):
+            description = {
+                "type": "scene",
+                "integrator": integrator,
+                "sensor": {
+                    "type": "perspective", "fov": fov, "fov_axis": "x", "near_clip": 1.0, "far_clip": 1e5,
+                    "to_world": mi.ScalarTransform4f().look_at(
+                        origin=frame.position.tolist(), target=(frame.position + frame.forward).tolist(),
+                        up=frame.up.tolist()),
+                    "film": {"type": "hdrfilm", "width": size, "height": size, "rfilter": {"type": "box"},
+                             "pixel_format": "rgb"},
+                    "sampler": {"type": "stratified", "sample_count": spp, "seed": seed},
+                },
+                "head": {"type": "ply", "filename": str(folder / "head.ply"), "bsdf": bsdf},
+            }
+            if emitter is not None:
+                description["light"] = emitter
+            loaded = mi.load_dict(description)
+            mi.render(loaded)
+            return {name: np.asarray(channel, np.float64)
+                    for name, channel in loaded.sensors()[0].film().bitmap().split()}
+
+        aovs = {"type": "aov", "aovs": "pos:position,nn:sh_normal,cov:albedo"}
+        geometry = scene({"type": "diffuse", "reflectance": {"type": "rgb", "value": 1.0}}, aovs)
+        skin = scene({"type": "diffuse", "reflectance": _bitmap(folder / "skin.exr")},
+                     {"type": "aov", "aovs": "cov:albedo"})["cov"][..., 0]
+        albedo = {"type": "diffuse", "reflectance": _bitmap(folder / "albedo.exr")}
+        direct = {"type": "path", "max_depth": 2, "hide_emitters": True}
+        emitters = [
+            {"type": "directional", "direction": (-frame.to_world(d)).tolist(),
+             # A directional light's irradiance E gives a white Lambertian surface facing
+             # it a radiance E / pi.
+             "irradiance": {"type": "rgb", "value": float(np.pi * k)}}
+            for d, k in zip(lighting.directions, lighting.intensities)
+        ] + [{"type": "constant", "radiance": {"type": "rgb", "value": float(lighting.ambient)}}]
+        source = sum(scene(albedo, direct, emitter)["<root>"][..., :3] for emitter in emitters)
+    coverage = geometry["cov"][..., 0]
+    seen = coverage > 1e-6
+    safe = np.where(seen, coverage, 1.0)[..., None]
+    position, normal = geometry["pos"] / safe, geometry["nn"] / safe
+    towards_camera = frame.position - position
+    front = seen & (np.einsum("hwc,hwc->hw", normal, towards_camera) > 0)
+    mask = front & (coverage >= 0.5) & (skin >= 0.5 * coverage)
+    depth = np.where(seen, (position - frame.position) @ frame.forward, 0.0)
     return Rendering(source, depth, mask.astype(np.float64), {})
-
-
-def load_fran() -> tuple[Mesh, dict]:
-    """The VTK 'fran' face in mm, its linear albedo and a skin map in texture space.
-
-    The scan is stored in metres with y up; its triangles wind inwards, so the vertex
-    normals are flipped. The texture is a photograph; the skin map drops texels much
-    darker than their surroundings (eyes, eyebrows, nostrils, the mouth line), found
-    with a local-contrast rule and checked by eye on the preview.
-    """
-    folder = SHARED_DATA / "vtk_fran"
-    mesh = read_vtk_polydata(folder / "fran_cut.vtk")
-    mesh.vertices = mesh.vertices * 1000.0
-    mesh.normals = -vertex_normals(mesh)
-    texture = read_texture(folder / "fran_cut.png")
-    luminance = texture @ np.array([0.2126, 0.7152, 0.0722])
-    dark = luminance < 0.5 * ndimage.gaussian_filter(luminance, 6.0)
-    dark = ndimage.binary_closing(ndimage.binary_opening(dark), iterations=2)
-    skin = ~ndimage.binary_dilation(dark) & (luminance > 0.01)
-    return mesh, {"albedo": texture, "skin": skin.astype(np.float64)[..., None]}
-
-
-def load_lee_perry_smith(mm_per_unit: float) -> tuple[Mesh, dict]:
-    """The Lee Perry-Smith bust (y up, face along +z) in mm; its whole texture is skin."""
-    folder = SHARED_DATA / "leeperrysmith"
-    mesh = read_glb_mesh(folder / "LeePerrySmith.glb")
-    mesh.vertices = mesh.vertices * mm_per_unit
-    texture = read_texture(folder / "Map-COL.jpg")
-    return mesh, {"albedo": texture, "skin": np.ones(texture.shape[:2] + (1,))}
-
-
-def rotation_y(degrees: float) -> np.ndarray:
-    a = np.radians(degrees)
-    return np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
 
 
 HEADS = {
@@ -457,50 +311,51 @@ HEADS = {
         # The scan's mean outward normal with its small vertical part dropped.
         "facing": [0.8121, 0.0, -0.5835],
         "attribution": FRAN_ATTRIBUTION,
-        "files": ["vtk_fran/fran_cut.vtk", "vtk_fran/fran_cut.png"],
+        "files": ["experiments/scenes/meshes/fran_cut.ply", "experiments/scenes/meshes/fran_cut.png"],
     },
     "leeperrysmith": {
         "load": lambda spec: load_lee_perry_smith(spec["mm_per_unit"]),
         "facing": [0.0, 0.0, 1.0],
         "attribution": LEE_PERRY_SMITH_ATTRIBUTION,
-        "files": ["leeperrysmith/LeePerrySmith.glb", "leeperrysmith/Map-COL.jpg"],
+        "files": ["experiments/scenes/meshes/LeePerrySmith.glb", "experiments/scenes/meshes/Map-COL.jpg"],
     },
 }
 
 
+def rotation_y(degrees: float) -> np.ndarray:
+    a = np.radians(degrees)
+    return np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+
+
 def face_scene(spec: dict, rng: np.random.Generator) -> tuple[Rendering, dict]:
-    """Put a pinhole camera in front of the head (turned and tilted) and rasterise."""
-    head = HEADS[spec["mesh"]]
-    mesh, textures = head["load"](spec)
-    textures["detail"] = skin_detail(rng, spec["detail_texels"], spec["detail_strength"])
+    """Put a pinhole camera in front of the head (turned and tilted) and render it."""
+    head_info = HEADS[spec["mesh"]]
+    head = head_info["load"](spec)
+    detail = skin_detail(rng, spec["detail_texels"], spec["detail_strength"])
+    # The detail is attached to the surface: bake it into the albedo texture.
+    head.albedo = head.albedo * sample_texture(detail, texel_uv(head.albedo.shape[:2]))
     centre = np.asarray(spec["look_at_mm"], np.float64)
-    view = rotation_y(spec["turn_deg"]) @ np.asarray(head["facing"])
+    view = rotation_y(spec["turn_deg"]) @ np.asarray(head_info["facing"])
     view = view + np.array([0.0, np.tan(np.radians(spec["tilt_deg"])), 0.0])
     view /= np.linalg.norm(view)
-    camera = Camera.look_at(
-        centre + spec["distance_mm"] * view, centre, [0, 1, 0], spec["focal_px"], IMAGE_SIZE
-    )
-    background_depth = spec["distance_mm"] + 350.0
-    rendering = render_mesh(
-        mesh, textures, camera, Lighting(**spec["lighting"]), background_depth,
-        [0.03, 0.035, 0.045], rng,
-    )
+    frame = CameraFrame.look_at(centre + spec["distance_mm"] * view, centre)
+    rendering = render_head(head, frame, spec["focal_px"], Lighting(**spec["lighting"]), spec["seed"])
+    c = (IMAGE_SIZE - 1) / 2.0
     rendering.camera = {
         "model": "pinhole",
         "focal_px": spec["focal_px"],
-        "principal_point_px": [camera.principal_point, camera.principal_point],
+        "principal_point_px": [c, c],
         "distance_mm": spec["distance_mm"],
-        "position_mm": np.round(camera.position, 3).tolist(),
+        "position_mm": np.round(frame.position, 3).tolist(),
         "look_at_mm": centre.tolist(),
         "up": [0.0, 1.0, 0.0],
         "head_turn_deg": spec["turn_deg"],
         "tilt_deg": spec["tilt_deg"],
-        "background_depth_mm": background_depth,
+        "background_depth_mm": 0.0,
+        "renderer": f"Mitsuba {import_mitsuba('scalar_rgb').__version__} scalar_rgb, "
+        f"{SOURCE_SPP} stratified samples per pixel, box filter, direct light only",
     }
-    source = {
-        "files": [f"shared/data/{f}" for f in head["files"]],
-        "attribution": head["attribution"],
-    }
+    source = {"files": head_info["files"], "attribution": head_info["attribution"]}
     if spec["mesh"] == "leeperrysmith":
         source["mm_per_unit"] = spec["mm_per_unit"]
     return rendering, source
@@ -512,8 +367,10 @@ def card_scene(spec: dict, rng: np.random.Generator) -> tuple[Rendering, dict]:
     Every pixel has the same eye depth, so all depth slopes are exactly 0: the
     correction and maxdd have no effect on the target and cannot be estimated.
     The skin mask is an ellipse on the card (the rest stands for cloth or paper).
+    The card faces the camera, so its shading is the same everywhere: it is
+    computed here rather than rendered.
     """
-    albedo = read_texture(SHARED_DATA / "leeperrysmith" / "Map-COL.jpg")
+    albedo = read_texture(MESHES / "Map-COL.jpg")
     detail = skin_detail(rng, spec["detail_texels"], spec["detail_strength"])
     size, f, distance = IMAGE_SIZE, spec["focal_px"], spec["distance_mm"]
     rows, cols = np.mgrid[0:size, 0:size].astype(np.float64)
@@ -521,8 +378,11 @@ def card_scene(spec: dict, rng: np.random.Generator) -> tuple[Rendering, dict]:
     t = (cols + 0.5) / size, (rows + 0.5) / size
     uv = np.stack([u0 + (u1 - u0) * t[0], v1 - (v1 - v0) * t[1]], axis=-1)
     lighting = Lighting(**spec["lighting"])
-    normal = np.broadcast_to(np.array([0.0, 0.0, -1.0]), (size, size, 3))
-    source = sample_texture(albedo, uv) * sample_texture(detail, uv) * lighting.shade(normal)
+    # Lambert for the card's normal, which points at the camera (eye z = -1).
+    shading = lighting.ambient + sum(
+        k * max(-float(d[2]) / float(np.linalg.norm(d)), 0.0)
+        for d, k in zip(lighting.directions, lighting.intensities))
+    source = sample_texture(albedo, uv) * sample_texture(detail, uv) * shading
     c = (size - 1) / 2.0
     ellipse = ((cols - c) / (0.40 * size)) ** 2 + ((rows - c) / (0.46 * size)) ** 2 <= 1.0
     camera = {
@@ -535,7 +395,7 @@ def card_scene(spec: dict, rng: np.random.Generator) -> tuple[Rendering, dict]:
     depth = np.full((size, size), distance)
     rendering = Rendering(source, depth, ellipse.astype(np.float64), camera)
     source_info = {
-        "files": ["shared/data/leeperrysmith/Map-COL.jpg"],
+        "files": ["experiments/scenes/meshes/Map-COL.jpg"],
         "attribution": LEE_PERRY_SMITH_ATTRIBUTION,
         "uv_crop": spec["uv_crop"],
     }
@@ -588,7 +448,7 @@ def preview(rendering: Rendering, target: np.ndarray) -> np.ndarray:
     d = rendering.depth
     near, far = d[skin].min(), d[skin].max()
     if far - near > 1e-6:
-        depth_view = np.where(d <= far, np.clip((far - d) / (far - near), 0, 1), 0.0)
+        depth_view = np.where(d > 0, np.clip((far - d) / (far - near), 0, 1), 0.0)
     else:  # flat: one grey
         depth_view = np.full_like(d, 0.5)
     height = d.shape[0]
@@ -823,13 +683,15 @@ mean noise-free target on the mask.
 ## How the images were made
 
 A pinhole camera (principal point at the image centre, square pixels, focal length
-`focal_px`) looks at a textured mesh; a z-buffer rasteriser written in NumPy samples each
-triangle at pixel centres with perspective-correct barycentric interpolation of texture
-coordinates, normals and depth. Texture colours are sRGB-decoded to linear and multiplied
-by a seeded two-octave log-normal noise texture (about 12 % std, attached to the surface)
-so that there is pore-scale detail for the blur to act on. Shading is Lambert from a key
-and a fill light plus a little ambient light. The background is a dim, faintly noisy wall
-at a depth of the camera distance plus 350 mm (mask 0 there).
+`focal_px`) looks at a textured mesh, rendered with Mitsuba 3 (`scalar_rgb`, 64
+stratified samples per pixel, box filter, so each pixel is the average over its area).
+Texture colours are sRGB-decoded to linear and multiplied by a seeded two-octave
+log-normal noise texture (about 12 % std, attached to the surface) so that there is
+pore-scale detail for the blur to act on. Shading is Lambert from a key and a fill
+directional light plus a little light from a uniform sky, direct light only, with cast
+shadows. Depth is eye-space z averaged over the pixel's samples on the mesh, 0 where the
+mesh is not seen (the renderer convention `invsss` accepts); the background of the source
+is black. Meshes and textures: `experiments/scenes/meshes/`.
 
 The scattering parameters are the thesis's 940 nm fit (its Table 5.1) for every scene:
 variances `[8.749, 2.099, 0.549, 0.5574, 1.194]` mm^2 and weights
@@ -839,7 +701,7 @@ first weight is almost 0: only their sum is well determined). `sss_level` equals
 `maxdd` = 0.5 mm per pixel give a real share of skin pixels on each side of `maxdd`
 (the table lists the shares of skin pixels with |dd/dx|, |dd/dy| > maxdd).
 
-Skin masks: for the fran scan, front-facing surface whose texture is not much darker than
+Skin masks (pixels at least half covered by the mesh, front facing): for the fran scan, surface whose texture is not much darker than
 its surroundings (a local-contrast rule that removes eyes, eyebrows, nostrils and the
 mouth line, and also a baked shadow beside the nose); for Lee Perry-Smith, all front-facing
 surface of the bust; for the card, an ellipse.
@@ -883,9 +745,9 @@ the Lee Perry-Smith colour map as a flat picture.
 """
 
 LICENCE_FILES = {
-    "vtk-data-Copyright.txt": "vtk_fran/Copyright_vtk-data.txt",
-    "vtk-data-LICENSE-Apache-2.0.txt": "vtk_fran/LICENSE_vtk-data.txt",
-    "LeePerrySmith_License.txt": "leeperrysmith/LeePerrySmith_License.txt",
+    "vtk-data-Copyright.txt": "Copyright_vtk-data.txt",
+    "vtk-data-LICENSE-Apache-2.0.txt": "LICENSE_vtk-data.txt",
+    "LeePerrySmith_License.txt": "LeePerrySmith_License.txt",
 }
 
 
@@ -919,20 +781,84 @@ def write_readme(out: Path, truths: dict) -> None:
         f"| `{name}` | {t['sss_level']:g} | {t['correction']:g} | {t['maxdd']:g} |"
         for name, t in truths.items()
     ]
-    text = README_HEAD + "\n".join(about + rows + params) + "\n" + README_ATTRIBUTION
+    text = README_HEAD + "\n".join(about + rows + params) + "\n" + path_traced_section(out) + README_ATTRIBUTION
     (out / "README.md").write_text(text)
     licences = out / "LICENSES"
     licences.mkdir(exist_ok=True)
     for copy, original in LICENCE_FILES.items():
-        (licences / copy).write_bytes((SHARED_DATA / original).read_bytes())
+        (licences / copy).write_bytes((MESHES / original).read_bytes())
+
+
+# ----------------------------------------------------------------------------- path-traced pairs
+
+#: Path-traced pairs: folder name -> scene description in experiments/scenes/.
+PATH_TRACED = {
+    "pt_face_940": "face_940.toml",
+    "pt_face_940_turned": "face_940_turned.toml",
+    "pt_face_skin1": "face_skin1.toml",
+}
+
+PATH_TRACED_HEAD = """
+## Path-traced pairs
+
+`pt_face_940`, `pt_face_940_turned` and `pt_face_skin1` are not made by invsss's model:
+their targets are Mitsuba 3 volumetric path traces of a homogeneous scattering medium in
+the shape of the Lee Perry-Smith scan (`invsss scene experiments/scenes/<name>.toml`, see
+`docs/README.md`). Each folder holds what `invsss scene` writes: `source.exr` (Lambertian,
+albedo calibrated to the medium's total reflectance), `target.exr` (the mean of two
+independently seeded half renders), `depth.exr` (eye z in mm, 0 off the head), `mask.png`,
+`normal.exr`, `coverage.exr` and `scene.json` (the resolved scene, seeds, spp, render
+times and the noise estimate). There are no true screen-space parameters: these pairs
+measure how well the model can match real light transport (`experiments/fidelity.py`).
+The boundary is index-matched (no refraction or Fresnel reflection): with a rough
+dielectric boundary the path tracer needs about 50 times the samples for the same noise.
+
+| pair | medium | sigma_s' (1/mm) | sigma_a (1/mm) | size | spp | noise ceiling (dB) |
+|---|---|---|---|---|---|---|
+"""
+
+
+def make_path_traced(name: str, out: Path) -> None:
+    """Render one path-traced pair from its scene description (minutes)."""
+    config = load_config(SCENE_CONFIGS / PATH_TRACED[name])
+    result = render_scene(config, progress=lambda line: print(f"{name}: {line}", flush=True))
+    write_scene_folder(result, out / name, overwrite=True)
+    print(f"{name}: {result.info['render_seconds']['total']:.0f} s, noise ceiling "
+          f"{result.info['noise']['noise_ceiling_db']:.1f} dB", flush=True)
+
+
+def path_traced_section(out: Path) -> str:
+    """The README section on the path-traced pairs, from the scene.json files in ``out``."""
+    rows = []
+    for name, config in PATH_TRACED.items():
+        info_path = out / name / "scene.json"
+        if not info_path.is_file():
+            continue
+        info = json.loads(info_path.read_text())
+        medium = info["medium"]
+        camera = info["config"]["camera"]
+        preset = info["config"]["medium"].get("preset") or "custom"
+        rows.append(
+            f"| `{name}` | {preset} ({medium['boundary']}) | {medium['sigma_s_prime']} | {medium['sigma_a']} | "
+            f"{camera['width']}x{camera['height']} | {info['spp']['target']} | "
+            f"{info['noise']['noise_ceiling_db']:.1f} |"
+        )
+    return PATH_TRACED_HEAD + "\n".join(rows) + "\n" if rows else ""
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=REPO / "data_synthetic")
-    parser.add_argument("--scenes", nargs="+", choices=sorted(SCENES), default=list(SCENES))
+    every = list(SCENES) + list(PATH_TRACED)
+    parser.add_argument("--scenes", nargs="+", choices=every, default=every)
+    parser.add_argument("--skip-path-traced", action="store_true",
+                        help="make the model-made pairs only (the path-traced ones take minutes each)")
     args = parser.parse_args(argv)
-    truths = {name: make_scene(name, args.out) for name in args.scenes}
+    chosen = [name for name in args.scenes if not (args.skip_path_traced and name in PATH_TRACED)]
+    truths = {name: make_scene(name, args.out) for name in chosen if name in SCENES}
+    for name in chosen:
+        if name in PATH_TRACED:
+            make_path_traced(name, args.out)
     if set(truths) == set(SCENES):  # the README describes the whole set
         write_readme(args.out, truths)
     return 0

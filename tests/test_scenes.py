@@ -300,7 +300,7 @@ def test_missing_mitsuba_is_one_line_naming_the_extra(tmp_path, capsys, monkeypa
 EXAMPLES = os.path.join(os.path.dirname(__file__), "..", "experiments", "scenes")
 
 
-@pytest.mark.parametrize("name", ["face_940.toml", "slab_stripes_940.toml"])
+@pytest.mark.parametrize("name", sorted(f for f in os.listdir(EXAMPLES) if f.endswith(".toml")))
 def test_example_scenes_render(name):
     config = load_config(os.path.join(EXAMPLES, name)).with_overrides(width=16, spp=2)
     result = render_scene(config)
