@@ -25,6 +25,10 @@ target over the eroded mask, one row per way of predicting the target:
     the best PSNR a noise-free prediction can reach against this Monte Carlo target
     (``scene.json``, from the two half renders).
 
+The last column is the share of each residual's energy that is smooth over a few
+pixels (:func:`coarse_share`): shading that differs over the whole face rather than
+detail the blur should have moved.
+
 Every prediction gets the per-channel gain and offset that match it best to the
 target on the mask (linear least squares), as the fit does, so the rows differ
 only in the blur. The mask is eroded by ``--erode`` pixels so that silhouette
@@ -109,11 +113,36 @@ def medium_key(info: dict) -> tuple:
     return (tuple(medium["sigma_s_prime"]), tuple(medium["sigma_a"]), medium["eta"], medium.get("boundary"))
 
 
+#: Residual structure wider than this (Gaussian sigma, pixels) counts as "coarse".
+COARSE_SIGMA_PX = 3.0
+
+
+def coarse_share(residual: np.ndarray, mask: np.ndarray) -> float:
+    """The share of the residual's energy on the mask that is smooth on a ``COARSE_SIGMA_PX`` scale.
+
+    A blur can only fix detail near its own width; a coarse residual (shading that
+    differs over the whole face) is something the screen-space blur cannot fix
+    whatever its parameters. Smoothing is normalised by the smoothed mask so that
+    the silhouette does not leak in.
+    """
+    on = mask > 0
+    weight = ndimage.gaussian_filter(on.astype(np.float64), COARSE_SIGMA_PX)
+    total = coarse = 0.0
+    for c in range(residual.shape[-1]):
+        r = np.where(on, residual[..., c], 0.0)
+        smooth = ndimage.gaussian_filter(r, COARSE_SIGMA_PX) / np.maximum(weight, 1e-6)
+        total += float(np.sum(r[on] ** 2))
+        coarse += float(np.sum(smooth[on] ** 2))
+    return coarse / total if total > 0 else 0.0
+
+
 def score(prediction, pair, mask) -> dict:
     matched = photometric_match(np.asarray(prediction, np.float32), pair["target"], mask)
+    residual = pair["target"] - matched
     return {"psnr": masked_psnr(matched, pair["target"], mask),
             "ssim": masked_ssim(matched, pair["target"], mask),
-            "residual": pair["target"] - matched}
+            "coarse": coarse_share(residual, mask),
+            "residual": residual}
 
 
 def save_residual(path: pathlib.Path, residual: np.ndarray, mask: np.ndarray) -> None:
@@ -157,7 +186,8 @@ def main() -> None:
         dipole = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"],
                                  profile=dipole_profile(pair["info"]), **fit_options)
         rows["fit (medium's dipole)"] = score(dipole.fitted[0], pair, mask)
-        rows["noise ceiling"] = {"psnr": pair["info"]["noise"]["noise_ceiling_db"], "ssim": None, "residual": None}
+        rows["noise ceiling"] = {"psnr": pair["info"]["noise"]["noise_ceiling_db"], "ssim": None, "coarse": None,
+                                 "residual": None}
         table[pair["name"]] = rows
         print(f"{pair['name']}: {time.perf_counter() - started:.0f} s", flush=True)
     for a, b in itertools.permutations(pairs, 2):
@@ -169,16 +199,18 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     summary = {}
     for name, rows in table.items():
-        print(f"\n{name}\n\n| prediction | PSNR (dB) | SSIM |\n|---|---|---|")
+        print(f"\n{name}\n\n| prediction | PSNR (dB) | SSIM | coarse share of residual |\n|---|---|---|---|")
         (args.out / name).mkdir(exist_ok=True)
         for row, result in rows.items():
             ssim = "" if result["ssim"] is None else f"{result['ssim']:.4f}"
-            print(f"| {row} | {result['psnr']:.2f} | {ssim} |")
+            coarse = "" if result["coarse"] is None else f"{100 * result['coarse']:.0f} %"
+            print(f"| {row} | {result['psnr']:.2f} | {ssim} | {coarse} |")
             if result["residual"] is not None:
                 slug = "".join(ch if ch.isalnum() else "_" for ch in row).strip("_")
                 save_residual(args.out / name / f"residual_{slug}.png", result["residual"],
                               eroded(next(p for p in pairs if p["name"] == name)["mask"], args.erode))
-        summary[name] = {row: {"psnr": r["psnr"], "ssim": r["ssim"]} for row, r in rows.items()}
+        summary[name] = {row: {"psnr": r["psnr"], "ssim": r["ssim"], "coarse_share": r["coarse"]}
+                         for row, r in rows.items()}
     (args.out / "fidelity.json").write_text(json.dumps(summary, indent=2) + "\n")
 
 

@@ -727,7 +727,8 @@ files were changed, keep the attribution notices). Both texts are copied unchang
 `LICENSES/vtk-data-Copyright.txt` and `LICENSES/vtk-data-LICENSE-Apache-2.0.txt`.
 No endorsement by the VTK authors is implied.
 
-**leeperrysmith, flat_card** use "Infinite, 3D Head Scan" by Lee Perry-Smith
+**leeperrysmith, flat_card and the path-traced pt_face_940, pt_face_940_turned,
+pt_face_skin1** use "Infinite, 3D Head Scan" by Lee Perry-Smith
 (Infinite-Realities, www.ir-ltd.net), based on a work at www.triplegangers.com, licensed
 under Creative Commons Attribution 3.0 Unported
 (https://creativecommons.org/licenses/by/3.0/); the licence note asks that users always
@@ -738,9 +739,11 @@ github.com/espisepi/t-shirt-configurator-espinaco). The licence note is copied i
 `LICENSES/LeePerrySmith_License.txt`.
 
 Changes made to both (for all scenes): the meshes were re-rendered here with a new camera
-and lighting, scaled to millimetres (fran: stored in metres; Lee Perry-Smith: an estimated
-45 mm per model unit), their textures were multiplied by synthetic noise, and the targets
-add synthetic subsurface scattering, a colour mix and noise. The flat card shows a crop of
+and lighting and scaled to millimetres (fran: stored in metres; Lee Perry-Smith: an
+estimated 45 mm per model unit, 44 mm in the path-traced pairs); for the model-made pairs
+their textures were multiplied by synthetic noise and the targets add synthetic subsurface
+scattering, a colour mix and noise; the path-traced pairs use the untextured mesh as the
+boundary of a scattering medium. The flat card shows a crop of
 the Lee Perry-Smith colour map as a flat picture.
 """
 
@@ -855,12 +858,18 @@ def main(argv=None) -> int:
                         help="make the model-made pairs only (the path-traced ones take minutes each)")
     args = parser.parse_args(argv)
     chosen = [name for name in args.scenes if not (args.skip_path_traced and name in PATH_TRACED)]
-    truths = {name: make_scene(name, args.out) for name in chosen if name in SCENES}
+    for name in chosen:
+        if name in SCENES:
+            make_scene(name, args.out)
     for name in chosen:
         if name in PATH_TRACED:
             make_path_traced(name, args.out)
-    if set(truths) == set(SCENES):  # the README describes the whole set
-        write_readme(args.out, truths)
+    # The README describes the whole set, so it is written from the files on disk
+    # once every model-made pair is there (made now or before).
+    on_disk = {name: json.loads((args.out / name / "truth.json").read_text())
+               for name in SCENES if (args.out / name / "truth.json").is_file()}
+    if set(on_disk) == set(SCENES):
+        write_readme(args.out, on_disk)
     return 0
 
 

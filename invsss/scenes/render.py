@@ -106,6 +106,20 @@ def _mesh_record(path: str | None) -> dict | None:
     return {"file": os.path.basename(path), "sha256": digest}
 
 
+def _portable(config: dict) -> dict:
+    """The config as recorded: a mesh under the working directory by its relative path.
+
+    ``load_config`` makes mesh paths absolute; a scene.json written in a repository
+    should not carry the path of the machine it was rendered on.
+    """
+    mesh = config["object"].get("mesh")
+    if mesh is not None:
+        relative = os.path.relpath(mesh)
+        if not relative.startswith(os.pardir):
+            config = {**config, "object": {**config["object"], "mesh": relative}}
+    return config
+
+
 def _grey_media(coefficients: dict) -> list[dict]:
     """The medium as one grey medium, or one grey medium per channel when the channels differ."""
     s, a = coefficients["sigma_s_prime"], coefficients["sigma_a"]
@@ -217,7 +231,7 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         "mitsuba_version": mi.__version__,
         "variant": config.variant,
         "platform": platform.platform(),
-        "config": config.model_dump(),
+        "config": _portable(config.model_dump()),
         "mesh": _mesh_record(config.object.mesh),
         "focal_px": config.camera.focal_length_px,
         "channels": channels,
