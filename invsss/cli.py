@@ -214,6 +214,10 @@ def _add_fit_parser(subparsers) -> None:
                         help="starting points of the multi-start search (default: 4)")
     parser.add_argument("--max-steps", type=int, default=200, metavar="N",
                         help="solver steps per start and per refinement (default: 200)")
+    parser.add_argument("--align", choices=("none", "translation", "similarity", "affine"), default="none",
+                        help="register the target onto the source inside the fit, for photographs "
+                        "that are not pixel-aligned with their render (default: none; about twice "
+                        "the time; the warp goes into params.json)")
     parser.add_argument(
         "--linear-codes",
         action="store_true",
@@ -363,7 +367,7 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
         ]
         options = dict(
             model=args.model, profile=args.profile, fix=fix or None, gauge=args.gauge,
-            solver=args.solver, n_starts=args.starts, max_steps=args.max_steps,
+            solver=args.solver, n_starts=args.starts, max_steps=args.max_steps, align=args.align,
         )
         compiled_before = _compile_seconds()
         progress = _ProgressLine(sys.stderr, lambda: _compile_seconds() - compiled_before)

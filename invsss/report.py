@@ -128,6 +128,12 @@ def _parameter_lines(result) -> list[str]:
     lines.append(f"gain {_format_value(result.gain)}   offset {_format_value(result.offset)}")
     if result.mix is not None:
         lines.append(f"RGB -> grey mix {_format_value(result.mix)}")
+    for k, record in enumerate(getattr(result, "alignment", ()) or ()):
+        dy, dx = record["shift_px"]
+        extra = (f", rotation {record['rotation_deg']:+.2f} deg, scale {record['scale']:.4f}"
+                 if record["kind"] == "similarity" else "")
+        where = f"pair {k} " if len(result.alignment) > 1 else ""
+        lines.append(f"{where}target registered ({record['kind']}): shift ({dy:+.2f}, {dx:+.2f}) px (dy, dx){extra}")
     lines.extend(textwrap.wrap(_CONDITIONAL_NOTE, width=_TEXT_WIDTH, subsequent_indent="  "))
     for message in result.warnings:
         lines.extend(textwrap.wrap("! " + message, width=_TEXT_WIDTH, subsequent_indent="  "))
@@ -244,6 +250,15 @@ def plot_fit_report(result, pairs, path) -> None:
     pairs = [
         (p.source, p.target, p.depth, p.mask) if hasattr(p, "source") else tuple(p) for p in pairs
     ]
+    if result.alignment:
+        # An aligned fit's images are on the source's grid: show the target there too.
+        from .registration import Warp, align_target
+
+        moved = []
+        for (source, target, depth, mask), record in zip(pairs, result.alignment):
+            target, mask = align_target(target, mask, Warp.from_dict(record))
+            moved.append((source, target, depth, mask))
+        pairs = moved
     fitted = list(result.fitted)
     if len(fitted) != len(pairs):
         raise InvalidInputError(

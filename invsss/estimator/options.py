@@ -51,6 +51,8 @@ class FitOptions:
         None picks the model's default set (:attr:`invsss.models.ScreenSpaceModel.default_tap_weights`).
     robust : {"pseudo-huber", "cauchy"} or None
         ``"none"`` and False are stored as None.
+    align : {"none", "translation", "similarity", "affine"}
+        Register the target onto the source inside the fit (:mod:`invsss.registration`).
 
     Raises
     ------
@@ -78,8 +80,13 @@ class FitOptions:
     max_steps: int = 200
     tap_weights: object = None
     robust: str | None = "pseudo-huber"
+    align: str = "none"
 
     def __post_init__(self):
+        from ..registration import ALIGN_KINDS
+
+        if self.align not in ("none", *ALIGN_KINDS):
+            raise InvalidInputError(f"align: expected one of none, {', '.join(ALIGN_KINDS)}, got {self.align!r}")
         get_model(self.model)  # one-line error naming the known models
         if self.gauge not in GAUGES:
             raise InvalidInputError(f"gauge: expected one of {', '.join(GAUGES)}, got {self.gauge!r}")

@@ -88,6 +88,10 @@ class FitResult(eqx.Module):
         ``{"weights", "variances"}``: the profile the fit started from (weights
         normalised per channel, shaped like the fitted ones), for comparing the
         fitted profile with it (:func:`invsss.report.plot_fit_report` does).
+    alignment : tuple of dict
+        With ``align``: per pair, the warp from source pixels to target pixels
+        (:meth:`invsss.registration.Warp.to_dict`); the fitted images are on the
+        source's grid. Empty without ``align``.
         Not written by :meth:`to_dict`.
     gain, offset : numpy.ndarray
         Photometric fit ``pred = gain * out + offset`` per target channel: shape
@@ -129,6 +133,7 @@ class FitResult(eqx.Module):
     interrupted: bool = False
     stages: tuple = ()
     start_profile: dict | None = None
+    alignment: tuple = ()
 
     def history_by_stage(self) -> dict:
         """``{label: losses}`` for each solve of the fit (see ``stages``).
@@ -169,7 +174,7 @@ class FitResult(eqx.Module):
         ``model``, ``tap_weights``, ``stderr``, ``undetermined``, ``loss``,
         ``psnr``, ``ssim``, ``converged``, ``interrupted``, ``iterations``,
         ``fixed``, ``gauge``, ``gain``, ``offset``, ``sigma``, ``solver``,
-        ``warnings`` and ``estimate`` (every parameter as a number, undetermined
+        ``warnings``, ``alignment`` and ``estimate`` (every parameter as a number, undetermined
         ones included: what produced the fitted image). The loss history is not
         written.
         """
@@ -197,6 +202,9 @@ class FitResult(eqx.Module):
         out["sigma"] = _number(self.sigma)
         out["solver"] = self.solver
         out["warnings"] = list(self.warnings)
+        # One warp per pair (invsss.registration.Warp.to_dict) when the fit registered
+        # the target, else null.
+        out["alignment"] = [dict(a) for a in self.alignment] or None
         # The numbers that produced the fitted image, undetermined ones included:
         # what a renderer uses when it needs a value anyway. Always written, so a
         # params file has one shape whatever the data determined.

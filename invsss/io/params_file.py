@@ -126,6 +126,8 @@ class ParamsFile(BaseModel):
     """Fit report: estimated noise level of the target."""
     solver: Optional[str] = None
     """Fit report: the nonlinear solver used."""
+    alignment: Any = None
+    """Fit report: per pair, the warp that registered the target onto the source (fit --align), or null."""
     warnings: Optional[list[str]] = None
     """Fit report: warnings the fit raised."""
 

@@ -1,0 +1,129 @@
+"""Registration of the target onto the source (invsss.registration, fit_pair(align=...))."""
+
+import json
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+import invsss
+from invsss.io.params_file import ParamsFile
+from invsss.registration import Warp, align_target, estimate_warp, match_photometry, warp_image
+from invsss.validation import InvalidInputError
+
+
+def _texture(size=96, seed=0):
+    rng = np.random.default_rng(seed)
+    return 0.3 + ndimage.gaussian_filter(rng.uniform(size=(size, size)), 1.5)[..., None]
+
+
+def _inner_mask(size=96, border=14):
+    mask = np.zeros((size, size))
+    mask[border:-border, border:-border] = 1.0
+    return mask
+
+
+def _photograph(image, warp):
+    """``image`` seen through ``warp``: photo(warp(x)) = image(x), resampled exactly (cubic, order 5)."""
+    inverse = np.linalg.inv(warp.matrix())
+    c, t = np.asarray(warp.centre), np.asarray(warp.params[:2])
+    # photo(y) = image(A^-1 (y - c - t) + c)
+    offset = c - inverse @ (c + t)
+    return np.stack([ndimage.affine_transform(image[..., k], inverse, offset=offset, order=5, mode="nearest")
+                     for k in range(image.shape[-1])], axis=-1)
+
+
+@pytest.mark.parametrize("kind, params", [
+    ("translation", (1.3, -2.6)),
+    ("similarity", (0.7, 1.1, float(np.radians(1.5)), float(np.log(1.02)))),
+    ("affine", (-0.8, 0.4, 0.01, -0.015, 0.008, 0.012)),
+])
+def test_estimate_warp_recovers_a_known_warp(kind, params):
+    reference = _texture()
+    mask = _inner_mask()
+    centre = tuple(float(v) for v in np.argwhere(mask > 0).mean(axis=0))
+    truth = Warp(kind, params, centre)
+    moving = _photograph(reference, truth)
+    found = estimate_warp(moving, reference, mask, kind)
+    # Compare where the warp sends the mask's corners: a mapping error in pixels.
+    corners = np.array([[14.0, 14.0], [14.0, 81.0], [81.0, 14.0], [81.0, 81.0]])
+    assert np.abs(found.map_points(corners) - truth.map_points(corners)).max() < 0.03
+
+
+def test_estimate_warp_ignores_gain_and_offset():
+    reference = _texture()
+    mask = _inner_mask()
+    truth = Warp("translation", (2.2, 0.9), (47.5, 47.5))
+    moving = 3.0 * _photograph(reference, truth) + 0.2
+    found = estimate_warp(moving, reference, mask, "translation")
+    np.testing.assert_allclose(found.params, truth.params, atol=0.02)
+
+
+@pytest.mark.parametrize("warp", [
+    Warp("translation", (1.0, -2.0), (10.0, 12.0)),
+    Warp("similarity", (0.5, 0.25, 0.02, -0.01), (40.0, 30.0)),
+    Warp("affine", (0.5, 0.25, 0.01, 0.02, -0.03, 0.04), (40.0, 30.0)),
+])
+def test_warp_record_round_trips_through_json(warp):
+    back = Warp.from_dict(json.loads(json.dumps(warp.to_dict())))
+    assert back.kind == warp.kind
+    np.testing.assert_allclose(back.params, warp.params, atol=1e-12)
+    np.testing.assert_allclose(back.centre, warp.centre)
+
+
+def test_align_target_undoes_the_warp_and_drops_pixels_from_outside():
+    reference = _texture(64)
+    warp = Warp("translation", (3.0, 0.0), (31.5, 31.5))
+    moving = _photograph(reference, warp)
+    aligned, kept = align_target(moving, np.ones((64, 64)), warp)
+    # Integer shift: exact where the warped position lies inside the frame.
+    np.testing.assert_allclose(aligned[:61], reference[:61], atol=1e-9)
+    assert kept[61:].sum() == 0 and kept[:61].all()
+
+
+def test_match_photometry_finds_a_channel_mix():
+    rng = np.random.default_rng(1)
+    rgb = rng.uniform(size=(16, 16, 3))
+    grey = (rgb @ np.array([0.5, 0.3, 0.2]) * 2.0 + 0.1)[..., None]
+    np.testing.assert_allclose(match_photometry(rgb, grey, np.ones((16, 16))), grey, atol=1e-10)
+
+
+def _shifted_pair():
+    source = _texture(80, seed=3)[..., 0]
+    depth = np.full((80, 80), 500.0)
+    mask = _inner_mask(80, 12)
+    truth = invsss.SSSParams(600.0, 0.0, 1.0, [1.0], [1.0])
+    clean = np.asarray(invsss.render(source, depth, mask, truth), np.float64)
+    shifted = _photograph(clean[..., None], Warp("translation", (1.4, -0.8), (39.5, 39.5)))[..., 0]
+    return source, shifted, depth, mask
+
+
+FIT = dict(profile={"weights": [1.0], "variances": [1.0]}, fix={"correction": 0.0, "maxdd": 1.0},
+           n_starts=1, max_steps=60, robust=None)
+
+
+def test_fit_with_align_recovers_the_blur_of_a_shifted_target():
+    source, target, depth, mask = _shifted_pair()
+    plain = invsss.fit_pair(source, target, depth, mask, **FIT)
+    aligned = invsss.fit_pair(source, target, depth, mask, align="translation", **FIT)
+    # Unaligned, the shift reads as a much wider blur; aligned, the truth comes back.
+    assert abs(float(plain.params.sss_level) / 600.0 - 1.0) > 0.15
+    assert float(aligned.params.sss_level) == pytest.approx(600.0, rel=0.02)
+    np.testing.assert_allclose(aligned.alignment[0]["shift_px"], (1.4, -0.8), atol=0.05)
+    assert aligned.psnr > plain.psnr + 10.0
+    # The report goes into a valid params file.
+    record = ParamsFile.model_validate(json.loads(json.dumps(aligned.to_dict())))
+    assert record.alignment[0]["kind"] == "translation"
+    assert json.loads(json.dumps(plain.to_dict()))["alignment"] is None
+
+
+def test_align_rejects_an_unknown_kind():
+    source, target, depth, mask = _shifted_pair()
+    with pytest.raises(InvalidInputError, match=r"^align: expected one of none, translation, similarity, affine"):
+        invsss.fit_pair(source, target, depth, mask, align="homography")
+
+
+def test_warp_image_marks_samples_outside_the_frame():
+    image = np.ones((8, 8, 1))
+    _, valid = warp_image(image, Warp("translation", (0.0, -2.5), (3.5, 3.5)))
+    assert not valid[:, :3].any() and valid[:, 3:].all()
