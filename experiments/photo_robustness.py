@@ -108,10 +108,12 @@ def main() -> None:
             started = time.perf_counter()
             fit = invsss.fit_pair(pair.source, photo, pair.depth, pair.mask, n_starts=args.starts, align=align)
             level, correction = float(fit.params.sss_level), float(fit.params.correction)
+            level_se = fit.stderr.get("sss_level")
             if name == "clean":
                 clean[align] = (level, correction, fit.psnr)
             ref = clean.get(align, (level, correction, fit.psnr))
-            cells += [f"{level:.0f} ({100 * (level / ref[0] - 1):+.0f} %)",
+            se = f" +- {float(level_se):.0f}" if level_se is not None else ""
+            cells += [f"{level:.0f}{se} ({100 * (level / ref[0] - 1):+.0f} %)",
                       f"{correction:.0f} ({100 * (correction / ref[1] - 1):+.0f} %)" if ref[1] else f"{correction:.0f}",
                       f"{fit.psnr:.1f}"]
             if align != "none":

@@ -251,12 +251,12 @@ def plot_fit_report(result, pairs, path) -> None:
         (p.source, p.target, p.depth, p.mask) if hasattr(p, "source") else tuple(p) for p in pairs
     ]
     if result.alignment:
-        # An aligned fit's images are on the source's grid: show the target there too.
-        from .registration import Warp, align_target
+        # An aligned fit's images are on the target's grid: show the source there too.
+        from .registration import Warp, align_source
 
         moved = []
         for (source, target, depth, mask), record in zip(pairs, result.alignment):
-            target, mask = align_target(target, mask, Warp.from_dict(record))
+            source, depth, mask = align_source(source, depth, mask, Warp.from_dict(record), np.shape(target)[:2])
             moved.append((source, target, depth, mask))
         pairs = moved
     fitted = list(result.fitted)

@@ -123,6 +123,8 @@ def test_a_fit_result_round_trips_with_every_report_key(tmp_path):
         "iterations": 7, "fixed": {}, "gauge": "variances", "channels_mix": [0.3, 0.6, 0.1],
         "gain": [1.0], "offset": [0.0], "profile": "thesis-nir", "estimate": PARAMS,
         "sigma": 0.01, "solver": "lm", "warnings": ["w"],
+        "alignment": [{"kind": "translation", "shift_px": [1.0, -0.5], "centre_px": [10.0, 12.0],
+                       "matrix": [[1.0, 0.0, 1.0], [0.0, 1.0, -0.5]]}],
     }
     path = tmp_path / "p.json"
     write_params(path, {**PARAMS, **report})

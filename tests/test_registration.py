@@ -8,7 +8,7 @@ from scipy import ndimage
 
 import invsss
 from invsss.io.params_file import ParamsFile
-from invsss.registration import Warp, align_target, estimate_warp, match_photometry, warp_image
+from invsss.registration import Warp, align_source, align_target, estimate_warp, match_photometry, warp_image
 from invsss.validation import InvalidInputError
 
 
@@ -69,6 +69,25 @@ def test_warp_record_round_trips_through_json(warp):
     assert back.kind == warp.kind
     np.testing.assert_allclose(back.params, warp.params, atol=1e-12)
     np.testing.assert_allclose(back.centre, warp.centre)
+
+
+def test_align_source_puts_the_source_on_the_target_grid():
+    reference = _texture(64)
+    warp = Warp("similarity", (1.5, -0.5, float(np.radians(2.0)), float(np.log(1.01))), (31.5, 31.5))
+    photo = _photograph(reference, warp)
+    depth = np.full((64, 64), 500.0)
+    depth[:, :4] = 0.0  # a renderer's background: filled before resampling
+    moved, moved_depth, kept = align_source(reference, depth, np.ones((64, 64)), warp, (64, 64))
+    inner = kept > 0.999
+    inner[:6], inner[-6:], inner[:, :6], inner[:, -6:] = False, False, False, False
+    assert inner.sum() > 2000
+    # The source resampled onto the target's grid is the photograph (both of one smooth image).
+    assert np.abs(moved - photo)[inner].max() < 2e-3
+    np.testing.assert_allclose(moved_depth, 500.0, rtol=1e-12)
+    # Target pixels that come from outside the source's frame are not skin.
+    corners = warp.inverse_map_points(np.array([[0.0, 0.0], [63.0, 63.0]]))
+    assert (corners < 0).any() or (corners > 63).any()
+    assert kept[0, 0] == 0.0 or kept[63, 63] == 0.0
 
 
 def test_align_target_undoes_the_warp_and_drops_pixels_from_outside():

@@ -37,7 +37,7 @@ import numpy as np
 from ..params import PARAM_NAMES, SSSParams
 from ..validation import InvalidInputError
 from .diagnostics import MISALIGNMENT_PX, masked_psnr, masked_ssim, misalignment
-from ..registration import align_target, estimate_warp, match_photometry
+from ..registration import align_source, align_target, estimate_warp, match_photometry
 from .inputs import prepare_pairs
 from .options import FitOptions
 from .problem import build_problem
@@ -117,16 +117,16 @@ def fit_pair(
     robust : {"pseudo-huber", "cauchy"} or None
         Robust loss by iterative reweighting (see :mod:`invsss.estimator.robust`).
     align : {"none", "translation", "similarity", "affine"}
-        Register the target onto the source's pixel grid as part of the fit, for
-        photographs that are not pixel-aligned with their render. The warp is
-        estimated against the photometrically matched source, the target resampled
-        (cubic spline) and fitted, the warp refined against that fit's prediction
-        (which carries the blur, so the blur does not bias the warp) and the
-        target fitted again; the warp is in :attr:`FitResult.alignment`. The
-        standard errors treat the warp as known (it is determined far more
-        tightly than the blur, by the whole image's edges). Pixels whose warped
-        position falls outside the target leave the mask. About twice the time
-        of a fit.
+        Register the pair as part of the fit, for photographs that are not
+        pixel-aligned with their render. The warp (source pixels to target pixels)
+        is estimated against the photometrically matched source; the source, depth
+        and mask are resampled onto the target's grid (the noisy target never is:
+        see :mod:`invsss.registration`) and fitted; the warp is refined against
+        that fit's prediction (which carries the blur, so the blur does not bias
+        the warp) and the pair fitted again. The warp is in
+        :attr:`FitResult.alignment` and the fitted images are on the target's grid.
+        The standard errors treat the warp as known. Target pixels that come from
+        outside the source's frame leave the mask. About twice the time of a fit.
     options : FitOptions, optional
         All of the above options (``model`` to ``robust``) in one checked value;
         then leave those keywords at their defaults.
@@ -301,7 +301,9 @@ def _fit(pairs, single, options, progress, stop) -> FitResult:
 
 
 def _fit_aligned(pairs, single, options, progress, stop) -> FitResult:
-    """A fit with the target registered onto the source (``align``; see :func:`fit_pair`)."""
+    """A fit with the source side registered onto the target (``align``; see :func:`fit_pair`)."""
+    from ..screen_space import render
+
     checked = [
         (np.asarray(p.source, np.float64), np.asarray(p.target, np.float64), np.asarray(p.depth, np.float64),
          np.asarray(p.mask, np.float64), p.target_ndim)
@@ -312,23 +314,30 @@ def _fit_aligned(pairs, single, options, progress, stop) -> FitResult:
     def aligned(warps):
         out = []
         for (source, target, depth, mask, ndim), warp in zip(checked, warps):
-            moved, kept = align_target(target[..., 0] if ndim == 2 else target, mask, warp)
+            moved, moved_depth, kept = align_source(source, depth, mask, warp, target.shape[:2])
             if not (kept > 0).any():
-                raise InvalidInputError("align: the registered target does not overlap the masked source")
-            out.append((source, moved, depth, kept))
+                raise InvalidInputError("align: the registered source does not overlap the target")
+            out.append((moved, target[..., 0] if ndim == 2 else target, moved_depth, kept))
         return out
 
     warps = [estimate_warp(target, match_photometry(source, target, mask), mask, options.align)
              for source, target, _, mask, _ in checked]
-    # A first fit on the coarsely registered target gives a prediction with the
-    # blur in it; registering against that removes the blur's pull on the warp.
+    # A first fit on the coarse registration gives parameters whose prediction
+    # carries the blur; registering against that removes the blur's pull on the warp.
     first = _fit(aligned(warps), single, dataclasses.replace(plain, n_starts=1), progress, stop)
     if first.interrupted:
         return dataclasses.replace(first, alignment=tuple(w.to_dict() for w in warps))
-    warps = [estimate_warp(target, np.asarray(f, np.float64).reshape(target.shape), mask, options.align, start=w)
-             for (_, target, _, mask, _), f, w in zip(checked, first.fitted, warps)]
-    result = _fit(aligned(warps), single, plain, progress, stop)
-    return dataclasses.replace(result, alignment=tuple(w.to_dict() for w in warps))
+    refined = []
+    for (source, target, depth, mask, _), warp in zip(checked, warps):
+        prediction = np.asarray(render(source, depth, mask, first.params, options.model,
+                                       tap_weights=options.tap_weights), np.float64)
+        prediction = prediction[..., None] if prediction.ndim == 2 else prediction
+        # The prediction in the target's channels (gain, offset, RGB -> grey mix),
+        # matched against the coarsely registered target.
+        reference = match_photometry(prediction, align_target(target, mask, warp)[0], mask)
+        refined.append(estimate_warp(target, reference, mask, options.align, start=warp))
+    result = _fit(aligned(refined), single, plain, progress, stop)
+    return dataclasses.replace(result, alignment=tuple(w.to_dict() for w in refined))
 
 
 class _Path:

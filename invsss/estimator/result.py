@@ -91,7 +91,7 @@ class FitResult(eqx.Module):
     alignment : tuple of dict
         With ``align``: per pair, the warp from source pixels to target pixels
         (:meth:`invsss.registration.Warp.to_dict`); the fitted images are on the
-        source's grid. Empty without ``align``.
+        target's grid. Empty without ``align``.
         Not written by :meth:`to_dict`.
     gain, offset : numpy.ndarray
         Photometric fit ``pred = gain * out + offset`` per target channel: shape
