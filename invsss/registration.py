@@ -42,6 +42,7 @@ import numpy as np
 import optimistix as optx
 from scipy import ndimage
 
+from .pair import fill_background_depth
 from .validation import InvalidInputError
 
 __all__ = ["ALIGN_KINDS", "Warp", "estimate_warp", "warp_image", "align_target", "align_source", "match_photometry"]
@@ -228,9 +229,10 @@ def estimate_warp(moving, reference, mask, kind: str = "similarity", start: Warp
 
 
 def warp_image(image, warp: Warp, order: int = 3):
-    """``image`` (H, W, C) resampled at the warped source grid; NaN where it falls outside.
+    """``image`` (H, W, C) (the target) sampled at the warped source grid (cubic spline by default).
 
-    Returns the resampled image and the (H, W) map of valid pixels.
+    Returns the resampled image and the (H, W) map of pixels whose warped position
+    lies inside ``image`` (edge values are used elsewhere).
 
     Examples
     --------
@@ -240,15 +242,9 @@ def warp_image(image, warp: Warp, order: int = 3):
     ([11.0, 12.0, 13.0, 14.0], [True, True, True, True, False])
     """
     image = np.asarray(image, np.float64)
-    h, w = image.shape[:2]
-    rows, cols = np.mgrid[0:h, 0:w].astype(np.float64)
-    mapped = warp.map_points(np.stack([rows.ravel(), cols.ravel()], axis=1))
-    r, c = mapped[:, 0].reshape(h, w), mapped[:, 1].reshape(h, w)
-    eps = 1e-6
-    valid = (r >= -eps) & (r <= h - 1 + eps) & (c >= -eps) & (c <= w - 1 + eps)
-    out = np.stack([ndimage.map_coordinates(image[..., k], [r, c], order=order, mode="nearest")
-                    for k in range(image.shape[-1])], axis=-1)
-    return out, valid
+    shape = image.shape[:2]
+    positions = warp.map_points(_grid(shape))
+    return _sample(image, positions, shape, order), _inside(positions, shape, shape)
 
 
 def align_target(target, mask, warp: Warp):
@@ -265,6 +261,20 @@ def align_target(target, mask, warp: Warp):
     moved, valid = warp_image(target[..., None] if target.ndim == 2 else target, warp)
     mask = np.ones(target.shape[:2]) if mask is None else np.asarray(mask, np.float64)
     return (moved[..., 0] if target.ndim == 2 else moved), np.where(valid, mask, 0.0)
+
+
+def _grid(shape) -> np.ndarray:
+    """Every pixel's (row, col) of an image of ``shape``, as (N, 2)."""
+    rows, cols = np.mgrid[0 : shape[0], 0 : shape[1]].astype(np.float64)
+    return np.stack([rows.ravel(), cols.ravel()], axis=1)
+
+
+def _inside(positions, frame, shape) -> np.ndarray:
+    """Which ``positions`` (N, 2) fall inside an image of size ``frame``, reshaped to ``shape``."""
+    eps = 1e-6
+    ok = ((positions[:, 0] >= -eps) & (positions[:, 0] <= frame[0] - 1 + eps)
+          & (positions[:, 1] >= -eps) & (positions[:, 1] <= frame[1] - 1 + eps))
+    return ok.reshape(shape)
 
 
 def _sample(image, positions, shape, order):
@@ -289,16 +299,10 @@ def align_source(source, depth, mask, warp: Warp, shape):
     >>> moved[1, :, 0].round(6).tolist(), mask[:, 0].tolist()
     ([0.0, 1.0, 2.0, 3.0], [0.0, 1.0, 1.0, 1.0])
     """
-    from .pair import fill_background_depth
-
     source = np.asarray(source, np.float64)
     source = source[..., None] if source.ndim == 2 else source
-    h, w = shape
-    rows, cols = np.mgrid[0:h, 0:w].astype(np.float64)
-    positions = warp.inverse_map_points(np.stack([rows.ravel(), cols.ravel()], axis=1))
-    eps = 1e-6
-    inside = ((positions[:, 0] >= -eps) & (positions[:, 0] <= source.shape[0] - 1 + eps)
-              & (positions[:, 1] >= -eps) & (positions[:, 1] <= source.shape[1] - 1 + eps)).reshape(shape)
+    positions = warp.inverse_map_points(_grid(shape))
+    inside = _inside(positions, source.shape[:2], shape)
     depth = np.asarray(fill_background_depth(np.asarray(depth, np.float64)), np.float64)
     moved = _sample(source, positions, shape, 3)
     moved_depth = _sample(depth[..., None], positions, shape, 1)[..., 0]
