@@ -50,8 +50,13 @@ __all__ = ["ALIGN_KINDS", "Warp", "estimate_warp", "warp_image", "align_target",
 #: The warp models, by number of parameters.
 ALIGN_KINDS = {"translation": 2, "similarity": 4, "affine": 6}
 
-#: Gaussian blur (pixels) of the coarse-to-fine estimation levels.
-_LEVELS = (3.0, 1.0, 0.0)
+#: Gaussian blur (pixels) of the coarse-to-fine estimation levels. The finest level
+#: still smooths by one pixel: on unsmoothed images, sampling the noisy target between
+#: pixels averages its noise and lowers the loss, which pulls the warp off the truth.
+#: On data_synthetic/fran_front against the true prediction, stopping at 0 gave a
+#: similarity of scale 0.99976 and a shift of 0.02 px (0.05 px at the mask's edge);
+#: stopping at 1 gave scale 1.000001 and a shift below 0.001 px.
+_LEVELS = (3.0, 1.0)
 
 
 @dataclasses.dataclass(frozen=True)
