@@ -216,7 +216,7 @@ def _add_fit_parser(subparsers) -> None:
                         help="solver steps per start and per refinement (default: 200)")
     parser.add_argument("--align", choices=("none", "translation", "similarity", "affine"), default="none",
                         help="register the target onto the source inside the fit, for photographs "
-                        "that are not pixel-aligned with their render (default: none; about twice "
+                        "that are not pixel-aligned with their render (default: none; two to five times "
                         "the time; the warp goes into params.json)")
     parser.add_argument(
         "--linear-codes",
