@@ -7,8 +7,11 @@ sRGB JPEG, Poisson-Gaussian noise. As in a camera, the noise comes after the
 optics: for a model-made pair (one with ``truth.json``) the noise-free target is
 rebuilt from its truth, moved or shaded, and only then given fresh noise of the
 recorded size (the ``noise`` row: Poisson-Gaussian instead; ``jpeg90`` encodes the
-noisy image). Moving a target whose noise is already in it would interpolate the
-noise, which a fit reads as blur (+91 % sss_level for the 0.6/0.8 px shift). Each is fitted with ``align="none"`` and with
+noisy image).
+
+The misregistration itself is simulated by a cubic-spline resampling of the
+noise-free target, which smooths it a little; a continuous-optics simulator (render
+the misregistered view) would be cleaner. Each is fitted with ``align="none"`` and with
 registration (``--align``); the table gives sss_level, correction and PSNR of each
 fit and its change from the clean fit::
 
