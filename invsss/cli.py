@@ -602,13 +602,15 @@ def _add_sweep_report_parser(subparsers) -> None:
     )
     parser.add_argument("out", metavar="DIR", help="a sweep's results folder")
     parser.add_argument("--no-plots", action="store_true", help="only the table and the CSV file")
+    parser.add_argument("--parquet", action="store_true",
+                        help="also write DIR/report/results.parquet (needs pandas and pyarrow)")
     parser.set_defaults(func=_run_sweep_report)
 
 
 def _run_sweep_report(args: argparse.Namespace, stop: StopSignals) -> int:
     from .experiments.report import write_report
 
-    table, written = write_report(args.out, plots=not args.no_plots)
+    table, written = write_report(args.out, plots=not args.no_plots, parquet=args.parquet)
     print(table)
     print(f"wrote {', '.join(written)}")
     return 0

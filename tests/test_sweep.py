@@ -310,6 +310,24 @@ profile = {PROFILE}
     assert isinstance(table, pandas.DataFrame) and list(table["pair"]) == ["a", "b"]
 
 
+def test_dask_worker_processes_use_the_compilation_cache(root, tmp_path, monkeypatch):
+    # Dask starts its own worker processes, which never pass through the CLI's
+    # cache switch; the sweep's choice must reach them with the trials.
+    pytest.importorskip("distributed")
+    path = _experiment(root, "cache.toml", RENDER.replace('pairs = ["data/*/"]', 'pairs = ["data/a/"]'))
+    cache = tmp_path / "cache"
+    monkeypatch.setenv("INVSSS_CACHE_DIR", str(cache))
+    summary = ex.run(path, tmp_path / "on", executor=ex.DaskExecutor(jobs=1), log=None)
+    assert summary.done == 4
+    assert cache.is_dir() and any(cache.iterdir())
+    off = tmp_path / "off_cache"
+    monkeypatch.setenv("INVSSS_CACHE_DIR", str(off))
+    monkeypatch.setenv("INVSSS_NO_CACHE", "1")
+    summary = ex.run(path, tmp_path / "off", executor=ex.DaskExecutor(jobs=1), log=None)
+    assert summary.done == 4
+    assert not off.exists()
+
+
 def test_pair_axis_per_task(root):
     # fit and render: one trial per pair unless the file names the pairs itself.
     chosen = ex.load(_experiment(root, "pairs.toml", RENDER + 'pair = ["c", "a"]\n'))
@@ -349,6 +367,23 @@ def test_sweep_report_table_csv_and_plots(root, capsys):
     # The render at the parameters the pair was made with scores best.
     best = max(rows.values(), key=lambda r: r["psnr"])
     assert (best["sss_level"], best["correction"]) == (600, 800)
+
+
+def test_sweep_report_parquet_holds_the_results(root, capsys):
+    pandas = pytest.importorskip("pandas")
+    pytest.importorskip("pyarrow")
+    path = _experiment(root, "parquet.toml", RENDER.replace('"data/*/"', '"data/b/"'))
+    out = root / "parquet_out"
+    ex.run(path, out, log=None)
+    assert invsss.cli.main(["sweep-report", str(out), "--no-plots", "--parquet"]) == 0
+    table = pandas.read_parquet(out / "report" / "results.parquet")
+    rows = _rows(out)
+    assert sorted(table["id"]) == sorted(rows) and len(rows) == 4
+    for record in table.to_dict("records"):
+        row = rows[record["id"]]
+        assert record["psnr"] == pytest.approx(row["psnr"], rel=1e-12)
+        assert list(record["param.weights"]) == pytest.approx(row["param.weights"], rel=1e-12)
+        assert record["status"] == "done" and record["pair"] == "b"
 
 
 def test_a_nan_loss_fails_the_trial_and_writes_nothing(root, monkeypatch):

@@ -19,7 +19,9 @@ process writes, always says what was started.
   file system), since each writes its trial's files itself.
 
 Every worker process keeps its compiled JAX functions from one trial to the
-next, so a sweep over same-sized pairs compiles once per worker and options.
+next, so a sweep over same-sized pairs compiles once per worker and options;
+local and Dask workers also share JAX's on-disk compilation cache
+(:mod:`invsss.compile_cache`) unless the sweep runs with ``--no-cache``.
 
 Running on a cluster (``pip install "invsss[cluster]"`` on every machine):
 
@@ -88,6 +90,22 @@ def _worker_start(parent: int) -> None:
     from ..compile_cache import enable_compile_cache
 
     enable_compile_cache()
+
+
+def _execute_on_dask_worker(trial: dict, out: str, use_cache: bool) -> dict:
+    """:func:`.runner.execute` on a Dask worker, with the compilation cache the sweep chose.
+
+    A Dask worker is started by Dask (or by the user's ``dask worker``), not
+    by invsss, and does not see the sweep's ``--no-cache``; the sweep's
+    choice travels with every trial instead. Enabling is idempotent, so only
+    a worker's first trial does any work. The cache lives where
+    :func:`~invsss.compile_cache.cache_directory` says on the worker's machine.
+    """
+    if use_cache:
+        from ..compile_cache import enable_compile_cache
+
+        enable_compile_cache()
+    return execute(trial, out)
 
 
 def _check_jobs(jobs) -> int:
@@ -218,7 +236,12 @@ class DaskExecutor:
         return f"Dask: {where}"
 
     def submit(self, trial: dict, out: str):
-        return self._client.submit(execute, trial, out, key=f"invsss-trial-{trial['id']}", pure=False)
+        from ..compile_cache import cache_disabled
+
+        return self._client.submit(
+            _execute_on_dask_worker, trial, out, not cache_disabled(),
+            key=f"invsss-trial-{trial['id']}", pure=False,
+        )
 
     def wait(self, futures, timeout: float):
         from distributed import wait

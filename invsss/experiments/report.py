@@ -4,6 +4,9 @@ Written into ``OUT/report/``:
 
 * ``results.csv`` -- every column of :func:`invsss.experiments.results`
   (lists as JSON text);
+* ``results.parquet`` with ``parquet=True`` -- the same table through
+  pandas (needs ``pip install 'invsss[report]'``: pandas and pyarrow), lists
+  kept as lists;
 * ``<metric>_vs_<axis>.png`` -- loss, PSNR and SSIM against each numeric axis,
   one line per pair;
 * for fits, ``params_vs_<axis>.png`` -- the fitted ``sss_level``,
@@ -182,15 +185,40 @@ def _contact_sheets(plt, rows, axes, out, folder) -> list[str]:
     return written
 
 
-def write_report(out, *, plots: bool = True) -> tuple[str, list[str]]:
+def _write_parquet(rows: list[dict], path: str) -> None:
+    import pandas
+
+    table = pandas.DataFrame(rows)
+    # A column mixing numbers and None or lists is stored as it is; an empty
+    # column of None has no type Parquet knows, so it is written as text.
+    for column in table.columns:
+        if table[column].isna().all():
+            table[column] = table[column].astype("string")
+    table.to_parquet(path, index=False)
+
+
+def _check_parquet_available() -> None:
+    try:
+        import pandas  # noqa: F401
+        import pyarrow  # noqa: F401
+    except ImportError as err:
+        raise InvalidInputError(
+            f"--parquet: needs pandas and pyarrow ({err.name} is not installed); "
+            "pip install 'invsss[report]'"
+        ) from None
+
+
+def write_report(out, *, plots: bool = True, parquet: bool = False) -> tuple[str, list[str]]:
     """Write ``OUT/report/`` (see the module docstring); return the table and the files.
 
     Raises
     ------
     InvalidInputError
-        ``out`` holds no sweep.
+        ``out`` holds no sweep, or ``parquet=True`` without pandas and pyarrow.
     """
     out = os.fspath(out)
+    if parquet:
+        _check_parquet_available()
     rows, meta = flat_rows(out)
     if not rows:
         raise InvalidInputError(f"{out}: the sweep has no trials")
@@ -200,6 +228,9 @@ def write_report(out, *, plots: bool = True) -> tuple[str, list[str]]:
     os.makedirs(folder, exist_ok=True)
     written = [os.path.join(folder, "results.csv")]
     _write_csv(rows, written[0])
+    if parquet:
+        written.append(os.path.join(folder, "results.parquet"))
+        _write_parquet(rows, written[-1])
     done = [r for r in rows if r["status"] == "done"]
     if plots and done:
         import matplotlib
