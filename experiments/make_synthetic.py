@@ -240,7 +240,25 @@ def _bitmap(path: Path) -> dict:
     return {"type": "bitmap", "filename": str(path), "raw": True, "filter_type": "bilinear", "wrap_mode": "clamp"}
 
 
-def render_head(head: Head, frame: CameraFrame, focal_px: float, lighting: Lighting, seed: int) -> Rendering:
+@dataclasses.dataclass(frozen=True)
+class CameraMove:
+    """A small move of the camera against the one a pair was made with (a misregistered photo).
+
+    The image content moves by ``shift_px`` (rows, columns), turns by
+    ``rotation_deg`` (counter-clockwise as displayed, i.e. with rows pointing
+    down) and grows by ``zoom`` about the image centre: the warp
+    ``experiments/photo_robustness.misregister`` applies by resampling, made by
+    the optics instead (a principal-point offset, a roll about the optical axis
+    and a focal length change), so nothing is interpolated.
+    """
+
+    shift_px: tuple[float, float] = (0.0, 0.0)
+    rotation_deg: float = 0.0
+    zoom: float = 1.0
+
+
+def render_head(head: Head, frame: CameraFrame, focal_px: float, lighting: Lighting, seed: int,
+                move: CameraMove = CameraMove()) -> Rendering:
     """Render ``head`` with Mitsuba 3: albedo x Lambert shading (with shadows), depth and skin mask.
 
     The albedo texture (already multiplied by the detail texture) is looked up by
@@ -251,7 +269,12 @@ def render_head(head: Head, frame: CameraFrame, focal_px: float, lighting: Light
     """
     mi = _mitsuba()
     size = IMAGE_SIZE
-    fov = float(np.degrees(2.0 * np.arctan(size / 2.0 / focal_px)))
+    fov = float(np.degrees(2.0 * np.arctan(size / 2.0 / (focal_px * move.zoom))))
+    # Rolling the camera turns the picture the other way; depth (along the
+    # optical axis) is unchanged by a roll. Signs checked by registering the
+    # moved render against the bundled one.
+    a = np.radians(move.rotation_deg)
+    up = np.cos(a) * frame.up + np.sin(a) * frame.right
     with tempfile.TemporaryDirectory(prefix="make-synthetic-") as folder:
         folder = Path(folder)
         _write_mitsuba_mesh(head.mesh, folder / "head.ply")
@@ -264,9 +287,11 @@ def render_head(head: Head, frame: CameraFrame, focal_px: float, lighting: Light
                 "integrator": integrator,
                 "sensor": {
                     "type": "perspective", "fov": fov, "fov_axis": "x", "near_clip": 1.0, "far_clip": 1e5,
+                    "principal_point_offset_x": -move.shift_px[1] / size,
+                    "principal_point_offset_y": -move.shift_px[0] / size,
                     "to_world": mi.ScalarTransform4f().look_at(
                         origin=frame.position.tolist(), target=(frame.position + frame.forward).tolist(),
-                        up=frame.up.tolist()),
+                        up=up.tolist()),
                     "film": {"type": "hdrfilm", "width": size, "height": size, "rfilter": {"type": "box"},
                              "pixel_format": "rgb"},
                     "sampler": {"type": "stratified", "sample_count": spp, "seed": seed},
@@ -327,7 +352,7 @@ def rotation_y(degrees: float) -> np.ndarray:
     return np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
 
 
-def face_scene(spec: dict, rng: np.random.Generator) -> tuple[Rendering, dict]:
+def face_scene(spec: dict, rng: np.random.Generator, move: CameraMove = CameraMove()) -> tuple[Rendering, dict]:
     """Put a pinhole camera in front of the head (turned and tilted) and render it."""
     head_info = HEADS[spec["mesh"]]
     head = head_info["load"](spec)
@@ -339,7 +364,7 @@ def face_scene(spec: dict, rng: np.random.Generator) -> tuple[Rendering, dict]:
     view = view + np.array([0.0, np.tan(np.radians(spec["tilt_deg"])), 0.0])
     view /= np.linalg.norm(view)
     frame = CameraFrame.look_at(centre + spec["distance_mm"] * view, centre)
-    rendering = render_head(head, frame, spec["focal_px"], Lighting(**spec["lighting"]), spec["seed"])
+    rendering = render_head(head, frame, spec["focal_px"], Lighting(**spec["lighting"]), spec["seed"], move)
     c = (IMAGE_SIZE - 1) / 2.0
     rendering.camera = {
         "model": "pinhole",
@@ -581,6 +606,25 @@ SCENES = {
         "channels_mix": None, "gain": [1.0, 0.95, 0.9], "offset": [0.01, 0.01, 0.01],
     },
 }
+
+
+def render_moved_view(name: str, move: CameraMove) -> Rendering:
+    """The source, depth and mask of face scene ``name`` seen by a camera moved by ``move``.
+
+    Same mesh, albedo detail (drawn first from the scene's seed), lighting and
+    sampler seed as the bundled pair; only the camera differs. Float32, as the
+    pair's files hold them.
+    """
+    spec = dict(SCENES[name], name=name)
+    if spec["kind"] != "face":
+        raise ValueError(f"{name}: only face scenes can be seen from a moved camera")
+    rendering, _ = face_scene(spec, np.random.default_rng(spec["seed"]), move)
+    return dataclasses.replace(
+        rendering,
+        source=rendering.source.astype(np.float32),
+        depth=rendering.depth.astype(np.float32),
+        mask=rendering.mask.astype(np.float32),
+    )
 
 
 def make_scene(name: str, out: Path) -> dict:

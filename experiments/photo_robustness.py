@@ -9,14 +9,18 @@ rebuilt from its truth, moved or shaded, and only then given fresh noise of the
 recorded size (the ``noise`` row: Poisson-Gaussian instead; ``jpeg90`` encodes the
 noisy image).
 
-The misregistration itself is simulated by a cubic-spline resampling of the
-noise-free target, which smooths it a little; a continuous-optics simulator (render
-the misregistered view) would be cleaner. Each is fitted with ``align="none"`` and with
-registration (``--align``); the table gives sss_level, correction and PSNR of each
+A misregistration is made by the optics, not by interpolation: the scene of a
+bundled face pair is rendered again from a camera moved by a principal-point
+offset, a roll and a focal change (``make_synthetic.CameraMove``), and the true
+model is applied to that view's own source, depth and mask. ``--optics resample``
+instead resamples the rendered target (cubic spline), the cheaper simulation of
+earlier runs, which smooths the image a little. Each photograph is fitted with
+``align="none"`` and with registration (``--align``); the table gives sss_level,
+correction and PSNR of each
 fit and its change from the clean fit::
 
     python experiments/photo_robustness.py [--pair data_synthetic/fran_front] [--align similarity]
-        [--rows clean,shift1,...] [--starts 2]
+        [--rows clean,shift1,...] [--starts 2] [--optics camera|resample]
 
 Rows: ``clean``, ``shift1``, ``shift2``, ``shift4`` (pixels, diagonal split as
 (0.6, 0.8) of the length), ``rot1`` (1 degree), ``rot2s`` (2 degrees and scale
@@ -27,17 +31,18 @@ read noise), ``vignette20`` (20 % at the corners).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import io
+import json
 import time
 from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
 
-import json
-
 import invsss
 from invsss.io import PARAMS_KEYS, linear_to_srgb, srgb_to_linear
+from make_synthetic import CameraMove, render_moved_view
 
 
 def misregister(image: np.ndarray, shift=(0.0, 0.0), rotation_deg: float = 0.0, scale: float = 1.0) -> np.ndarray:
@@ -82,43 +87,68 @@ def shot_noise(image: np.ndarray, electrons: float, read: float, rng) -> np.ndar
     return counts / per_unit
 
 
-#: name -> (what the optics do to the noise-free image, what the sensor adds; None: Gaussian noise)
+@dataclasses.dataclass(frozen=True)
+class Row:
+    """One nuisance: a camera move, a shading of the image, and what the sensor adds."""
+
+    move: CameraMove = CameraMove()
+    shade: float = 0.0  # vignetting strength
+    sensor: str = "gaussian"  # "gaussian" (the pair's noise), "shot" or "jpeg"
+
+
 ROWS = {
-    "clean": (lambda t: t, None),
-    "shift1": (lambda t: misregister(t, (0.6, 0.8)), None),
-    "shift2": (lambda t: misregister(t, (1.2, 1.6)), None),
-    "shift4": (lambda t: misregister(t, (2.4, 3.2)), None),
-    "rot1": (lambda t: misregister(t, rotation_deg=1.0), None),
-    "rot2s": (lambda t: misregister(t, rotation_deg=2.0, scale=1.02), None),
-    "jpeg90": (lambda t: t, "jpeg"),
-    "noise": (lambda t: t, "shot"),
-    "vignette20": (lambda t: vignette(t, 0.2), None),
+    "clean": Row(),
+    "shift1": Row(CameraMove((0.6, 0.8))),
+    "shift2": Row(CameraMove((1.2, 1.6))),
+    "shift4": Row(CameraMove((2.4, 3.2))),
+    "rot1": Row(CameraMove(rotation_deg=1.0)),
+    "rot2s": Row(CameraMove(rotation_deg=2.0, zoom=1.02)),
+    "jpeg90": Row(sensor="jpeg"),
+    "noise": Row(sensor="shot"),
+    "vignette20": Row(shade=0.2),
 }
 
 
-def clean_target(folder: Path, pair) -> tuple[np.ndarray, float]:
-    """The noise-free target of a model-made pair and its noise sigma (else the target and 0)."""
-    target = np.asarray(pair.target, np.float64)
-    target = target[..., None] if target.ndim == 2 else target
-    truth_path = folder / "truth.json"
-    if not truth_path.is_file():
-        return target, 0.0
-    truth = json.loads(truth_path.read_text())
+def _truth(folder: Path) -> dict | None:
+    path = folder / "truth.json"
+    return json.loads(path.read_text()) if path.is_file() else None
+
+
+def clean_target(folder: Path, pair, move: CameraMove, optics: str) -> tuple[np.ndarray, float]:
+    """The noise-free target seen through ``move`` and its noise sigma.
+
+    A model-made pair's target is rebuilt from truth.json: on the moved camera's
+    own source, depth and mask (``optics="camera"``), or on the pair's, then
+    resampled (``"resample"``). Without truth.json, the pair's target is
+    resampled and the sigma is 0.
+    """
+    truth = _truth(folder)
+    if truth is None:
+        target = np.asarray(pair.target, np.float64)
+        target = target[..., None] if target.ndim == 2 else target
+        return misregister(target, move.shift_px, move.rotation_deg, move.zoom), 0.0
+    source, depth, mask = pair.source, pair.depth, pair.mask
+    moved = move != CameraMove()
+    if moved and optics == "camera":
+        view = render_moved_view(folder.name, move)
+        source, depth, mask = view.source, view.depth, view.mask
     params = invsss.SSSParams.from_dict({k: truth[k] for k in PARAMS_KEYS})
-    out = np.asarray(invsss.render(pair.source, pair.depth, pair.mask, params, truth["model"],
+    out = np.asarray(invsss.render(source, depth, mask, params, truth["model"],
                                    tap_weights=truth["tap_weights"]), np.float64)
     if truth["channels_mix"] is not None:
         out = out @ np.asarray(truth["channels_mix"])[:, None]
-    return np.asarray(truth["gain"]) * out + np.asarray(truth["offset"]), float(truth["noise_sigma"])
+    out = np.asarray(truth["gain"]) * out + np.asarray(truth["offset"])
+    if moved and optics == "resample":
+        out = misregister(out, move.shift_px, move.rotation_deg, move.zoom)
+    return out, float(truth["noise_sigma"])
 
 
-def photograph(clean: np.ndarray, sigma: float, name: str, rng) -> np.ndarray:
-    optics, sensor = ROWS[name]
-    image = optics(clean)
-    if sensor == "shot":
+def photograph(clean: np.ndarray, sigma: float, row: Row, rng) -> np.ndarray:
+    image = vignette(clean, row.shade) if row.shade else clean
+    if row.sensor == "shot":
         return shot_noise(image, 2000.0, 2.0, rng)
     image = image + sigma * rng.standard_normal(image.shape)
-    return jpeg(image, 90) if sensor == "jpeg" else image
+    return jpeg(image, 90) if row.sensor == "jpeg" else image
 
 
 def main() -> None:
@@ -127,16 +157,21 @@ def main() -> None:
     parser.add_argument("--align", default="similarity", choices=("translation", "similarity", "affine"))
     parser.add_argument("--rows", default=",".join(ROWS), help="comma-separated rows (default: all)")
     parser.add_argument("--starts", type=int, default=2)
+    parser.add_argument("--optics", default="camera", choices=("camera", "resample"),
+                        help="misregister by rendering from a moved camera (default) or by "
+                        "resampling the rendered target (cubic)")
     args = parser.parse_args()
     pair = invsss.load_pair(*(args.pair / f for f in ("source.exr", "target.exr", "depth.exr", "mask.png")))
-    clean_image, sigma = clean_target(args.pair, pair)
     rng = np.random.default_rng(13)
-    print(f"{args.pair}: fits with {args.starts} starts; align none | align {args.align}", flush=True)
+    print(f"{args.pair}: fits with {args.starts} starts; align none | align {args.align}; "
+          f"misregistration by {args.optics}", flush=True)
     header = ("| nuisance | sss_level | correction | PSNR dB | sss_level aligned | correction aligned "
               "| PSNR aligned | warp found |")
     rows, clean = [], {}
     for name in args.rows.split(","):
-        photo = photograph(clean_image, sigma, name, rng).astype(np.float32)
+        row = ROWS[name]
+        clean_image, sigma = clean_target(args.pair, pair, row.move, args.optics)
+        photo = photograph(clean_image, sigma, row, rng).astype(np.float32)
         photo = photo[..., 0] if np.ndim(pair.target) == 2 else photo
         cells = [name]
         for align in ("none", args.align):

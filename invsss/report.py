@@ -134,6 +134,12 @@ def _parameter_lines(result) -> list[str]:
                  if record["kind"] == "similarity" else "")
         where = f"pair {k} " if len(result.alignment) > 1 else ""
         lines.append(f"{where}target registered ({record['kind']}): shift ({dy:+.2f}, {dx:+.2f}) px (dy, dx){extra}")
+    vignetting = getattr(result, "vignetting", None)
+    if vignetting is not None:
+        a1, a2 = vignetting["coefficients"]
+        errors = ", ".join("?" if e is None else f"{e:.2g}" for e in vignetting["stderr"])
+        lines.append(f"vignetting: corner gain {vignetting['corner_gain']:.3f} "
+                     f"(1 + {a1:+.3f} rho^2 {a2:+.3f} rho^4; stderr {errors})")
     lines.extend(textwrap.wrap(_CONDITIONAL_NOTE, width=_TEXT_WIDTH, subsequent_indent="  "))
     for message in result.warnings:
         lines.extend(textwrap.wrap("! " + message, width=_TEXT_WIDTH, subsequent_indent="  "))

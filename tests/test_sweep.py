@@ -144,6 +144,21 @@ def test_trial_ids_are_stable_and_follow_the_configuration(root):
     assert not {t.id for t in first.trials} & {t.id for t in changed.trials}
 
 
+def test_align_and_vignetting_are_fit_axes_that_keep_older_ids(root):
+    from invsss.experiments.trials import trial_id
+
+    text = 'task = "fit"\n[data]\npairs = ["data/a/"]\n[grid]\nvignetting = [false, true]\nalign = ["none", "similarity"]\n'
+    experiment = ex.load(_experiment(root, "camera.toml", text))
+    assert len({t.id for t in experiment.trials}) == 4
+    plain = [t for t in experiment.trials if t.options["align"] == "none" and not t.options["vignetting"]]
+    # Options added after the first release do not enter the id at their
+    # defaults: a sweep started before they existed resumes with the same ids.
+    older = {k: v for k, v in plain[0].options.items() if k not in ("align", "vignetting")}
+    assert plain[0].id == trial_id({**plain[0].config, "options": older})
+    with pytest.raises(InvalidInputError, match="vignetting"):
+        ex.load(_experiment(root, "camera2.toml", text.replace("[false, true]", '["yes"]')))
+
+
 def test_sobol_and_random_samples_are_seeded_and_in_range(root):
     text = RENDER.split("[grid]")[0] + (
         '[sample]\nmethod = "sobol"\nn = 4\nseed = 3\nlog = ["sss_level"]\n'

@@ -68,6 +68,7 @@ def fit_pair(
     progress=None,
     robust: str | None = "pseudo-huber",
     align: str = "none",
+    vignetting: bool = False,
     options: FitOptions | None = None,
     stop=None,
 ) -> FitResult:
@@ -128,6 +129,11 @@ def fit_pair(
         :attr:`FitResult.alignment` and the fitted images are on the target's grid.
         The standard errors treat the warp as known. Target pixels that come from
         outside the source's frame leave the mask. Two to five times the time of a fit.
+    vignetting : bool
+        Fit the camera's fall-off toward the corners as a gain field
+        ``1 + a_1 rho^2 + a_2 rho^4`` about the frame's centre
+        (:mod:`invsss.estimator.vignetting`), for photographs; reported in
+        :attr:`FitResult.vignetting`, and the standard errors account for it.
     options : FitOptions, optional
         All of the above options (``model`` to ``robust``) in one checked value;
         then leave those keywords at their defaults.
@@ -164,7 +170,8 @@ def fit_pair(
     600
     """
     given = dict(model=model, profile=profile, fix=fix, gauge=gauge, solver=solver, n_starts=n_starts,
-                 max_steps=max_steps, tap_weights=tap_weights, robust=robust, align=align)
+                 max_steps=max_steps, tap_weights=tap_weights, robust=robust, align=align,
+                 vignetting=vignetting)
     return _fit([(source, target, depth, mask)], True, _options(options, given), progress, stop)
 
 
@@ -182,6 +189,7 @@ def fit_pairs(
     progress=None,
     robust: str | None = "pseudo-huber",
     align: str = "none",
+    vignetting: bool = False,
     options: FitOptions | None = None,
     stop=None,
 ) -> FitResult:
@@ -195,7 +203,8 @@ def fit_pairs(
     ``stop`` as for :func:`fit_pair`.
     """
     given = dict(model=model, profile=profile, fix=fix, gauge=gauge, solver=solver, n_starts=n_starts,
-                 max_steps=max_steps, tap_weights=tap_weights, robust=robust, align=align)
+                 max_steps=max_steps, tap_weights=tap_weights, robust=robust, align=align,
+                 vignetting=vignetting)
     return _fit(pairs, False, _options(options, given), progress, stop)
 
 
@@ -547,7 +556,22 @@ def _report(problem, path, single, steps) -> FitResult:
             "weights": problem.start_weights,
             "variances": np.asarray(problem.variances, np.float64),
         },
+        vignetting=_vignetting_record(natural, unc),
     )
+
+
+def _vignetting_record(natural, unc) -> dict | None:
+    """The fitted fall-off field as params.json writes it (None when not fitted)."""
+    if "vignetting" not in natural:
+        return None
+    a = np.asarray(natural["vignetting"], np.float64)
+    err = np.asarray(unc.stderr["vignetting"], np.float64)
+    return {
+        "model": "gain field 1 + a1 rho^2 + a2 rho^4, rho = distance from the frame's centre / half-diagonal",
+        "coefficients": a.tolist(),
+        "stderr": [None if not np.isfinite(e) else float(e) for e in err],
+        "corner_gain": float(1.0 + a.sum()),
+    }
 
 
 def _combine_flags(roles, natural, unc, flags):

@@ -25,6 +25,7 @@ from jaxtyping import Array, Float
 from .basis import basis_images
 from .parametrisation import Parametrisation
 from .projection import combine, solve_linear
+from .vignetting import vignetting_field
 
 __all__ = ["Objective"]
 
@@ -72,9 +73,15 @@ class Objective(eqx.Module):
         return tuple(p.mask[..., None] * u for p, u in zip(self.pairs, self.robust))
 
     def bases(self, natural: dict) -> tuple:
-        return tuple(
+        images = tuple(
             basis_images(p, natural, self.model, self.tap_weights, self.linear_weights)
             for p in self.pairs
+        )
+        if "vignetting" not in natural:
+            return images
+        # The lens shades whatever the scattering delivers; the offset stays flat.
+        return tuple(
+            x * vignetting_field(natural["vignetting"], x.shape[1:3])[None, :, :, None] for x in images
         )
 
     def linear(self, z) -> tuple[dict, tuple, Array, Array, Array]:

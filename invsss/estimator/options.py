@@ -53,6 +53,8 @@ class FitOptions:
         ``"none"`` and False are stored as None.
     align : {"none", "translation", "similarity", "affine"}
         Register the target onto the source inside the fit (:mod:`invsss.registration`).
+    vignetting : bool
+        Fit the camera's radial fall-off as a gain field (:mod:`invsss.estimator.vignetting`).
 
     Raises
     ------
@@ -81,12 +83,15 @@ class FitOptions:
     tap_weights: object = None
     robust: str | None = "pseudo-huber"
     align: str = "none"
+    vignetting: bool = False
 
     def __post_init__(self):
         from ..registration import ALIGN_KINDS
 
         if self.align not in ("none", *ALIGN_KINDS):
             raise InvalidInputError(f"align: expected one of none, {', '.join(ALIGN_KINDS)}, got {self.align!r}")
+        if not isinstance(self.vignetting, bool):
+            raise InvalidInputError(f"vignetting: expected true or false, got {self.vignetting!r}")
         get_model(self.model)  # one-line error naming the known models
         if self.gauge not in GAUGES:
             raise InvalidInputError(f"gauge: expected one of {', '.join(GAUGES)}, got {self.gauge!r}")

@@ -29,6 +29,8 @@ variances      ``ref_i * exp(z_i)``                  the profile's variances
 weights        ``softmax([0, z])`` per channel       (``separable`` only)
 mix            ``softmax([0, z_1, z_2])``            equal mix
 gain_ratio     ``exp(z)``                            1 (pair p's gain / pair 0's)
+vignetting     ``z``                                 0 (no fall-off; see
+                                                     :mod:`invsss.estimator.vignetting`)
 =============  ====================================  ===============================
 
 ``softplus`` keeps the correction non-negative while letting it approach 0
@@ -206,6 +208,8 @@ class Parametrisation(eqx.Module):
                 out[name] = _simplex(u, axis=0)
             elif name == "gain_ratio":
                 out[name] = jnp.exp(u)
+            elif name == "vignetting":
+                out[name] = ref * u
             else:  # pragma: no cover - blocks are built by this module
                 raise AssertionError(name)
         return out
@@ -223,6 +227,8 @@ class Parametrisation(eqx.Module):
             elif name in ("weights", "mix"):
                 logs = np.log(np.maximum(x, 1e-12))
                 u = (logs - logs[:1])[1:]
+            elif name == "vignetting":
+                u = x / ref
             else:
                 u = np.log(x)
             parts.append(np.broadcast_to(u, shape).ravel())

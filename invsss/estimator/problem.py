@@ -21,6 +21,7 @@ from .inputs import prepare_pairs
 from .objective import Objective
 from .options import FitOptions
 from .parametrisation import Parametrisation, assign_roles, resolve_profile
+from .vignetting import ORDER as VIGNETTING_ORDER
 
 __all__ = ["FitProblem", "build_problem"]
 
@@ -38,7 +39,7 @@ def _initial_weights(profile_weights, k, channels):
     return w / w.sum(axis=0)
 
 
-def _build(pairs, roles, fixed, profile_w, profile_v, scales):
+def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False):
     """The parametrisation and the natural starting values of the free blocks."""
     c_src, c_tgt = pairs[0].channels
     variances = fixed.get("variances", profile_v)
@@ -90,6 +91,10 @@ def _build(pairs, roles, fixed, profile_w, profile_v, scales):
         blocks.append(("gain_ratio", (len(pairs) - 1, c_tgt)))
         start["gain_ratio"] = np.ones((len(pairs) - 1, c_tgt))
         reference["gain_ratio"] = 1.0
+    if vignetting:
+        blocks.append(("vignetting", (VIGNETTING_ORDER,)))
+        start["vignetting"] = np.zeros(VIGNETTING_ORDER)
+        reference["vignetting"] = 1.0
     param = Parametrisation(
         tuple(blocks), {k_: jnp.asarray(v) for k_, v in reference.items()}, values
     )
@@ -155,7 +160,9 @@ class FitProblem:
         self.fixed = dict(options.fix)
         self.roles = assign_roles(options.model, options.gauge, self.fixed)
         self.scales = data_scales(self.data)
-        self.param, self.z_base = _build(self.data, self.roles, self.fixed, profile_w, profile_v, self.scales)
+        self.param, self.z_base = _build(
+            self.data, self.roles, self.fixed, profile_w, profile_v, self.scales, options.vignetting
+        )
         self.variances = np.asarray(self.fixed.get("variances", profile_v))
         self.channels = self.data[0].channels[1]
         self.start_weights = _initial_weights(profile_w, self.variances.shape[0], self.channels)

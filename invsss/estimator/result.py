@@ -93,6 +93,11 @@ class FitResult(eqx.Module):
         (:meth:`invsss.registration.Warp.to_dict`); the fitted images are on the
         target's grid. Empty without ``align``.
         Not written by :meth:`to_dict`.
+    vignetting : dict or None
+        With ``vignetting=True``: the fitted fall-off field
+        (:mod:`invsss.estimator.vignetting`) as ``{"model", "coefficients",
+        "stderr", "corner_gain"}``; ``stderr`` entries are None where the data do
+        not determine them. None without it.
     gain, offset : numpy.ndarray
         Photometric fit ``pred = gain * out + offset`` per target channel: shape
         (C',) for one pair, (P, C') for :func:`fit_pairs`.
@@ -134,6 +139,7 @@ class FitResult(eqx.Module):
     stages: tuple = ()
     start_profile: dict | None = None
     alignment: tuple = ()
+    vignetting: dict | None = None
 
     def history_by_stage(self) -> dict:
         """``{label: losses}`` for each solve of the fit (see ``stages``).
@@ -174,7 +180,7 @@ class FitResult(eqx.Module):
         ``model``, ``tap_weights``, ``stderr``, ``undetermined``, ``loss``,
         ``psnr``, ``ssim``, ``converged``, ``interrupted``, ``iterations``,
         ``fixed``, ``gauge``, ``gain``, ``offset``, ``sigma``, ``solver``,
-        ``warnings``, ``alignment`` and ``estimate`` (every parameter as a number, undetermined
+        ``warnings``, ``alignment``, ``vignetting`` and ``estimate`` (every parameter as a number, undetermined
         ones included: what produced the fitted image). The loss history is not
         written.
         """
@@ -205,6 +211,8 @@ class FitResult(eqx.Module):
         # One warp per pair (invsss.registration.Warp.to_dict) when the fit registered
         # the target, else null.
         out["alignment"] = [dict(a) for a in self.alignment] or None
+        # The camera's fitted fall-off (fit --vignetting), else null.
+        out["vignetting"] = copy.deepcopy(self.vignetting)
         # The numbers that produced the fitted image, undetermined ones included:
         # what a renderer uses when it needs a value anyway. Always written, so a
         # params file has one shape whatever the data determined.

@@ -82,7 +82,11 @@ def _reported(objective, linear_weights: bool, sizes, theta) -> dict:
     z = theta[:n_z]
     coef = theta[n_z : n_z + n_coef].reshape(objective.num_basis, -1)
     natural = objective.param.natural(z)
-    out = {k: natural[k] for k in ("sss_level", "correction", "maxdd", "variances") if k in objective.param.free}
+    out = {
+        k: natural[k]
+        for k in ("sss_level", "correction", "maxdd", "variances", "vignetting")
+        if k in objective.param.free
+    }
     if linear_weights:
         w = coef / jnp.sum(coef, axis=0)
         out["weights"] = w[:, 0] if w.shape[1] == 1 else w
@@ -170,6 +174,10 @@ def gauss_newton_uncertainty(objective, lin: dict, correction_ref: float, robust
             vague = std > WEIGHT_VAGUE
         elif name == "correction":
             vague = std > np.maximum(np.abs(val), correction_ref)
+        elif name == "vignetting":
+            # 0 (no fall-off) is a value like any other; only a null direction
+            # leaves a coefficient undetermined.
+            vague = np.zeros(val.shape, bool)
         else:
             vague = std > np.abs(val)
         bad = on_null | vague | ~np.isfinite(std)

@@ -138,6 +138,8 @@ class FitTaskOptions(BaseModel):
     max_steps: int = 200
     tap_weights: _Taps = None
     robust: str = "pseudo-huber"
+    align: str = "none"
+    vignetting: bool = False
 
 
 class RenderTaskOptions(BaseModel):

@@ -45,6 +45,11 @@ def trial_id(config: dict) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
+#: Fit options added after the first release, with the defaults that leave a
+#: trial's id unchanged.
+LATER_OPTIONS = {"align": "none", "vignetting": False}
+
+
 @dataclasses.dataclass(frozen=True)
 class Trial:
     """One run of a sweep.
@@ -82,10 +87,17 @@ class Trial:
 
     @property
     def config(self) -> dict:
-        """What the id hashes: the trial without its position, axes and root."""
+        """What the id hashes: the trial without its position, axes and root.
+
+        Options added after the first release are left out while they hold
+        their default (:data:`LATER_OPTIONS`), so a sweep started before they
+        existed keeps its trial ids and resumes instead of starting over.
+        """
+        options = {k: v for k, v in self.options.items()
+                   if not (k in LATER_OPTIONS and v == LATER_OPTIONS[k])}
         return {
             "task": self.task,
-            "options": self.options,
+            "options": options,
             "pairs": [dict(p) for p in self.pairs],
             "depth_scale": self.depth_scale,
             "linear_codes": self.linear_codes,

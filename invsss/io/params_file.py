@@ -128,6 +128,8 @@ class ParamsFile(BaseModel):
     """Fit report: the nonlinear solver used."""
     alignment: Any = None
     """Fit report: per pair, the warp that registered the target onto the source (fit --align), or null."""
+    vignetting: Any = None
+    """Fit report: the camera's fitted radial fall-off (fit --vignetting): model, coefficients, stderr, corner_gain; or null."""
     warnings: Optional[list[str]] = None
     """Fit report: warnings the fit raised."""
 
