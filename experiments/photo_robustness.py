@@ -15,7 +15,8 @@ offset, a roll and a focal change (``make_synthetic.CameraMove``), and the true
 model is applied to that view's own source, depth and mask. ``--optics resample``
 instead resamples the rendered target (cubic spline), the cheaper simulation of
 earlier runs, which smooths the image a little. Each photograph is fitted with
-``align="none"`` and with registration (``--align``); the table gives sss_level,
+``align="none"`` and as a photograph should be (registration ``--align`` and a
+fitted vignetting field, unless ``--no-vignetting``); the table gives sss_level,
 correction and PSNR of each
 fit and its change from the clean fit::
 
@@ -157,13 +158,16 @@ def main() -> None:
     parser.add_argument("--align", default="similarity", choices=("translation", "similarity", "affine"))
     parser.add_argument("--rows", default=",".join(ROWS), help="comma-separated rows (default: all)")
     parser.add_argument("--starts", type=int, default=2)
+    parser.add_argument("--no-vignetting", action="store_true",
+                        help="the second fit registers only (by default it also fits vignetting)")
     parser.add_argument("--optics", default="camera", choices=("camera", "resample"),
                         help="misregister by rendering from a moved camera (default) or by "
                         "resampling the rendered target (cubic)")
     args = parser.parse_args()
     pair = invsss.load_pair(*(args.pair / f for f in ("source.exr", "target.exr", "depth.exr", "mask.png")))
     rng = np.random.default_rng(13)
-    print(f"{args.pair}: fits with {args.starts} starts; align none | align {args.align}; "
+    second = f"align {args.align}" + ("" if args.no_vignetting else " + vignetting")
+    print(f"{args.pair}: fits with {args.starts} starts; plain | {second}; "
           f"misregistration by {args.optics}", flush=True)
     header = ("| nuisance | sss_level | correction | PSNR dB | sss_level aligned | correction aligned "
               "| PSNR aligned | warp found |")
@@ -176,7 +180,8 @@ def main() -> None:
         cells = [name]
         for align in ("none", args.align):
             started = time.perf_counter()
-            fit = invsss.fit_pair(pair.source, photo, pair.depth, pair.mask, n_starts=args.starts, align=align)
+            fit = invsss.fit_pair(pair.source, photo, pair.depth, pair.mask, n_starts=args.starts, align=align,
+                                  vignetting=align != "none" and not args.no_vignetting)
             level, correction = float(fit.params.sss_level), float(fit.params.correction)
             level_se = fit.stderr.get("sss_level")
             if name == "clean":

@@ -39,6 +39,11 @@ class ImagePair(eqx.Module):
     mask : array, shape (H, W), in [0, 1], not all zero
     target_ndim : int, static
         2 when the target was given as (H, W): a fit returns its prediction so.
+    fit_weight : array, shape (H, W), in [0, 1], or None
+        Where the fit's residual counts, on top of the mask (None: everywhere the
+        mask is on). The model still treats every masked pixel as skin; this only
+        leaves pixels out of the comparison (an aligned fit drops the mask's rim,
+        whose resampled values are least reliable).
 
     Examples
     --------
@@ -55,6 +60,12 @@ class ImagePair(eqx.Module):
     depth: Float[Array, "H W"]
     mask: Float[Array, "H W"]
     target_ndim: int = eqx.field(static=True, default=3)
+    fit_weight: Float[Array, "H W"] | None = None
+
+    @property
+    def residual_weight(self) -> Float[Array, "H W"]:
+        """``mask * fit_weight``: how much each pixel's residual counts."""
+        return self.mask if self.fit_weight is None else self.mask * self.fit_weight
 
     @property
     def channels(self) -> tuple[int, int]:
@@ -74,6 +85,7 @@ class ImagePair(eqx.Module):
             jnp.asarray(np.asarray(self.depth, dtype=np.float64)),
             jnp.asarray(np.asarray(self.mask, dtype=np.float64)),
             target_ndim,
+            None if self.fit_weight is None else jnp.asarray(np.asarray(self.fit_weight, dtype=np.float64)),
         )
 
 

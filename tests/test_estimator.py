@@ -200,6 +200,29 @@ def test_misaligned_target_is_reported():
     assert len(shifted) == 1 and "2.0" in shifted[0]
 
 
+def test_fit_weight_leaves_pixels_out_of_the_comparison_only():
+    source, target, depth, mask, _ = scene("wave", seed=9)
+    spoiled = target.copy()
+    spoiled[20:40, 30:60] += 0.4  # a highlight the model cannot make
+    weight = np.ones(mask.shape)
+    weight[20:40, 30:60] = 0.0
+    kw = {"profile": PROFILE3, "robust": None, "n_starts": 2}
+    plain = fit_pair(source, spoiled, depth, mask, **kw)
+    pair = invsss.ImagePair(source, spoiled, depth, mask, fit_weight=weight)
+    weighted = invsss.fit_pairs([pair], **kw)
+    assert abs(float(plain.params.correction) / 300.0 - 1) > 0.1
+    assert abs(float(weighted.params.sss_level) / 700.0 - 1) < 0.02
+    assert abs(float(weighted.params.correction) / 300.0 - 1) < 0.02
+    # The model still blurs across the left-out pixels: the prediction there is the
+    # skin's, not the source's.
+    inside = np.asarray(weighted.fitted[0])[25:35, 40:50]
+    assert np.abs(inside - target[25:35, 40:50]).mean() < 0.02
+    with pytest.raises(InvalidInputError, match=r"^fit_weight: expected finite values in \[0, 1\]$"):
+        invsss.fit_pairs([invsss.ImagePair(source, target, depth, mask, fit_weight=2.0 * weight)], **kw)
+    with pytest.raises(InvalidInputError, match="fit_weight: leaves no masked pixel in the fit"):
+        invsss.fit_pairs([invsss.ImagePair(source, target, depth, mask, fit_weight=0.0 * weight)], **kw)
+
+
 def test_robust_loss_resists_outliers():
     source, target, depth, mask, _ = scene("wave", seed=9)
     rng = np.random.default_rng(9)

@@ -21,7 +21,18 @@ __all__ = ["ImagePair", "PairData", "prepare_pair", "prepare_pairs"]
 PairData = ImagePair
 
 
-def prepare_pair(source, target, depth, mask=None, *, name: str = "") -> ImagePair:
+def _check_fit_weight(fit_weight, shape, mask, name: str):
+    weight = np.asarray(fit_weight, np.float64)
+    if weight.shape != tuple(shape):
+        raise InvalidInputError(f"{name}: expected shape {tuple(shape)} (the mask's), got {weight.shape}")
+    if not np.all(np.isfinite(weight)) or weight.min() < 0 or weight.max() > 1:
+        raise InvalidInputError(f"{name}: expected finite values in [0, 1]")
+    if not np.any(weight * np.asarray(mask) > 0):
+        raise InvalidInputError(f"{name}: leaves no masked pixel in the fit")
+    return weight
+
+
+def prepare_pair(source, target, depth, mask=None, *, fit_weight=None, name: str = "") -> ImagePair:
     """Validate one pair and convert it to float64 (call under ``jax.enable_x64``).
 
     ``mask=None`` fits every pixel. ``name`` prefixes the input names in errors.
@@ -40,14 +51,16 @@ def prepare_pair(source, target, depth, mask=None, *, name: str = "") -> ImagePa
         mask = np.ones(np.shape(source)[:2])
     # Renderer-style background depth (0, inf) never reaches the model.
     depth = fill_background_depth(depth)
-    return ImagePair(source, target, depth, mask).as_float64()
+    if fit_weight is not None:
+        fit_weight = _check_fit_weight(fit_weight, np.shape(mask), mask, f"{name}fit_weight")
+    return ImagePair(source, target, depth, mask, fit_weight=fit_weight).as_float64()
 
 
 def _unpack(pair, index: int):
     if isinstance(pair, ImagePair):
-        return pair.source, pair.target, pair.depth, pair.mask
+        return pair.source, pair.target, pair.depth, pair.mask, pair.fit_weight
     if isinstance(pair, (tuple, list)) and len(pair) in (3, 4):
-        return (*pair, None) if len(pair) == 3 else tuple(pair)
+        return (*pair, None, None) if len(pair) == 3 else (*pair, None)
     raise InvalidInputError(
         f"pairs[{index}]: expected a (source, target, depth, mask) tuple or an "
         f"invsss.ImagePair, got {type(pair).__name__}"
@@ -58,10 +71,12 @@ def prepare_pairs(pairs) -> tuple[ImagePair, ...]:
     """Validate a sequence of pairs; all must have the same channel layout."""
     if isinstance(pairs, (str, bytes)) or not hasattr(pairs, "__len__") or len(pairs) == 0:
         raise InvalidInputError("pairs: expected a non-empty sequence of (source, target, depth, mask)")
-    out = tuple(
-        prepare_pair(*_unpack(p, i), name=f"pairs[{i}]." if len(pairs) > 1 else "")
-        for i, p in enumerate(pairs)
-    )
+    out = []
+    for i, p in enumerate(pairs):
+        source, target, depth, mask, fit_weight = _unpack(p, i)
+        out.append(prepare_pair(source, target, depth, mask, fit_weight=fit_weight,
+                                name=f"pairs[{i}]." if len(pairs) > 1 else ""))
+    out = tuple(out)
     layouts = {p.channels for p in out}
     if len(layouts) > 1:
         raise InvalidInputError(

@@ -7,8 +7,9 @@ its numbers are arrays, so a new start, new robust weights or a new active set
 reuse the compiled solver step; only the static layout (model, free blocks,
 image sizes) triggers a compile.
 
-Residual of pixel ``n``, channel ``j`` of pair ``p`` (``m`` the mask, ``u`` the
-robust weight, ``s`` the target's masked standard deviation):
+Residual of pixel ``n``, channel ``j`` of pair ``p`` (``m`` the mask times the
+pair's ``fit_weight``, ``u`` the robust weight, ``s`` the target's masked
+standard deviation):
 
     rho = sqrt(m u) (T - pred) / s
 
@@ -70,7 +71,7 @@ class Objective(eqx.Module):
         return one
 
     def weights(self) -> tuple:
-        return tuple(p.mask[..., None] * u for p, u in zip(self.pairs, self.robust))
+        return tuple(p.residual_weight[..., None] * u for p, u in zip(self.pairs, self.robust))
 
     def bases(self, natural: dict) -> tuple:
         images = tuple(
@@ -119,5 +120,5 @@ class Objective(eqx.Module):
         """Mask-weighted mean of ``u (T - pred)^2`` over pixels and channels."""
         r, _ = self(z)
         c = self.pairs[0].target.shape[-1]
-        total = sum(jnp.sum(p.mask) for p in self.pairs) * c
+        total = sum(jnp.sum(p.residual_weight) for p in self.pairs) * c
         return jnp.sum(r**2) * self.scale**2 / total

@@ -180,7 +180,7 @@ class FitProblem:
             options.model,
             self.linear_weights,
         )
-        total = float(sum(np.sum(np.asarray(p.mask)) for p in self.data)) * self.channels
+        total = float(sum(np.sum(np.asarray(p.residual_weight)) for p in self.data)) * self.channels
         # 0.5 * sum(rho^2) -> the reported loss (see objective.py).
         self.to_loss = 2.0 * scale**2 / total
         self.starts = ()

@@ -62,7 +62,8 @@ class FitResult(eqx.Module):
     sigma : float
         Residual standard deviation (target units) used for the standard errors.
     psnr, ssim : float
-        PSNR (dB) and SSIM of the prediction against the target on the mask.
+        PSNR (dB) and SSIM of the prediction against the target on the mask
+        (where the residual counted: an aligned fit leaves out the mask's rim).
     converged : bool
         Whether the last solve met its tolerances within ``max_steps`` (False
         when ``interrupted``).
