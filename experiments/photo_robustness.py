@@ -26,7 +26,8 @@ fit and its change from the clean fit::
 Rows: ``clean``, ``shift1``, ``shift2``, ``shift4`` (pixels, diagonal split as
 (0.6, 0.8) of the length), ``rot1`` (1 degree), ``rot2s`` (2 degrees and scale
 1.02), ``jpeg90``, ``noise`` (2000 electrons at the 99th percentile plus 2 e-
-read noise), ``vignette20`` (20 % at the corners).
+read noise), ``gamma22`` (8-bit codes of a 2.2 power law decoded as sRGB),
+``vignette20`` (20 % at the corners).
 """
 
 from __future__ import annotations
@@ -81,6 +82,14 @@ def jpeg(image: np.ndarray, quality: int) -> np.ndarray:
     return srgb_to_linear(decoded) / scale
 
 
+def wrong_curve(image: np.ndarray) -> np.ndarray:
+    """8-bit codes of a pure 2.2 power law read back as if they were sRGB (a camera
+    whose tone curve the user took for sRGB); exposed as :func:`jpeg` is."""
+    scale = 0.9 / np.percentile(image, 99.5)
+    codes = np.round(255 * np.clip(image * scale, 0, 1) ** (1 / 2.2))
+    return srgb_to_linear(codes / 255.0) / scale
+
+
 def shot_noise(image: np.ndarray, electrons: float, read: float, rng) -> np.ndarray:
     """Poisson photon noise with ``electrons`` at the 99th percentile, plus Gaussian read noise (e-)."""
     per_unit = electrons / np.percentile(image, 99)
@@ -106,6 +115,7 @@ ROWS = {
     "rot2s": Row(CameraMove(rotation_deg=2.0, zoom=1.02)),
     "jpeg90": Row(sensor="jpeg"),
     "noise": Row(sensor="shot"),
+    "gamma22": Row(sensor="gamma"),
     "vignette20": Row(shade=0.2),
 }
 
@@ -149,6 +159,8 @@ def photograph(clean: np.ndarray, sigma: float, row: Row, rng) -> np.ndarray:
     if row.sensor == "shot":
         return shot_noise(image, 2000.0, 2.0, rng)
     image = image + sigma * rng.standard_normal(image.shape)
+    if row.sensor == "gamma":
+        return wrong_curve(image)
     return jpeg(image, 90) if row.sensor == "jpeg" else image
 
 
