@@ -37,11 +37,10 @@ from pathlib import Path
 import numpy as np
 
 import invsss
-from invsss.io import linear_to_srgb, srgb_to_linear
 from invsss.scenes import parse_config
 from invsss.scenes.mitsuba_scene import import_mitsuba, load_mesh_ply, scene_dict
 
-from photo_robustness import shot_noise, vignette
+from photo_robustness import eight_bit_srgb, shot_noise, vignette
 
 
 def moved_config(config, shift_px, roll_deg):
@@ -77,11 +76,8 @@ def render_pass(config, kind: str, spp: int, seed: int, medium: dict | None = No
     return image[..., :1]
 
 
-def eight_bit_srgb(image: np.ndarray) -> np.ndarray:
-    """Encoded to 8-bit sRGB codes and decoded back to linear (exposure undone)."""
-    scale = 0.9 / np.percentile(image, 99.5)
-    codes = np.round(255 * linear_to_srgb(np.clip(image * scale, 0, 1)))
-    return srgb_to_linear(codes / 255.0) / scale
+def _pm(value) -> str:
+    return "" if value is None else f" +- {value:.0f}"
 
 
 def main() -> None:
@@ -91,6 +87,8 @@ def main() -> None:
     parser.add_argument("--shift", type=float, nargs=2, default=(1.2, 1.6), metavar=("ROWS", "COLS"))
     parser.add_argument("--roll", type=float, default=1.0)
     parser.add_argument("--specular", type=float, default=1.0)
+    parser.add_argument("--roughness", type=float, default=None,
+                        help="Beckmann roughness of the specular boundary (default: the medium's)")
     parser.add_argument("--vignetting", type=float, default=0.15)
     parser.add_argument("--starts", type=int, default=2)
     parser.add_argument("--check-camera", action="store_true",
@@ -115,7 +113,10 @@ def main() -> None:
     started = time.perf_counter()
     target = render_pass(moved, "target", args.spp, 11, grey)
     # The boundary a real face has: a rough dielectric of the medium's index.
-    dielectric = config.medium.model_copy(update={"boundary": "rough-dielectric"})
+    update = {"boundary": "rough-dielectric"}
+    if args.roughness is not None:
+        update["roughness"] = args.roughness
+    dielectric = config.medium.model_copy(update=update)
     specular_medium = dielectric.coefficients()
     specular_medium = {**specular_medium, "sigma_s_prime": specular_medium["sigma_s_prime"][:1],
                        "sigma_a": specular_medium["sigma_a"][:1]}
@@ -150,11 +151,12 @@ def main() -> None:
             extra += f"; corner gain {fit.vignetting['corner_gain']:.3f}"
         rows.append(f"| {name} | {label} | {float(fit.values['sss_level']):.0f}"
                     f"{'' if se is None else f' +- {se:.0f}'} ({change('sss_level'):+.1f} %) | "
-                    f"{float(fit.values['correction']):.0f} ({change('correction'):+.1f} %) | "
+                    f"{float(fit.values['correction']):.0f}{_pm(fit.stderr.get('correction'))} "
+                    f"({change('correction'):+.1f} %) | "
                     f"{float(fit.values['maxdd']):.3g} | {fit.psnr:.1f} | {extra} |")
         print(f"  {name}, {label}: {time.perf_counter() - t0:.0f} s", flush=True)
     print(f"\n{args.pair}: camera moved ({args.shift[0]}, {args.shift[1]}) px and rolled {args.roll} deg, "
-          f"specular x{args.specular}, vignetting {args.vignetting:.0%}, shot noise, 8-bit sRGB; "
+          f"specular x{args.specular} (roughness {dielectric.roughness}), vignetting {args.vignetting:.0%}, shot noise, 8-bit sRGB; "
           f"changes against the clean plain fit")
     print("| pair | fit | sss_level | correction | maxdd | PSNR dB | found |\n|---|---|---|---|---|---|---|")
     print("\n".join(rows))

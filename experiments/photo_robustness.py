@@ -27,7 +27,8 @@ Rows: ``clean``, ``shift1``, ``shift2``, ``shift4`` (pixels, diagonal split as
 (0.6, 0.8) of the length), ``rot1`` (1 degree), ``rot2s`` (2 degrees and scale
 1.02), ``jpeg90``, ``noise`` (2000 electrons at the 99th percentile plus 2 e-
 read noise), ``gamma22`` (8-bit codes of a 2.2 power law decoded as sRGB),
-``vignette20`` (20 % at the corners).
+``vignette20`` (20 % at the corners), ``mixture`` (camera moved (1.2, 1.6) px and
+rolled 1 degree, 15 % vignetting, shot noise, 8-bit sRGB).
 """
 
 from __future__ import annotations
@@ -82,6 +83,13 @@ def jpeg(image: np.ndarray, quality: int) -> np.ndarray:
     return srgb_to_linear(decoded) / scale
 
 
+def eight_bit_srgb(image: np.ndarray) -> np.ndarray:
+    """8-bit sRGB codes (exposed as :func:`jpeg` is) decoded back to linear."""
+    scale = 0.9 / np.percentile(image, 99.5)
+    codes = np.round(255 * linear_to_srgb(np.clip(image * scale, 0, 1)))
+    return srgb_to_linear(codes / 255.0) / scale
+
+
 def wrong_curve(image: np.ndarray) -> np.ndarray:
     """8-bit codes of a pure 2.2 power law read back as if they were sRGB (a camera
     whose tone curve the user took for sRGB); exposed as :func:`jpeg` is."""
@@ -117,6 +125,9 @@ ROWS = {
     "noise": Row(sensor="shot"),
     "gamma22": Row(sensor="gamma"),
     "vignette20": Row(shade=0.2),
+    # Everything at once but highlights (a model-made pair has no specular layer; see
+    # photo_mixture.py for a path-traced pair with one).
+    "mixture": Row(CameraMove((1.2, 1.6), rotation_deg=1.0), shade=0.15, sensor="shot+8bit"),
 }
 
 
@@ -158,6 +169,8 @@ def photograph(clean: np.ndarray, sigma: float, row: Row, rng) -> np.ndarray:
     image = vignette(clean, row.shade) if row.shade else clean
     if row.sensor == "shot":
         return shot_noise(image, 2000.0, 2.0, rng)
+    if row.sensor == "shot+8bit":
+        return eight_bit_srgb(shot_noise(image, 2000.0, 2.0, rng))
     image = image + sigma * rng.standard_normal(image.shape)
     if row.sensor == "gamma":
         return wrong_curve(image)
