@@ -16,8 +16,9 @@ make it, with every nuisance at once:
 5. 8-bit sRGB encoding (exposed so the 99.5th percentile is 0.9) and the
    decoding ``invsss.load_pair`` applies to an 8-bit file.
 
-It is fitted plainly and as a photograph should be (``--align similarity`` and
-``--vignetting``), and compared with the plain fit of the clean pair::
+It is fitted plainly, as a photograph should be (``--align similarity`` and
+``--vignetting``), and with ``--highlights`` as well, and compared with the plain
+fit of the clean pair::
 
     python experiments/photo_mixture.py [--pair data_synthetic/pt_face_940] [--spp 1024]
         [--shift 1.2 1.6] [--roll 1.0] [--specular 1.0] [--vignetting 0.15] [--starts 2]
@@ -135,10 +136,12 @@ def main() -> None:
         ("clean", pair.target, {"align": "similarity", "vignetting": True}),
         ("photograph", photo, {}),
         ("photograph", photo, {"align": "similarity", "vignetting": True}),
+        ("photograph", photo, {"align": "similarity", "vignetting": True, "highlights": True}),
     ]:
         t0 = time.perf_counter()
         fit = invsss.fit_pair(pair.source, image, pair.depth, pair.mask, n_starts=args.starts, **options)
-        label = "align similarity + vignetting" if options else "plain"
+        label = ("align similarity + vignetting" + (" + highlights" if options.get("highlights") else "")
+                 if options else "plain")
         fits[(name, label)] = fit
         ref = fits[("clean", "plain")]
         change = lambda k: 100 * (float(fit.values[k]) / float(ref.values[k]) - 1)  # noqa: E731
@@ -149,6 +152,8 @@ def main() -> None:
             extra = f"({a['shift_px'][0]:+.2f}, {a['shift_px'][1]:+.2f}) px, {a['rotation_deg']:+.2f} deg"
         if fit.vignetting:
             extra += f"; corner gain {fit.vignetting['corner_gain']:.3f}"
+        if fit.highlights:
+            extra += f"; {fit.highlights['fraction'][0]:.1%} left out as highlights"
         rows.append(f"| {name} | {label} | {float(fit.values['sss_level']):.0f}"
                     f"{'' if se is None else f' +- {se:.0f}'} ({change('sss_level'):+.1f} %) | "
                     f"{float(fit.values['correction']):.0f}{_pm(fit.stderr.get('correction'))} "

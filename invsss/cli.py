@@ -221,6 +221,9 @@ def _add_fit_parser(subparsers) -> None:
     parser.add_argument("--vignetting", action="store_true",
                         help="fit the camera's fall-off toward the corners as a gain field "
                         "1 + a1 rho^2 + a2 rho^4 (for photographs; the field goes into params.json)")
+    parser.add_argument("--highlights", action="store_true",
+                        help="refit with the specular highlights of a first fit's residual left out "
+                        "(for photographs without cross-polarisation; their count goes into params.json)")
     parser.add_argument(
         "--linear-codes",
         action="store_true",
@@ -371,7 +374,7 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
         options = dict(
             model=args.model, profile=args.profile, fix=fix or None, gauge=args.gauge,
             solver=args.solver, n_starts=args.starts, max_steps=args.max_steps, align=args.align,
-            vignetting=args.vignetting,
+            vignetting=args.vignetting, highlights=args.highlights,
         )
         compiled_before = _compile_seconds()
         progress = _ProgressLine(sys.stderr, lambda: _compile_seconds() - compiled_before)

@@ -71,6 +71,7 @@ def fit_pair(
     robust: str | None = "pseudo-huber",
     align: str = "none",
     vignetting: bool = False,
+    highlights: bool = False,
     options: FitOptions | None = None,
     stop=None,
 ) -> FitResult:
@@ -136,6 +137,12 @@ def fit_pair(
         ``1 + a_1 rho^2 + a_2 rho^4`` about the frame's centre
         (:mod:`invsss.estimator.vignetting`), for photographs; reported in
         :attr:`FitResult.vignetting`, and the standard errors account for it.
+    highlights : bool
+        Leave specular highlights out: after the fit, pixels where the target is
+        brighter than the prediction by more than :data:`HIGHLIGHT_SIGMAS` robust
+        standard deviations of the residual (smoothed over 1 px; dilated by 1 px)
+        are excluded from the comparison and the pair is fitted again. Reported in
+        :attr:`FitResult.highlights`.
     options : FitOptions, optional
         All of the above options (``model`` to ``robust``) in one checked value;
         then leave those keywords at their defaults.
@@ -173,7 +180,7 @@ def fit_pair(
     """
     given = dict(model=model, profile=profile, fix=fix, gauge=gauge, solver=solver, n_starts=n_starts,
                  max_steps=max_steps, tap_weights=tap_weights, robust=robust, align=align,
-                 vignetting=vignetting)
+                 vignetting=vignetting, highlights=highlights)
     return _fit([(source, target, depth, mask)], True, _options(options, given), progress, stop)
 
 
@@ -192,6 +199,7 @@ def fit_pairs(
     robust: str | None = "pseudo-huber",
     align: str = "none",
     vignetting: bool = False,
+    highlights: bool = False,
     options: FitOptions | None = None,
     stop=None,
 ) -> FitResult:
@@ -206,7 +214,7 @@ def fit_pairs(
     """
     given = dict(model=model, profile=profile, fix=fix, gauge=gauge, solver=solver, n_starts=n_starts,
                  max_steps=max_steps, tap_weights=tap_weights, robust=robust, align=align,
-                 vignetting=vignetting)
+                 vignetting=vignetting, highlights=highlights)
     return _fit(pairs, False, _options(options, given), progress, stop)
 
 
@@ -306,10 +314,50 @@ def _fit(pairs, single, options, progress, stop) -> FitResult:
     # Rebuild the parameters outside float64 mode: the caller gets arrays of their
     # own default precision, ready for render().
     params = SSSParams(*(result.values[k] for k in PARAM_NAMES))
-    return dataclasses.replace(
+    result = dataclasses.replace(
         result, params=params, solver=options.solver, profile=options.profile_label,
         tap_weights=options.tap_label,
     )
+    if options.highlights and not result.interrupted:
+        return _fit_without_highlights(problem.data, result, single, options, progress, stop)
+    return result
+
+
+#: A pixel is a highlight when its residual, smoothed over 1 px, is brighter than
+#: the prediction by this many robust standard deviations of the smoothed residual.
+HIGHLIGHT_SIGMAS = 3.0
+
+
+def _highlight_map(target, fitted, region) -> np.ndarray:
+    """Pixels (H, W) of ``region`` where the target is markedly brighter than the fit."""
+    residual = np.asarray(target, np.float64) - np.asarray(fitted, np.float64).reshape(np.shape(target))
+    smooth = ndimage.gaussian_filter(residual.mean(axis=-1), 1.0)
+    values = smooth[region]
+    spread = 1.4826 * float(np.median(np.abs(values - np.median(values))))
+    bright = region & (smooth - np.median(values) > HIGHLIGHT_SIGMAS * spread)
+    return ndimage.binary_dilation(bright, iterations=1) & region
+
+
+def _fit_without_highlights(data, first, single, options, progress, stop) -> FitResult:
+    """Refit with the specular highlights of the first fit's residual left out (``highlights``)."""
+    pairs, counts = [], []
+    for pair, fitted in zip(data, first.fitted):
+        region = np.asarray(pair.residual_weight) > 0
+        bright = _highlight_map(pair.target, fitted, region)
+        counts.append(int(bright.sum()))
+        keep = np.where(bright, 0.0, 1.0 if pair.fit_weight is None else np.asarray(pair.fit_weight))
+        pairs.append(ImagePair(pair.source, pair.target, pair.depth, pair.mask, pair.target_ndim,
+                               fit_weight=keep if (keep * np.asarray(pair.mask)).any() else None))
+    record = {
+        "method": f"residual of a first fit smoothed over 1 px, brighter than the prediction by "
+                  f"{HIGHLIGHT_SIGMAS:g} robust standard deviations, dilated by 1 px",
+        "excluded_pixels": counts,
+        "fraction": [c / max(float(np.sum(np.asarray(p.residual_weight) > 0)), 1.0) for c, p in zip(counts, data)],
+    }
+    if not any(counts):
+        return dataclasses.replace(first, highlights=record)
+    second = _fit(pairs, single, dataclasses.replace(options, highlights=False), progress, stop)
+    return dataclasses.replace(second, highlights=record)
 
 
 def _fit_aligned(pairs, single, options, progress, stop) -> FitResult:
@@ -346,7 +394,8 @@ def _fit_aligned(pairs, single, options, progress, stop) -> FitResult:
     # depend on each other, so alternate until the warp settles: a warp off by a
     # tenth of a pixel at the face's edge moves sss_level by tens of per cent.
     for _ in range(ALIGN_ROUNDS):
-        trial = _fit(aligned(warps), single, dataclasses.replace(plain, n_starts=1), progress, stop)
+        trial = _fit(aligned(warps), single, dataclasses.replace(plain, n_starts=1, highlights=False),
+                     progress, stop)
         if trial.interrupted:
             return dataclasses.replace(trial, alignment=tuple(w.to_dict() for w in warps))
         refined = []

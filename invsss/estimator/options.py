@@ -55,6 +55,8 @@ class FitOptions:
         Register the target onto the source inside the fit (:mod:`invsss.registration`).
     vignetting : bool
         Fit the camera's radial fall-off as a gain field (:mod:`invsss.estimator.vignetting`).
+    highlights : bool
+        Refit with the first fit's specular highlights left out (see :func:`invsss.fit_pair`).
 
     Raises
     ------
@@ -84,14 +86,16 @@ class FitOptions:
     robust: str | None = "pseudo-huber"
     align: str = "none"
     vignetting: bool = False
+    highlights: bool = False
 
     def __post_init__(self):
         from ..registration import ALIGN_KINDS
 
         if self.align not in ("none", *ALIGN_KINDS):
             raise InvalidInputError(f"align: expected one of none, {', '.join(ALIGN_KINDS)}, got {self.align!r}")
-        if not isinstance(self.vignetting, bool):
-            raise InvalidInputError(f"vignetting: expected true or false, got {self.vignetting!r}")
+        for name in ("vignetting", "highlights"):
+            if not isinstance(getattr(self, name), bool):
+                raise InvalidInputError(f"{name}: expected true or false, got {getattr(self, name)!r}")
         get_model(self.model)  # one-line error naming the known models
         if self.gauge not in GAUGES:
             raise InvalidInputError(f"gauge: expected one of {', '.join(GAUGES)}, got {self.gauge!r}")

@@ -99,6 +99,9 @@ class FitResult(eqx.Module):
         (:mod:`invsss.estimator.vignetting`) as ``{"model", "coefficients",
         "stderr", "corner_gain"}``; ``stderr`` entries are None where the data do
         not determine them. None without it.
+    highlights : dict or None
+        With ``highlights=True``: ``{"method", "excluded_pixels", "fraction"}``,
+        per pair the pixels left out as specular highlights. None without it.
     gain, offset : numpy.ndarray
         Photometric fit ``pred = gain * out + offset`` per target channel: shape
         (C',) for one pair, (P, C') for :func:`fit_pairs`.
@@ -141,6 +144,7 @@ class FitResult(eqx.Module):
     start_profile: dict | None = None
     alignment: tuple = ()
     vignetting: dict | None = None
+    highlights: dict | None = None
 
     def history_by_stage(self) -> dict:
         """``{label: losses}`` for each solve of the fit (see ``stages``).
@@ -181,7 +185,7 @@ class FitResult(eqx.Module):
         ``model``, ``tap_weights``, ``stderr``, ``undetermined``, ``loss``,
         ``psnr``, ``ssim``, ``converged``, ``interrupted``, ``iterations``,
         ``fixed``, ``gauge``, ``gain``, ``offset``, ``sigma``, ``solver``,
-        ``warnings``, ``alignment``, ``vignetting`` and ``estimate`` (every parameter as a number, undetermined
+        ``warnings``, ``alignment``, ``vignetting``, ``highlights`` and ``estimate`` (every parameter as a number, undetermined
         ones included: what produced the fitted image). The loss history is not
         written.
         """
@@ -214,6 +218,8 @@ class FitResult(eqx.Module):
         out["alignment"] = [dict(a) for a in self.alignment] or None
         # The camera's fitted fall-off (fit --vignetting), else null.
         out["vignetting"] = copy.deepcopy(self.vignetting)
+        # The pixels left out as specular highlights (fit --highlights), else null.
+        out["highlights"] = copy.deepcopy(self.highlights)
         # The numbers that produced the fitted image, undetermined ones included:
         # what a renderer uses when it needs a value anyway. Always written, so a
         # params file has one shape whatever the data determined.

@@ -140,6 +140,7 @@ class FitTaskOptions(BaseModel):
     robust: str = "pseudo-huber"
     align: str = "none"
     vignetting: bool = False
+    highlights: bool = False
 
 
 class RenderTaskOptions(BaseModel):

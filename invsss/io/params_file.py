@@ -130,6 +130,8 @@ class ParamsFile(BaseModel):
     """Fit report: per pair, the warp that registered the target onto the source (fit --align), or null."""
     vignetting: Any = None
     """Fit report: the camera's fitted radial fall-off (fit --vignetting): model, coefficients, stderr, corner_gain; or null."""
+    highlights: Any = None
+    """Fit report: pixels left out as specular highlights (fit --highlights): method, excluded_pixels, fraction; or null."""
     warnings: Optional[list[str]] = None
     """Fit report: warnings the fit raised."""
 
