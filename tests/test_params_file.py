@@ -125,6 +125,9 @@ def test_a_fit_result_round_trips_with_every_report_key(tmp_path):
         "sigma": 0.01, "solver": "lm", "warnings": ["w"],
         "alignment": [{"kind": "translation", "shift_px": [1.0, -0.5], "centre_px": [10.0, 12.0],
                        "matrix": [[1.0, 0.0, 1.0], [0.0, 1.0, -0.5]]}],
+        "vignetting": {"model": "gain field", "coefficients": [-0.2, 0.01], "stderr": [0.004, None],
+                       "corner_gain": 0.81},
+        "highlights": {"method": "residual", "excluded_pixels": [12], "fraction": [0.01]},
     }
     path = tmp_path / "p.json"
     write_params(path, {**PARAMS, **report})
