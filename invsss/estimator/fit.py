@@ -144,7 +144,7 @@ def fit_pair(
         are excluded from the comparison and the pair is fitted again. Reported in
         :attr:`FitResult.highlights`.
     options : FitOptions, optional
-        All of the above options (``model`` to ``robust``) in one checked value;
+        All of the above options (``model`` to ``highlights``) in one checked value;
         then leave those keywords at their defaults.
     stop : callable, optional
         ``stop() -> bool``, polled after every solver step (and once before the
