@@ -2,9 +2,8 @@
 
 Lenses pass less light to the edges of the frame than to its centre. A fit that
 ignores this reads the darker periphery as something the scattering model must
-explain; measured on a model-made face (experiments/photo_robustness.py), 20 % at
-the corners moved
-``correction`` by half. With ``vignetting=True`` the prediction becomes
+explain; measured on a model-made face (experiments/photo_robustness.py), 20 %
+at the corners moved ``correction`` by half. With ``vignetting=True`` the prediction becomes
 
     pred = V(rho) * gain * out + offset,    V(rho) = 1 + a_1 rho^2 + a_2 rho^4,
 
