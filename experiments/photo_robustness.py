@@ -69,12 +69,19 @@ def vignette(image: np.ndarray, strength: float) -> np.ndarray:
     return image * (1.0 - strength * r2)[..., None]
 
 
+def _eight_bit(image: np.ndarray, encode) -> tuple[np.ndarray, float]:
+    """8-bit codes (0-255, as floats) of ``image`` through the curve ``encode``, exposed so
+    the 99.5th percentile is 0.9, and that exposure."""
+    scale = 0.9 / np.percentile(image, 99.5)
+    return np.round(255 * encode(np.clip(image * scale, 0, 1))), scale
+
+
 def jpeg(image: np.ndarray, quality: int) -> np.ndarray:
-    """8-bit sRGB JPEG at ``quality``, decoded back to linear (exposed so the 99.5th percentile is 0.9)."""
+    """8-bit sRGB JPEG at ``quality``, decoded back to linear (exposed as :func:`_eight_bit` does)."""
     from PIL import Image
 
-    scale = 0.9 / np.percentile(image, 99.5)
-    codes = np.round(255 * linear_to_srgb(np.clip(image * scale, 0, 1))).astype(np.uint8)
+    codes, scale = _eight_bit(image, linear_to_srgb)
+    codes = codes.astype(np.uint8)
     buffer = io.BytesIO()
     mode_image = Image.fromarray(codes[..., 0] if codes.shape[-1] == 1 else codes)
     mode_image.save(buffer, format="JPEG", quality=quality)
@@ -84,17 +91,15 @@ def jpeg(image: np.ndarray, quality: int) -> np.ndarray:
 
 
 def eight_bit_srgb(image: np.ndarray) -> np.ndarray:
-    """8-bit sRGB codes (exposed as :func:`jpeg` is) decoded back to linear."""
-    scale = 0.9 / np.percentile(image, 99.5)
-    codes = np.round(255 * linear_to_srgb(np.clip(image * scale, 0, 1)))
+    """8-bit sRGB codes (exposed as :func:`_eight_bit` does) decoded back to linear."""
+    codes, scale = _eight_bit(image, linear_to_srgb)
     return srgb_to_linear(codes / 255.0) / scale
 
 
 def wrong_curve(image: np.ndarray) -> np.ndarray:
     """8-bit codes of a pure 2.2 power law read back as if they were sRGB (a camera
-    whose tone curve the user took for sRGB); exposed as :func:`jpeg` is."""
-    scale = 0.9 / np.percentile(image, 99.5)
-    codes = np.round(255 * np.clip(image * scale, 0, 1) ** (1 / 2.2))
+    whose tone curve the user took for sRGB)."""
+    codes, scale = _eight_bit(image, lambda x: x ** (1 / 2.2))
     return srgb_to_linear(codes / 255.0) / scale
 
 
@@ -111,7 +116,9 @@ class Row:
 
     move: CameraMove = CameraMove()
     shade: float = 0.0  # vignetting strength
-    sensor: str = "gaussian"  # "gaussian" (the pair's noise), "shot" or "jpeg"
+    # "gaussian" (the pair's noise), "shot", "jpeg", "gamma" (wrong_curve after the
+    # pair's noise) or "shot+8bit".
+    sensor: str = "gaussian"
 
 
 ROWS = {
