@@ -40,6 +40,7 @@ import numpy as np
 import invsss
 from invsss.scenes import parse_config
 from invsss.scenes.mitsuba_scene import import_mitsuba, load_mesh_ply, scene_dict
+from invsss.scenes.render import _grey_media
 
 from photo_robustness import eight_bit_srgb, shot_noise, vignette
 
@@ -99,8 +100,8 @@ def main() -> None:
     config = parse_config(info["config"])
     pair = invsss.load_pair(*(args.pair / f for f in ("source.exr", "target.exr", "depth.exr", "mask.png")))
     moved = moved_config(config, args.shift, args.roll)
-    medium = config.medium.coefficients()
-    grey = {**medium, "sigma_s_prime": medium["sigma_s_prime"][:1], "sigma_a": medium["sigma_a"][:1]}
+    # The first (for a grey medium, the only) channel's medium, as the scene renderer splits it.
+    grey = _grey_media(config.medium.coefficients())[0]
 
     if args.check_camera:
         from invsss.registration import estimate_warp
@@ -118,9 +119,7 @@ def main() -> None:
     if args.roughness is not None:
         update["roughness"] = args.roughness
     dielectric = config.medium.model_copy(update=update)
-    specular_medium = dielectric.coefficients()
-    specular_medium = {**specular_medium, "sigma_s_prime": specular_medium["sigma_s_prime"][:1],
-                       "sigma_a": specular_medium["sigma_a"][:1]}
+    specular_medium = _grey_media(dielectric.coefficients())[0]
     specular = render_pass(moved.model_copy(update={"medium": dielectric}), "specular", max(args.spp // 4, 16), 12,
                            specular_medium)
     print(f"rendered the moved view in {time.perf_counter() - started:.0f} s; specular peak "
@@ -145,7 +144,6 @@ def main() -> None:
         fits[(name, label)] = fit
         ref = fits[("clean", "plain")]
         change = lambda k: 100 * (float(fit.values[k]) / float(ref.values[k]) - 1)  # noqa: E731
-        se = fit.stderr.get("sss_level")
         extra = ""
         if fit.alignment:
             a = fit.alignment[0]
@@ -155,7 +153,7 @@ def main() -> None:
         if fit.highlights:
             extra += f"; {fit.highlights['fraction'][0]:.1%} left out as highlights"
         rows.append(f"| {name} | {label} | {float(fit.values['sss_level']):.0f}"
-                    f"{'' if se is None else f' +- {se:.0f}'} ({change('sss_level'):+.1f} %) | "
+                    f"{_pm(fit.stderr.get('sss_level'))} ({change('sss_level'):+.1f} %) | "
                     f"{float(fit.values['correction']):.0f}{_pm(fit.stderr.get('correction'))} "
                     f"({change('correction'):+.1f} %) | "
                     f"{float(fit.values['maxdd']):.3g} | {fit.psnr:.1f} | {extra} |")
