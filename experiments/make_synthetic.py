@@ -440,6 +440,16 @@ def slope_fractions(depth: np.ndarray, mask: np.ndarray, maxdd: float) -> dict:
     }
 
 
+def noise_free_target(source, depth, mask, params, *, gain, offset, channels_mix, model="sog", tap_weights=None):
+    """``gain * (channels_mix . render(source, depth, mask, params)) + offset``, float64:
+    the formula truth.json records (``channels_mix`` None: gain and offset per channel)."""
+    scattered = np.asarray(invsss.render(source, depth, mask, params, model=model, tap_weights=tap_weights),
+                           np.float64)
+    if channels_mix is not None:
+        scattered = scattered @ np.asarray(channels_mix, np.float64)[:, None]
+    return np.asarray(gain) * scattered + np.asarray(offset)
+
+
 def make_target(rendering: Rendering, spec: dict, rng: np.random.Generator):
     """``gain * (channels_mix . render(source)) + offset + noise``; returns (target, sigma).
 
@@ -447,14 +457,8 @@ def make_target(rendering: Rendering, spec: dict, rng: np.random.Generator):
     ``NOISE_FRACTION`` of the mean noise-free target over the mask.
     """
     params = invsss.SSSParams.from_dict(spec["params"], source=f"scene {spec['name']}")
-    scattered = np.asarray(
-        invsss.render(rendering.source, rendering.depth, rendering.mask, params, model="sog"),
-        np.float64,
-    )
-    mix = spec["channels_mix"]
-    if mix is not None:
-        scattered = scattered @ np.asarray(mix, np.float64)[:, None]
-    clean = np.asarray(spec["gain"]) * scattered + np.asarray(spec["offset"])
+    clean = noise_free_target(rendering.source, rendering.depth, rendering.mask, params,
+                              gain=spec["gain"], offset=spec["offset"], channels_mix=spec["channels_mix"])
     sigma = NOISE_FRACTION * float(clean[rendering.mask > 0.5].mean())
     target = clean + sigma * rng.standard_normal(clean.shape)
     return target, sigma

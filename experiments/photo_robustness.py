@@ -45,7 +45,7 @@ from scipy import ndimage
 
 import invsss
 from invsss.io import PARAMS_KEYS, linear_to_srgb, srgb_to_linear
-from make_synthetic import CameraMove, render_moved_view
+from make_synthetic import CameraMove, noise_free_target, render_moved_view
 
 
 def misregister(image: np.ndarray, shift=(0.0, 0.0), rotation_deg: float = 0.0, scale: float = 1.0) -> np.ndarray:
@@ -162,11 +162,9 @@ def clean_target(folder: Path, pair, move: CameraMove, optics: str) -> tuple[np.
         view = render_moved_view(folder.name, move)
         source, depth, mask = view.source, view.depth, view.mask
     params = invsss.SSSParams.from_dict({k: truth[k] for k in PARAMS_KEYS})
-    out = np.asarray(invsss.render(source, depth, mask, params, truth["model"],
-                                   tap_weights=truth["tap_weights"]), np.float64)
-    if truth["channels_mix"] is not None:
-        out = out @ np.asarray(truth["channels_mix"])[:, None]
-    out = np.asarray(truth["gain"]) * out + np.asarray(truth["offset"])
+    out = noise_free_target(source, depth, mask, params, gain=truth["gain"], offset=truth["offset"],
+                            channels_mix=truth["channels_mix"], model=truth["model"],
+                            tap_weights=truth["tap_weights"])
     if moved and optics == "resample":
         out = misregister(out, move.shift_px, move.rotation_deg, move.zoom)
     return out, float(truth["noise_sigma"])
