@@ -13,6 +13,7 @@ from scipy.ndimage import gaussian_filter
 
 import invsss
 from invsss.cli import _ProgressLine, main
+from _pair_files import pair_args, write_pair
 
 SIZE = 40
 # Two Gaussians keep the compiled fit small; the variances are the profile's (the
@@ -41,33 +42,16 @@ def _scene(rng, gain, offset):
     return source, target, depth, mask
 
 
-def _write_pair(folder, name, arrays):
-    paths = {}
-    for key, array, ext in zip(("source", "target", "depth", "mask"), arrays,
-                               (".exr", ".exr", ".exr", ".png")):
-        paths[key] = folder / f"{name}_{key}{ext}"
-        invsss.write_image(paths[key], np.asarray(array, np.float32))
-    return paths
-
-
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
     """Two pairs on disk (different texture and exposure) and the profile file."""
     folder = tmp_path_factory.mktemp("fit_scene")
     rng = np.random.default_rng(7)
-    pairs = [_write_pair(folder, "a", _scene(rng, 0.8, 0.02)),
-             _write_pair(folder, "b", _scene(rng, 1.1, 0.0))]
+    pairs = [write_pair(folder, "a", _scene(rng, 0.8, 0.02)),
+             write_pair(folder, "b", _scene(rng, 1.1, 0.0))]
     profile = folder / "profile.json"
     profile.write_text(json.dumps(PROFILE))
     return {"pairs": pairs, "profile": profile}
-
-
-def _pair_args(*pairs):
-    args = []
-    for p in pairs:
-        args += ["--source", str(p["source"]), "--target", str(p["target"]),
-                 "--depth", str(p["depth"]), "--mask", str(p["mask"])]
-    return args
 
 
 def _is_png(path) -> tuple[int, int]:
@@ -83,7 +67,7 @@ def single_fit(scene, tmp_path_factory):
     out = tmp_path_factory.mktemp("fit_single") / "result"  # does not exist yet
     stdout, err = io.StringIO(), io.StringIO()
     with redirect_stderr(err), redirect_stdout(stdout):
-        code = main(["fit", *_pair_args(scene["pairs"][0]), "--profile", str(scene["profile"]),
+        code = main(["fit", *pair_args(scene["pairs"][0]), "--profile", str(scene["profile"]),
                      "--fix", "maxdd=0.7", *FAST, "--out", str(out)])
     return {"code": code, "out": out, "stdout": stdout.getvalue(), "stderr": err.getvalue()}
 
@@ -132,7 +116,7 @@ def test_fit_prints_summary_and_progress(single_fit):
 
 def test_several_pairs_share_one_fit(scene, tmp_path, capsys):
     out = tmp_path / "two"
-    code = main(["fit", *_pair_args(*scene["pairs"]), "--profile", str(scene["profile"]),
+    code = main(["fit", *pair_args(*scene["pairs"]), "--profile", str(scene["profile"]),
                  "--fix", "maxdd=0.7", *FAST, "--out", str(out)])
     assert code == 0, capsys.readouterr().err
     for k, pair in enumerate(scene["pairs"]):
@@ -156,7 +140,7 @@ def _one_error_line(capsys, code):
 
 
 def test_unknown_fix_name_is_one_line_error(scene, tmp_path, capsys):
-    code = main(["fit", *_pair_args(scene["pairs"][0]), "--fix", "blur=3", "--out", str(tmp_path / "o")])
+    code = main(["fit", *pair_args(scene["pairs"][0]), "--fix", "blur=3", "--out", str(tmp_path / "o")])
     line = _one_error_line(capsys, code)
     assert "'blur'" in line and "sss_level" in line
     assert not (tmp_path / "o").exists()  # nothing is created for a rejected command
@@ -168,13 +152,13 @@ def test_unknown_fix_name_is_one_line_error(scene, tmp_path, capsys):
     ("variances=0.5,x", "comma-separated numbers"),
 ])
 def test_malformed_fix_is_one_line_error(scene, tmp_path, capsys, item, expected):
-    code = main(["fit", *_pair_args(scene["pairs"][0]), "--fix", item, "--out", str(tmp_path / "o")])
+    code = main(["fit", *pair_args(scene["pairs"][0]), "--fix", item, "--out", str(tmp_path / "o")])
     assert expected in _one_error_line(capsys, code)
 
 
 def test_mismatched_pair_counts_are_one_line_error(scene, tmp_path, capsys):
     a, b = scene["pairs"]
-    args = _pair_args(a) + ["--source", str(b["source"]), "--target", str(b["target"])]
+    args = pair_args(a) + ["--source", str(b["source"]), "--target", str(b["target"])]
     code = main(["fit", *args, "--out", str(tmp_path / "o")])
     line = _one_error_line(capsys, code)
     assert "2 --source, 2 --target, 1 --depth, 1 --mask" in line
@@ -183,13 +167,13 @@ def test_mismatched_pair_counts_are_one_line_error(scene, tmp_path, capsys):
 def test_out_that_is_a_file_is_refused(scene, tmp_path, capsys):
     existing = tmp_path / "taken"
     existing.write_text("not a directory")
-    code = main(["fit", *_pair_args(scene["pairs"][0]), "--out", str(existing)])
+    code = main(["fit", *pair_args(scene["pairs"][0]), "--out", str(existing)])
     assert str(existing) in _one_error_line(capsys, code)
     assert existing.read_text() == "not a directory"
 
 
 def test_missing_input_file_is_one_line_error(scene, tmp_path, capsys):
-    args = _pair_args(scene["pairs"][0])
+    args = pair_args(scene["pairs"][0])
     args[args.index("--target") + 1] = str(tmp_path / "nope.exr")
     code = main(["fit", *args, "--out", str(tmp_path / "o")])
     assert "nope.exr" in _one_error_line(capsys, code)

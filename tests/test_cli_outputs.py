@@ -23,6 +23,7 @@ import pytest
 import invsss
 from invsss.cli import main
 from invsss.result_dir import MANIFEST_NAME, ResultDir, result_state
+from _pair_files import pair_args
 
 ROOT = Path(__file__).resolve().parents[1]
 FRAN = ROOT / "data_synthetic" / "fran_front"
@@ -30,11 +31,7 @@ SIZE = 32
 FAST = ["--starts", "1", "--max-steps", "8", "--fix", "maxdd=0.7"]
 
 
-def _pair_args(paths):
-    return [arg for key in ("source", "target", "depth", "mask") for arg in (f"--{key}", str(paths[key]))]
-
-
-FRAN_ARGS = _pair_args({k: FRAN / f"{k}.{'png' if k == 'mask' else 'exr'}" for k in ("source", "target", "depth", "mask")})
+FRAN_ARGS = pair_args({k: FRAN / f"{k}.{'png' if k == 'mask' else 'exr'}" for k in ("source", "target", "depth", "mask")})
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +53,7 @@ def small_pair(tmp_path_factory):
         invsss.write_image(paths[key], np.asarray(array, np.float32))
     profile = folder / "profile.json"
     profile.write_text(json.dumps({"weights": [0.5, 0.5], "variances": [0.5, 2.0]}))
-    return [*_pair_args(paths), "--profile", str(profile), *FAST]
+    return [*pair_args(paths), "--profile", str(profile), *FAST]
 
 
 def _snapshot(folder):

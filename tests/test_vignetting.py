@@ -18,6 +18,7 @@ from invsss import InvalidInputError
 from invsss.estimator import FitOptions, build_problem
 from invsss.estimator.vignetting import radius_squared, vignetting_field
 from _estimator_scenes import make_pair
+from _pair_files import pair_args, write_pair
 
 PROFILE3 = {"weights": [0.3, 0.45, 0.25], "variances": [0.25, 1.2, 5.0]}
 TRUTH = invsss.SSSParams(700.0, 300.0, 2.0, PROFILE3["weights"], PROFILE3["variances"])
@@ -112,16 +113,10 @@ def test_cli_fit_writes_the_field_into_params_json(tmp_path):
 
     source, depth, mask, _, photo = _photographs()
     crop = slice(20, 60)  # a small fit: the flag's path through the CLI, not its accuracy
-    files = {"source.exr": source[crop, crop], "target.exr": photo[crop, crop],
-             "depth.exr": depth[crop, crop], "mask.png": mask[crop, crop]}
-    for name, image in files.items():
-        invsss.write_image(tmp_path / name, np.asarray(image, np.float32))
-    arguments = ["fit", "--out", str(tmp_path / "out"), "--starts", "1", "--max-steps", "20", "--vignetting",
-                 "--profile", str(tmp_path / "profile.json")]
+    files = write_pair(tmp_path, "crop", [image[crop, crop] for image in (source, photo, depth, mask)])
     (tmp_path / "profile.json").write_text(json.dumps(PROFILE3))
-    for flag, name in (("--source", "source.exr"), ("--target", "target.exr"), ("--depth", "depth.exr"),
-                       ("--mask", "mask.png")):
-        arguments += [flag, str(tmp_path / name)]
+    arguments = ["fit", *pair_args(files), "--out", str(tmp_path / "out"), "--starts", "1", "--max-steps", "20",
+                 "--vignetting", "--profile", str(tmp_path / "profile.json")]
     assert invsss.cli.main(arguments) == 0
     written = json.loads((tmp_path / "out" / "params.json").read_text())
     assert len(written["vignetting"]["coefficients"]) == 2 and written["vignetting"]["corner_gain"] < 1.0
