@@ -340,11 +340,12 @@ def _highlight_map(target, fitted, region) -> np.ndarray:
 
 def _fit_without_highlights(data, first, single, options, progress, stop) -> FitResult:
     """Refit with the specular highlights of the first fit's residual left out (``highlights``)."""
-    pairs, counts = [], []
+    pairs, counts, fractions = [], [], []
     for pair, fitted in zip(data, first.fitted):
         region = np.asarray(pair.residual_weight) > 0
         bright = _highlight_map(pair.target, fitted, region)
         counts.append(int(bright.sum()))
+        fractions.append(counts[-1] / max(float(region.sum()), 1.0))
         keep = np.where(bright, 0.0, 1.0 if pair.fit_weight is None else np.asarray(pair.fit_weight))
         pairs.append(ImagePair(pair.source, pair.target, pair.depth, pair.mask, pair.target_ndim,
                                fit_weight=keep if (keep * np.asarray(pair.mask)).any() else None))
@@ -352,7 +353,7 @@ def _fit_without_highlights(data, first, single, options, progress, stop) -> Fit
         "method": f"residual of a first fit smoothed over 1 px, brighter than the prediction by "
                   f"{HIGHLIGHT_SIGMAS:g} robust standard deviations, dilated by 1 px",
         "excluded_pixels": counts,
-        "fraction": [c / max(float(np.sum(np.asarray(p.residual_weight) > 0)), 1.0) for c, p in zip(counts, data)],
+        "fraction": fractions,
     }
     if not any(counts):
         return dataclasses.replace(first, highlights=record)
