@@ -312,7 +312,7 @@ class _Stages:
         setattr(module, name, timed_call)
 
 
-def _solve_label(solver, objective, z0, max_steps, on_step=None, stop=None):
+def _solve_label(solver, objective, z0, max_steps, on_step=None, *rest, **options):
     # fit.py's ``run`` labels each solve ("start 2", "robust 1", "active set 1").
     label = on_step.stages[-1][0] if on_step is not None and on_step.stages else "solve"
     return "solve: " + label.rstrip("0123456789").strip()
