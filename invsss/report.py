@@ -133,6 +133,9 @@ def _parameter_lines(result) -> list[str]:
         extra = (f", rotation {record['rotation_deg']:+.2f} deg, scale {record['scale']:.4f}"
                  if record["kind"] == "similarity" else "")
         where = f"pair {k} " if len(result.alignment) > 1 else ""
+        shift_err = (record.get("stderr") or {}).get("shift_px")
+        if shift_err is not None:
+            extra += "; shift stderr (" + ", ".join("?" if e is None else f"{e:.2g}" for e in shift_err) + ") px"
         lines.append(f"{where}target registered ({record['kind']}): shift ({dy:+.2f}, {dx:+.2f}) px (dy, dx){extra}")
     vignetting = getattr(result, "vignetting", None)
     if vignetting is not None:

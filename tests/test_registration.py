@@ -130,6 +130,9 @@ def test_fit_with_align_recovers_the_blur_of_a_shifted_target():
     assert float(aligned.params.sss_level) == pytest.approx(600.0, rel=0.02)
     np.testing.assert_allclose(aligned.alignment[0]["shift_px"], (1.4, -0.8), atol=0.05)
     assert aligned.psnr > plain.psnr + 10.0
+    # The warp's own standard errors: positive, and far below the 0.05 px it is checked to.
+    shift_err = aligned.alignment[0]["stderr"]["shift_px"]
+    assert all(0.0 < e < 0.01 for e in shift_err)
     # The report goes into a valid params file.
     record = ParamsFile.model_validate(json.loads(json.dumps(aligned.to_dict())))
     assert record.alignment[0]["kind"] == "translation"

@@ -140,7 +140,9 @@ def fit_pair(
         the warp), alternating (at most 4 rounds) until the warp moves less than
         0.01 px, and the pair fitted again. The warp is in
         :attr:`FitResult.alignment` and the fitted images are on the target's grid.
-        The standard errors treat the warp as known. Target pixels that come from
+        The standard errors count the warp as estimated too (its parameters join the
+        covariance as nuisance unknowns; their own standard errors are in the
+        alignment record). Target pixels that come from
         outside the source's frame leave the mask. Two to five times the time of a fit.
     vignetting : bool
         Fit the camera's fall-off toward the corners as a gain field
@@ -311,7 +313,9 @@ def _options(options, given):
     return options
 
 
-def _fit(pairs, single, options, progress, stop) -> FitResult:
+def _fit(pairs, single, options, progress, stop, nuisance=None) -> FitResult:
+    """The fit; ``nuisance`` (an aligned fit's :class:`_WarpSensitivity`) adds
+    unknowns estimated outside the solve to the covariance of the final fit."""
     _check_callback("progress", progress)
     _check_callback("stop", stop)
     if options.align != "none":
@@ -320,7 +324,7 @@ def _fit(pairs, single, options, progress, stop) -> FitResult:
     with jax.enable_x64(True):
         steps = _Steps(progress, stop, problem.to_loss)
         path = _solve(problem, options, steps)
-        result = _report(problem, path, single, steps)
+        result = _report(problem, path, single, steps, nuisance)
     # Rebuild the parameters outside float64 mode: the caller gets arrays of their
     # own default precision, ready for render().
     params = SSSParams(*(result.values[k] for k in PARAM_NAMES))
@@ -329,7 +333,7 @@ def _fit(pairs, single, options, progress, stop) -> FitResult:
         tap_weights=options.tap_label,
     )
     if options.highlights and not result.interrupted:
-        return _fit_without_highlights(problem.data, result, single, options, progress, stop)
+        return _fit_without_highlights(problem.data, result, single, options, progress, stop, nuisance)
     return result
 
 
@@ -348,7 +352,7 @@ def _highlight_map(target, fitted, region) -> np.ndarray:
     return ndimage.binary_dilation(bright, iterations=1) & region
 
 
-def _fit_without_highlights(data, first, single, options, progress, stop) -> FitResult:
+def _fit_without_highlights(data, first, single, options, progress, stop, nuisance=None) -> FitResult:
     """Refit with the specular highlights of the first fit's residual left out (``highlights``)."""
     pairs, counts, fractions = [], [], []
     for pair, fitted in zip(data, first.fitted):
@@ -367,7 +371,7 @@ def _fit_without_highlights(data, first, single, options, progress, stop) -> Fit
     }
     if not any(counts):
         return dataclasses.replace(first, highlights=record)
-    second = _fit(pairs, single, dataclasses.replace(options, highlights=False), progress, stop)
+    second = _fit(pairs, single, dataclasses.replace(options, highlights=False), progress, stop, nuisance)
     return dataclasses.replace(second, highlights=record)
 
 
@@ -422,7 +426,8 @@ def _fit_aligned(pairs, single, options, progress, stop) -> FitResult:
         warps = refined
         if moved < ALIGN_SETTLED_PX:
             break
-    result = _fit(aligned(warps), single, plain, progress, stop)
+    sensitivity = _WarpSensitivity(checked, warps)
+    result = _fit(aligned(warps), single, plain, progress, stop, sensitivity)
     resampled = max(float(np.abs(w.map_points(_corners(mask)) - _corners(mask)).max())
                     for w, (_, _, _, mask, _) in zip(warps, checked))
     messages = result.warnings
@@ -430,10 +435,78 @@ def _fit_aligned(pairs, single, options, progress, stop) -> FitResult:
         messages += (
             f"align: the source was resampled onto the photograph's grid (the warp moves it by up to "
             f"{resampled:.2f} px); that alone biases sss_level by a few per cent beyond its standard "
-            "error (-3 to -5 % on a model-made face), and the standard errors treat the warp as known. "
+            "error (-3 to -5 % on a model-made face). "
             "For final numbers render the source again with the fitted warp and fit without align",
         )
-    return dataclasses.replace(result, alignment=tuple(w.to_dict() for w in warps), warnings=messages)
+    return dataclasses.replace(result, alignment=sensitivity.records(), warnings=messages)
+
+
+#: The warp's parameters are perturbed by steps that move the mask's farthest
+#: corner this far (px) to differentiate the residual: below the 0.1 px that
+#: moves the blur estimate, above the resampling's rounding.
+WARP_STEP_PX = 0.05
+
+
+@eqx.filter_jit
+def _explicit_residual(objective, z, coef, offset):
+    return objective.explicit_residual(z, coef, offset)
+
+
+class _WarpSensitivity:
+    """How the final fit's residual changes with each warp parameter, so that the
+    standard errors count the warp as estimated (:func:`gauss_newton_uncertainty`'s
+    ``nuisance``), and the warps with their own standard errors for params.json.
+
+    The derivative is a central difference of the whole resampling (source,
+    depth and mask moved by :func:`~invsss.registration.align_source`) with the
+    scattering parameters, the linear unknowns and the residual's weights held.
+    """
+
+    def __init__(self, checked, warps):
+        self.checked, self.warps = checked, warps
+        self.stderr = None
+
+    def _steps(self, warp, mask) -> np.ndarray:
+        reach = float(np.max(np.linalg.norm(_corners(mask) - np.asarray(warp.centre), axis=1)))
+        steps = np.full(len(warp.params), WARP_STEP_PX / max(reach, 1.0))
+        steps[:2] = WARP_STEP_PX  # the shift is in pixels already
+        return steps
+
+    def columns(self, objective, z, coef, offset) -> np.ndarray:
+        out = []
+        for i, ((source, target, depth, mask, _), warp) in enumerate(zip(self.checked, self.warps)):
+            for j, h in enumerate(self._steps(warp, mask)):
+                sides = []
+                for sign in (1.0, -1.0):
+                    params = np.array(warp.params, np.float64)
+                    params[j] += sign * h
+                    moved, moved_depth, kept = align_source(
+                        source, depth, mask, type(warp)(warp.kind, tuple(params), warp.centre), target.shape[:2])
+                    shifted = eqx.tree_at(
+                        lambda o: (o.pairs[i].source, o.pairs[i].depth, o.pairs[i].mask), objective,
+                        (jnp.asarray(moved), jnp.asarray(moved_depth), jnp.asarray(kept)))
+                    sides.append(np.asarray(_explicit_residual(shifted, z, coef, offset)))
+                out.append((sides[0] - sides[1]) / (2.0 * h))
+        return np.stack(out, axis=1)
+
+    def records(self) -> tuple:
+        """Each warp as params.json writes it, with the standard errors of its parameters."""
+        out, first = [], 0
+        for warp in self.warps:
+            record = warp.to_dict()
+            n = len(warp.params)
+            if self.stderr is not None:
+                err = [None if not np.isfinite(e) else float(e) for e in self.stderr[first:first + n]]
+                first += n
+                stderr = {"shift_px": err[:2]}
+                if warp.kind == "similarity":
+                    stderr["rotation_deg"] = None if err[2] is None else float(np.degrees(err[2]))
+                    stderr["scale"] = None if err[3] is None else float(np.exp(warp.params[3]) * err[3])
+                elif warp.kind == "affine":
+                    stderr["matrix_2x2"] = err[2:]
+                record["stderr"] = stderr
+            out.append(record)
+        return tuple(out)
 
 
 #: Registration rounds (a one-start fit and a warp refinement each) at most.
@@ -560,7 +633,7 @@ def _active_set(problem, path, run) -> None:
         path.messages.append(f"{names}: held at 0 (the unconstrained least squares made them negative)")
 
 
-def _report(problem, path, single, steps) -> FitResult:
+def _report(problem, path, single, steps, nuisance=None) -> FitResult:
     """The estimate, its uncertainty and diagnostics (step 5 above)."""
     param, roles, data, c_tgt = problem.param, problem.roles, problem.data, problem.channels
     robust, max_steps = problem.options.robust, problem.options.max_steps
@@ -582,10 +655,13 @@ def _report(problem, path, single, steps) -> FitResult:
     natural["weights"] = weights
 
     # Uncertainty and undetermined parameters.
+    columns = None if nuisance is None else nuisance.columns(path.objective, path.z, coef, offset)
     unc = gauss_newton_uncertainty(
         path.objective, final["linearisation"], problem.scales.correction,
-        None if robust is None else (robust, path.delta),
+        None if robust is None else (robust, path.delta), columns,
     )
+    if nuisance is not None:
+        nuisance.stderr = unc.nuisance_stderr
     if problem.linear_weights:
         active = np.asarray(path.objective.active)
     else:

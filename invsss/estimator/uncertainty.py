@@ -75,6 +75,7 @@ class Uncertainty(NamedTuple):
     undetermined: dict
     sigma: float
     dof: int
+    nuisance_stderr: np.ndarray | None = None
 
 
 def _reported(objective, linear_weights: bool, sizes, theta) -> dict:
@@ -122,15 +123,32 @@ def linearise(objective, z, coef, offset) -> dict:
     }
 
 
-def gauss_newton_uncertainty(objective, lin: dict, correction_ref: float, robust=None) -> Uncertainty:
+def gauss_newton_uncertainty(
+    objective, lin: dict, correction_ref: float, robust=None, nuisance=None
+) -> Uncertainty:
     """Standard errors and undetermined entries from :func:`linearise`'s output.
 
     ``robust`` is None for plain least squares, else ``(kind, delta)`` of the
     robust loss (``delta`` in target units); see the module docs.
+
+    ``nuisance`` (N, q), optional: the weighted residual's derivatives with
+    respect to q more unknowns that were estimated outside this objective (an
+    aligned fit's warp). They join ``J`` as columns, so every standard error is
+    the marginal one, with those unknowns estimated too rather than taken as
+    known; theirs are ``nuisance_stderr`` (NaN where undetermined).
     """
     jac = np.asarray(lin["jacobian"])
     rho = np.asarray(lin["residual"])
-    values, jacs = lin["values"], lin["value_jacobians"]
+    values, jacs = lin["values"], dict(lin["value_jacobians"])
+    q = 0
+    if nuisance is not None:
+        nuisance = np.asarray(nuisance, np.float64).reshape(jac.shape[0], -1)
+        q = nuisance.shape[1]
+        jac = np.concatenate([jac, nuisance], axis=1)
+        # The reported values do not depend on the nuisance unknowns themselves.
+        jacs = {k: np.concatenate([np.asarray(g).reshape(-1, jac.shape[1] - q),
+                                   np.zeros((int(np.size(values[k])), q))], axis=1)
+                for k, g in jacs.items()}
     weighted = np.concatenate([np.asarray(w).ravel() > 0 for w in objective.weights()])
     n, p = int(weighted.sum()), jac.shape[1]
     dof = max(n - p, 1)
@@ -184,7 +202,14 @@ def gauss_newton_uncertainty(objective, lin: dict, correction_ref: float, robust
         shape = np.shape(value)
         stderr[name] = np.where(bad, np.nan, std).reshape(shape)
         undetermined[name] = bad.reshape(shape)
-    return Uncertainty(stderr, undetermined, float(np.sqrt(sigma2)) * float(objective.scale), dof)
+    nuisance_stderr = None
+    if q:
+        last = np.arange(p - q, p)
+        var = np.diag(cov_theta)[last]
+        on_null = np.any(np.abs(null_dirs[last]) > 1e-6, axis=1) if null_dirs.size else np.zeros(q, bool)
+        nuisance_stderr = np.where(on_null, np.nan, np.sqrt(np.maximum(var, 0.0)))
+    return Uncertainty(stderr, undetermined, float(np.sqrt(sigma2)) * float(objective.scale), dof,
+                       nuisance_stderr)
 
 
 def _coinciding(natural, scales, flags, msgs, roles):
