@@ -428,7 +428,8 @@ def _fit_aligned(pairs, single, options, progress, stop) -> FitResult:
             break
     sensitivity = _WarpSensitivity(checked, warps)
     result = _fit(aligned(warps), single, plain, progress, stop, sensitivity)
-    resampled = max(float(np.abs(w.map_points(_corners(mask)) - _corners(mask)).max())
+    # How far the warp moves the mask's corners from where they were: zero parameters are the identity.
+    resampled = max(_warp_change(w, type(w)(w.kind, (0.0,) * len(w.params), w.centre), mask)
                     for w, (_, _, _, mask, _) in zip(warps, checked))
     messages = result.warnings
     if resampled > ALIGN_SETTLED_PX:
@@ -528,6 +529,7 @@ def _corners(mask) -> np.ndarray:
 
 
 def _warp_change(a, b, mask) -> float:
+    """How far (px) two warps take any corner of the mask's bounding box apart."""
     corners = _corners(mask)
     return float(np.abs(a.map_points(corners) - b.map_points(corners)).max())
 

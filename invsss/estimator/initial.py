@@ -38,6 +38,7 @@ class DataScales(eqx.Module):
     slopes_x: np.ndarray
     slopes_y: np.ndarray
     size: int  # smallest image side
+    mask_diameter: float = np.inf  # the smallest pair's mask as a disc of equal area (px)
 
     @property
     def slopes(self) -> np.ndarray:
@@ -61,11 +62,15 @@ class DataScales(eqx.Module):
         """The correction at which ``c * slope`` equals the depth."""
         return self.depth / self.slope
 
-    def max_stretch(self, sss_level, correction, maxdd) -> float:
-        """The largest stretch factor over the masked pixels (pixels per mm)."""
+    def stretch_range(self, sss_level, correction, maxdd) -> tuple[float, float]:
+        """The smallest and largest stretch factor over the masked pixels, both axes (px per mm)."""
         sx = stretch_along(self.depths, self.slopes_x, sss_level, correction, maxdd, xp=np)
         sy = stretch_along(self.depths, self.slopes_y, sss_level, correction, maxdd, xp=np)
-        return float(max(sx.max(), sy.max()))
+        return float(min(sx.min(), sy.min())), float(max(sx.max(), sy.max()))
+
+    def max_stretch(self, sss_level, correction, maxdd) -> float:
+        """The largest stretch factor over the masked pixels (pixels per mm)."""
+        return self.stretch_range(sss_level, correction, maxdd)[1]
 
 
 def data_scales(pairs) -> DataScales:
@@ -77,7 +82,9 @@ def data_scales(pairs) -> DataScales:
         slopes_x.append(np.asarray(sx)[keep])
         slopes_y.append(np.asarray(sy)[keep])
     size = min(min(p.depth.shape) for p in pairs)
-    return DataScales(np.concatenate(depths), np.concatenate(slopes_x), np.concatenate(slopes_y), int(size))
+    area = min(float(np.sum(np.asarray(p.mask) > 0)) for p in pairs)
+    return DataScales(np.concatenate(depths), np.concatenate(slopes_x), np.concatenate(slopes_y), int(size),
+                      2.0 * float(np.sqrt(area / np.pi)))
 
 
 def blur_reference(scales: DataScales, variances) -> float:

@@ -32,7 +32,9 @@ A parameter is reported *undetermined* (value null) when
    :data:`ZERO_WEIGHT`), a parameter the model does not use, or two Gaussians
    whose layers differ by a blur narrower than :data:`COINCIDENT_PX` pixel even
    at the largest stretch on the mask (their weights; the thesis's 940 nm
-   profile has such a pair, 0.549 and 0.5574 mm^2).
+   profile has such a pair, 0.549 and 0.5574 mm^2), or, with the variances
+   estimated, a Gaussian narrower than :data:`UNRESOLVED_PX` at the largest
+   stretch or wider than the mask at the smallest (its variance).
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ __all__ = [
     "WEIGHT_VAGUE",
     "ZERO_WEIGHT",
     "COINCIDENT_PX",
+    "UNRESOLVED_PX",
     "FEW_SLOPES",
     "Uncertainty",
     "linearise",
@@ -61,6 +64,9 @@ NULL_TOL = 1e-10
 WEIGHT_VAGUE = 0.1
 ZERO_WEIGHT = 1e-3
 COINCIDENT_PX = 0.25
+#: An estimated variance whose Gaussian blurs by less than this (px) even at the
+#: largest stretch on the mask cannot be told from no blur at all.
+UNRESOLVED_PX = 0.1
 FEW_SLOPES = 0.01
 
 
@@ -302,4 +308,29 @@ def structural_reasons(
             flags["variances"] = zero
             idx = ", ".join(str(i) for i in np.flatnonzero(zero))
             msgs.append(f"variances[{idx}]: the weight is ~0, so the variance has no effect")
+        _unresolved(natural, scales, flags, msgs, ~zero)
     return flags, msgs
+
+
+def _unresolved(natural, scales, flags, msgs, weighted):
+    """Estimated variances the image cannot resolve: a Gaussian narrower than
+    :data:`UNRESOLVED_PX` even where the stretch is largest looks like no blur, and
+    one wider than the mask even where the stretch is smallest looks like a flat
+    offset; either way its variance can wander without changing the image."""
+    v = np.asarray(natural["variances"], np.float64)
+    args = (float(natural["sss_level"]), float(natural["correction"]), float(natural["maxdd"]))
+    low, high = scales.stretch_range(*args)
+    widest, narrowest = high * np.sqrt(v), low * np.sqrt(v)
+    narrow = weighted & (widest < UNRESOLVED_PX)
+    wide = weighted & (narrowest > scales.mask_diameter)
+    for chosen, what in ((narrow, f"blurs by less than {UNRESOLVED_PX} px even where the stretch is largest, "
+                                  "so it cannot be told from no blur"),
+                         (wide, f"blurs by more than the mask's width ({scales.mask_diameter:.0f} px) even "
+                                "where the stretch is smallest, so it cannot be told from a flat offset")):
+        if np.any(chosen):
+            flag = flags.setdefault("variances", np.zeros(v.shape, bool))
+            flag |= chosen
+            which = np.flatnonzero(chosen)
+            idx = ", ".join(str(i) for i in which)
+            values = ", ".join(f"{x:.3g}" for x in v[which])
+            msgs.append(f"variances[{idx}] ({values} mm^2): {what}")
