@@ -120,8 +120,7 @@ def _add_render_parser(subparsers) -> None:
     )
     _add_model_arguments(parser)
     parser.add_argument("--out", required=True, help="output image (.exr, .png, .tif, .jpg, .npy)")
-    parser.add_argument("--no-cache", action="store_true",
-                        help="do not use the persistent compilation cache (also INVSSS_NO_CACHE=1)")
+    _add_no_cache_argument(parser)
     parser.set_defaults(func=_run_render)
 
 
@@ -157,6 +156,12 @@ def _run_render(args: argparse.Namespace, stop: StopSignals) -> int:
 _FIX_SCALARS = ("sss_level", "correction", "maxdd")
 _FIX_LISTS = ("weights", "variances")
 _PAIR_FLAGS = ("source", "target", "depth", "mask")
+
+
+def _add_no_cache_argument(parser) -> None:
+    """``--no-cache``, for the commands that compile (see :func:`_use_compile_cache`)."""
+    parser.add_argument("--no-cache", action="store_true",
+                        help="do not use the persistent compilation cache (also INVSSS_NO_CACHE=1)")
 
 
 def _add_fit_parser(subparsers) -> None:
@@ -236,8 +241,7 @@ def _add_fit_parser(subparsers) -> None:
     parser.add_argument("--overwrite", action="store_true",
                         help="replace the result already in DIR (its files only; other "
                         "files in DIR are kept)")
-    parser.add_argument("--no-cache", action="store_true",
-                        help="do not use the persistent compilation cache (also INVSSS_NO_CACHE=1)")
+    _add_no_cache_argument(parser)
     parser.set_defaults(func=_run_fit)
 
 
@@ -572,8 +576,7 @@ def _add_sweep_parser(subparsers) -> None:
                         "the Dask LocalCluster started without --scheduler (default 2)")
     parser.add_argument("--scheduler", default=None, metavar="ADDR",
                         help="address of a running Dask scheduler (tcp://host:8786)")
-    parser.add_argument("--no-cache", action="store_true",
-                        help="do not use the persistent compilation cache (also INVSSS_NO_CACHE=1)")
+    _add_no_cache_argument(parser)
     parser.set_defaults(func=_run_sweep)
     # `invsss sweep-report` is the sweep's other half: registered with it.
     _add_sweep_report_parser(subparsers)
