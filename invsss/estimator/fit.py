@@ -39,7 +39,7 @@ from ..pair import ImagePair
 from ..params import PARAM_NAMES, SSSParams
 from ..validation import InvalidInputError
 from .diagnostics import MISALIGNMENT_PX, masked_psnr, masked_ssim, misalignment
-from ..registration import align_source, align_target, estimate_warp, match_photometry
+from ..registration import Warp, align_source, align_target, estimate_warp, match_photometry
 from .inputs import prepare_pairs
 from .options import FitOptions
 from .problem import build_problem
@@ -429,7 +429,7 @@ def _fit_aligned(pairs, single, options, progress, stop) -> FitResult:
     sensitivity = _WarpSensitivity(checked, warps)
     result = _fit(aligned(warps), single, plain, progress, stop, sensitivity)
     # How far the warp moves the mask's corners from where they were: zero parameters are the identity.
-    resampled = max(_warp_change(w, type(w)(w.kind, (0.0,) * len(w.params), w.centre), mask)
+    resampled = max(_warp_change(w, Warp(w.kind, (0.0,) * len(w.params), w.centre), mask)
                     for w, (_, _, _, mask, _) in zip(warps, checked))
     messages = result.warnings
     if resampled > ALIGN_SETTLED_PX:
@@ -461,6 +461,8 @@ class _WarpSensitivity:
     The derivative is a central difference of the whole resampling (source,
     depth and mask moved by :func:`~invsss.registration.align_source`) with the
     scattering parameters, the linear unknowns and the residual's weights held.
+    The fit's report calls :meth:`columns` and stores the warp parameters'
+    standard errors in ``stderr``, which :meth:`records` then writes out.
     """
 
     def __init__(self, checked, warps):
@@ -482,7 +484,7 @@ class _WarpSensitivity:
                     params = np.array(warp.params, np.float64)
                     params[j] += sign * h
                     moved, moved_depth, kept = align_source(
-                        source, depth, mask, type(warp)(warp.kind, tuple(params), warp.centre), target.shape[:2])
+                        source, depth, mask, Warp(warp.kind, tuple(params), warp.centre), target.shape[:2])
                     shifted = eqx.tree_at(
                         lambda o: (o.pairs[i].source, o.pairs[i].depth, o.pairs[i].mask), objective,
                         (jnp.asarray(moved), jnp.asarray(moved_depth), jnp.asarray(kept)))
