@@ -187,19 +187,27 @@ def _done_count(database):
         return 0
 
 
-def test_sweep_killed_mid_run_resumes_to_one_done_row_per_trial(root):
-    path = _experiment(root, "kill.toml", RENDER)
-    out = root / "killed"
-    # The result protocol's test hook pauses inside every commit, so the kill
-    # lands while trials are being written.
+def _sweep_until(path, out, done, stdout):
+    """``invsss sweep`` in a subprocess, returned once ``done`` trials are done.
+
+    The result protocol's test hook pauses inside every commit, so a signal
+    sent next lands while trials are being written.
+    """
     env = {**os.environ, "INVSSS_TEST_PAUSE_IN_COMMIT": "0.4"}
     process = subprocess.Popen(
         [sys.executable, "-m", "invsss", "sweep", str(path), "--out", str(out)],
-        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        env=env, stdout=stdout, stderr=subprocess.PIPE, text=True,
     )
     deadline = time.monotonic() + 120
-    while _done_count(out / "results.sqlite") < 3 and time.monotonic() < deadline and process.poll() is None:
+    while _done_count(out / "results.sqlite") < done and time.monotonic() < deadline and process.poll() is None:
         time.sleep(0.1)
+    return process
+
+
+def test_sweep_killed_mid_run_resumes_to_one_done_row_per_trial(root):
+    path = _experiment(root, "kill.toml", RENDER)
+    out = root / "killed"
+    process = _sweep_until(path, out, 3, subprocess.DEVNULL)
     time.sleep(0.5)  # into the next trial's commit
     process.send_signal(signal.SIGKILL)
     process.wait()
@@ -232,14 +240,7 @@ def test_sweep_killed_mid_run_resumes_to_one_done_row_per_trial(root):
 def test_ctrl_c_stops_between_trials_and_a_rerun_resumes(root):
     path = _experiment(root, "sigint.toml", RENDER)
     out = root / "sigint"
-    env = {**os.environ, "INVSSS_TEST_PAUSE_IN_COMMIT": "0.4"}
-    process = subprocess.Popen(
-        [sys.executable, "-m", "invsss", "sweep", str(path), "--out", str(out)],
-        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )
-    deadline = time.monotonic() + 120
-    while _done_count(out / "results.sqlite") < 2 and time.monotonic() < deadline and process.poll() is None:
-        time.sleep(0.1)
+    process = _sweep_until(path, out, 2, subprocess.PIPE)
     process.send_signal(signal.SIGINT)
     _, err = process.communicate(timeout=60)
     assert process.returncode == 130
