@@ -513,3 +513,18 @@ def test_one_compiled_step_serves_starts_rounds_and_refinement():
     # The refinement solves the best start again at the full tolerance.
     best_start = min(plain.history[stop - 1] for _, _, stop in plain.stages[:2])
     assert plain.loss <= best_start * (1 + 1e-12)
+
+
+def test_build_problem_starts_where_it_is_told():
+    source, target, depth, mask, _ = scene(size=32)
+    start = {"sss_level": 650.0, "correction": 250.0, "maxdd": 1.5, "weights": [0.2, 0.3, 0.5]}
+    problem = invsss.estimator.build_problem([(source, target, depth, mask)],
+                                             FitOptions(profile=PROFILE3), start=start)
+    assert len(problem.starts) == 1
+    with jax.enable_x64(True):
+        natural = problem.param.natural(problem.z0)
+    # The free blocks start at the given values; the weights are not a block of
+    # the sog fit (they are solved linearly), so that entry is ignored.
+    for name in ("sss_level", "correction", "maxdd"):
+        assert float(natural[name]) == pytest.approx(start[name], rel=1e-12)
+    assert "weights" not in problem.param.free

@@ -155,7 +155,7 @@ class FitProblem:
         Whether the weights are eliminated by least squares (``sog``).
     """
 
-    def __init__(self, data, options, profile_w, profile_v):
+    def __init__(self, data, options, profile_w, profile_v, start=None):
         self.options, self.data, self.model = options, tuple(data), options.model
         self.fixed = dict(options.fix)
         self.roles = assign_roles(options.model, options.gauge, self.fixed)
@@ -184,7 +184,13 @@ class FitProblem:
         # 0.5 * sum(rho^2) -> the reported loss (see objective.py).
         self.to_loss = 2.0 * scale**2 / total
         self.starts = ()
-        if self.param.size:
+        if self.param.size and start is not None:
+            # A known neighbourhood (an earlier fit of nearly the same pair): start
+            # there, without the scan.
+            natural = {k: np.asarray(v) for k, v in self.param.natural(jnp.asarray(self.z_base)).items()}
+            natural.update({k: np.asarray(v, np.float64) for k, v in start.items() if k in self.param.free})
+            self.starts = (jnp.asarray(self.param.unknowns(natural)),)
+        elif self.param.size:
             blur0 = _blur_at_zero(self.roles, self.scales, self.fixed, self.variances)
             self.starts = tuple(
                 jnp.asarray(z)
@@ -204,7 +210,7 @@ class FitProblem:
         return float(_loss(self.objective, jnp.asarray(z)))
 
 
-def build_problem(pairs, options: FitOptions | None = None) -> FitProblem:
+def build_problem(pairs, options: FitOptions | None = None, start: dict | None = None) -> FitProblem:
     """Check the pairs and build the problem :func:`invsss.fit_pairs` would solve.
 
     Parameters
@@ -213,6 +219,11 @@ def build_problem(pairs, options: FitOptions | None = None) -> FitProblem:
         As for :func:`invsss.fit_pairs`.
     options : FitOptions, optional
         Default ``FitOptions()``.
+    start : dict, optional
+        Natural values (``sss_level``, ``correction``, ``maxdd``, ``mix``, ...) to
+        start from instead of scanning for starts: one start, the free blocks
+        named here at these values and the others where they would begin. Names
+        that are not free are ignored.
 
     Returns
     -------
@@ -246,4 +257,4 @@ def build_problem(pairs, options: FitOptions | None = None) -> FitProblem:
         raise InvalidInputError(f"options: expected a FitOptions, got {type(options).__name__}")
     with jax.enable_x64(True):
         profile_w, profile_v = resolve_profile(options.profile)
-        return FitProblem(prepare_pairs(pairs), options, profile_w, profile_v)
+        return FitProblem(prepare_pairs(pairs), options, profile_w, profile_v, start)
