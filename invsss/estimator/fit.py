@@ -138,8 +138,8 @@ def fit_pair(
         see :mod:`invsss.registration`) and fitted; the warp is refined against
         that fit's prediction (which carries the blur, so the blur does not bias
         the warp), alternating (at most 4 rounds, each a one-start fit of at most
-        30 steps per solve from the previous round's estimate) until the warp moves less than
-        0.01 px, and the pair fitted again. The warp is in
+        30 steps per solve from the previous round's estimate) until the warp
+        moves less than 0.01 px, and the pair fitted again. The warp is in
         :attr:`FitResult.alignment` and the fitted images are on the target's grid.
         The standard errors count the warp as estimated too (its parameters join the
         covariance as nuisance unknowns; their own standard errors are in the
@@ -604,11 +604,13 @@ def _solve(problem, options, steps) -> _Path:
     best, minima = None, []
 
     def known_basin(z):
-        return any(float(jnp.max(jnp.abs(z - m))) < SAME_BASIN for m in minima)
+        # NumPy, not jax.numpy: this runs on the host after every step.
+        z = np.asarray(z)
+        return any(float(np.max(np.abs(z - m))) < SAME_BASIN for m in minima)
 
     for i, z0 in enumerate(problem.starts):
         record = run(f"start {i + 1}", z0, screen, known_basin)
-        minima.append(record.z)
+        minima.append(np.asarray(record.z))
         if best is None or record.final < best.final:
             best = record
         if record.interrupted:

@@ -28,7 +28,10 @@ import optimistix as optx
 
 from ..validation import InvalidInputError
 
-__all__ = ["SOLVERS", "SCREEN_TOL", "NOISE_TOL", "gauss_newton_distance", "make_solver", "SolveRecord", "run_solver", "FitInterrupted"]
+__all__ = [
+    "SOLVERS", "SCREEN_TOL", "NOISE_TOL", "gauss_newton_distance", "make_solver", "SolveRecord",
+    "run_solver", "FitInterrupted",
+]
 
 SOLVERS = ("lm", "gauss-newton", "bfgs")
 
