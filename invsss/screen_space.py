@@ -22,6 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .light_terms import LIGHT_TERM_NAMES, LightBuffers, LightTerms, apply_light_terms
 from .models import MODEL_NAMES, get_model, resolve_tap_weights
 from .params import SSSParams
 from .pass_plan import pass_plan
@@ -30,7 +31,7 @@ from .passes import tap_weights as tap_weight_set
 from .profiles import sum_of_gaussians
 from .stretch import stretch_factors
 from .pair import fill_background_depth
-from .validation import InvalidInputError, check_depth, check_image, check_mask
+from .validation import InvalidInputError, check_depth, check_image, check_mask, is_concrete
 
 __all__ = [
     "MODELS",
@@ -245,6 +246,22 @@ def _render(image, depth, mask, params, model, tap_w, taps, strength, follow_sur
     return LAYOUT_RENDERERS[layout](image, depth, mask, params, tap_w, **options)
 
 
+def _light_buffers(terms, buffers, hw, mask) -> LightBuffers:
+    if not isinstance(terms, LightTerms):
+        raise InvalidInputError(f"light_terms: expected invsss.LightTerms, got {type(terms).__name__}")
+    terms.check()
+    if not isinstance(buffers, LightBuffers):
+        raise InvalidInputError(
+            "light_buffers: light_terms need an invsss.LightBuffers with the normal and/or light buffer, "
+            f"got {type(buffers).__name__}"
+        )
+    used = [t for t in LIGHT_TERM_NAMES if not is_concrete(getattr(terms, t)) or float(getattr(terms, t)) != 0.0]
+    buffers.require(used)
+    if not is_concrete(mask):
+        return buffers
+    return buffers.checked(hw, mask)
+
+
 def render(
     image: Float[Array, "H W *C"],
     depth: Float[Array, "H W"],
@@ -256,6 +273,8 @@ def render(
     taps: int = 17,
     strength=1.0,
     follow_surface=0.0,
+    light_terms: LightTerms | None = None,
+    light_buffers: LightBuffers | None = None,
 ) -> Float[Array, "H W *C"]:
     """Apply screen-space subsurface scattering to ``image``.
 
@@ -281,6 +300,12 @@ def render(
         ``separable`` only: kernel size (odd; 11, 17 or 25 in Jimenez's code), blend
         with the identity (scalar or per channel), and the follow-surface factor
         ``k`` in ``lerp(sample, centre, clamp(k |d_s - d_c|, 0, 1))`` (0 disables it).
+    light_terms : LightTerms, optional
+        The light-aware terms of docs/model.md, section 8, applied to the blurred
+        image (:func:`invsss.light_terms.apply_light_terms`).
+    light_buffers : LightBuffers, optional
+        Their per-pixel buffers; required with ``light_terms``, and a term whose
+        parameter is not 0 needs its buffer.
 
     Returns
     -------
@@ -323,8 +348,8 @@ def render(
             tap_w = tap_weight_set(tap_weights, dtype)
         except ValueError as err:
             raise InvalidInputError(str(err)) from None
-    out = _render(
-        image, jnp.asarray(depth, dtype), jnp.asarray(mask, dtype), params, entry.name,
-        tap_w, taps, strength, follow_surface,
-    )
+    depth, mask = jnp.asarray(depth, dtype), jnp.asarray(mask, dtype)
+    out = _render(image, depth, mask, params, entry.name, tap_w, taps, strength, follow_surface)
+    if light_terms is not None:
+        out = apply_light_terms(out, depth, mask, params, light_terms, _light_buffers(light_terms, light_buffers, hw, mask))
     return out[..., 0] if squeeze else out

@@ -15,6 +15,8 @@ single definition both follow), module for module:
 :func:`sum_of_gaussians`
 :func:`render`, :func:`sog_layers`,     :mod:`invsss.screen_space`
 :func:`separable_kernel`, ...
+:func:`apply_light_terms`,              :mod:`invsss.light_terms`
+:func:`shift_image`, ...
 =====================================  ==========================================
 
 Only the tap constants (``TAP_OFFSETS``, ``TAP_WEIGHTS``), the model names and the
@@ -50,6 +52,7 @@ except ImportError as err:  # pragma: no cover - exercised only without the extr
         "(pip install 'invsss[torch]')"
     ) from err
 
+from .light_terms import apply_light_terms, grazing_field, propagation_offsets, shift_image
 from .params import SSSParams
 from .passes import TAP_OFFSETS, TAP_WEIGHTS, directional_pass, sample_along, tap_spread, tap_weights
 from .profiles import gaussian, sum_of_gaussians
@@ -66,6 +69,10 @@ from .stretch import depth_slopes, stretch_factors
 
 __all__ = [
     "SSSParams",
+    "apply_light_terms",
+    "grazing_field",
+    "propagation_offsets",
+    "shift_image",
     "TAP_OFFSETS",
     "TAP_WEIGHTS",
     "tap_weights",

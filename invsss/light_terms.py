@@ -1,0 +1,261 @@
+"""Light-aware terms applied after the screen-space blur (docs/model.md, section 8).
+
+The blur of sections 3-5 is radially symmetric: it spreads light equally in every
+direction. Two effects of real light transport are not symmetric, and each is
+added here as a switch with one fitted parameter, using per-pixel buffers a
+deferred renderer already has:
+
+``shift`` (``kappa``, scene units, needs the light buffer)
+    Light that enters obliquely travels on along its direction before it
+    scatters, so it leaves the skin displaced away from the light. The blurred
+    image is read at ``x - delta(x)`` with
+
+        delta = kappa * (s_x p_x, s_y p_y)
+
+    where ``(s_x, s_y)`` are the stretch factors of section 2 (pixels per scene
+    unit, the same ones that scale the blur) and ``p = (-l_x, l_y)`` are the image
+    components of the propagation direction ``-l`` (``l`` the unit vector from the
+    surface towards the light in camera space, x right, y up; image rows point
+    down, hence the sign of the second component).
+``grazing`` (``gamma``, dimensionless, needs the normal buffer)
+    The exitant radiance of a scattering medium is not Lambertian; towards grazing
+    view it is brighter (no boundary, or a thin one) or darker (Fresnel loss at a
+    dielectric boundary). The shifted image is multiplied by
+    ``1 + gamma * (1 - n_z)``, with ``n_z`` the camera-space normal's component
+    towards the camera (the cosine of the view angle for a distant camera),
+    clipped to ``[0, 1]``.
+
+Both terms are linear in the image, so a blurred image and its layers can be
+passed through them alike; off the mask the image is returned unchanged
+(``out = B + m (T(B) - B)``, as a pass blends).
+
+Examples
+--------
+>>> import jax.numpy as jnp
+>>> from invsss.light_terms import shift_image
+>>> image = jnp.arange(4.0).reshape(1, 4, 1)
+>>> offset = jnp.zeros((1, 4, 2)).at[..., 0].set(0.5)   # half a pixel to the right
+>>> shift_image(image, offset)[0, :, 0].tolist()
+[0.0, 0.5, 1.5, 2.5]
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .stretch import stretch_factors
+from .validation import InvalidInputError, is_concrete
+
+__all__ = [
+    "LIGHT_TERM_NAMES",
+    "LightTerms",
+    "LightBuffers",
+    "propagation_offsets",
+    "grazing_field",
+    "shift_image",
+    "light_transport",
+    "apply_light_terms",
+]
+
+#: The terms, in the order of docs/model.md, section 8, with the buffer each needs.
+LIGHT_TERM_NAMES = ("shift", "grazing")
+NEEDED_BUFFER = {"shift": "light", "grazing": "normal"}
+
+#: How far from unit length a buffer's vectors may be before it is refused
+#: (8-bit normal maps are off by about 1 %; a wrongly decoded map by far more).
+UNIT_TOLERANCE = 0.05
+
+
+def _as_float(x) -> Array:
+    return jnp.asarray(x, dtype=jnp.result_type(float))
+
+
+class LightTerms(eqx.Module):
+    """The parameters of the light-aware terms (0 switches a term off).
+
+    Parameters
+    ----------
+    shift : float
+        ``kappa``: how far light travels on along its direction before it
+        exits, in scene units (mm); 0 is the symmetric blur.
+    grazing : float
+        ``gamma``: relative brightening at grazing view (negative: darkening);
+        must be > -1 so the gain stays positive.
+
+    Examples
+    --------
+    >>> from invsss.light_terms import LightTerms
+    >>> LightTerms(shift=0.4).grazing.item()
+    0.0
+    """
+
+    shift: Float[Array, ""] = eqx.field(converter=_as_float, default=0.0)
+    grazing: Float[Array, ""] = eqx.field(converter=_as_float, default=0.0)
+
+    def check(self, name: str = "light_terms") -> None:
+        """Raise :class:`InvalidInputError` for values outside the model's domain."""
+        for field in LIGHT_TERM_NAMES:
+            value = getattr(self, field)
+            if not is_concrete(value):
+                continue
+            if np.ndim(value) != 0 or not np.isfinite(float(value)):
+                raise InvalidInputError(f"{name}.{field}: expected one finite number, got {np.asarray(value)!r}")
+        if is_concrete(self.grazing) and float(self.grazing) <= -1.0:
+            raise InvalidInputError(f"{name}.grazing: expected a value > -1, got {float(self.grazing):g}")
+
+    def to_dict(self) -> dict:
+        return {field: float(getattr(self, field)) for field in LIGHT_TERM_NAMES}
+
+
+def _check_unit_vectors(array, shape, mask, name: str):
+    try:
+        a = np.asarray(array, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"{name}: expected an array of numbers, got {type(array).__name__}") from None
+    if a.shape != (*shape, 3):
+        raise InvalidInputError(f"{name}: expected shape {(*shape, 3)} (unit vectors per pixel), got {a.shape}")
+    on = np.asarray(mask) > 0
+    values = a[on]
+    if not np.all(np.isfinite(values)):
+        raise InvalidInputError(f"{name}: NaN or infinite vectors on the mask")
+    length = np.linalg.norm(values, axis=-1)
+    worst = float(np.max(np.abs(length - 1.0))) if length.size else 0.0
+    if worst > UNIT_TOLERANCE:
+        raise InvalidInputError(
+            f"{name}: expected unit vectors in camera space on the mask, but a length is off by "
+            f"{worst:.2g} (an 8-bit map must be decoded to [-1, 1] first)"
+        )
+    # Off the mask a renderer writes zeros; give those a harmless unit vector.
+    safe = np.where(np.linalg.norm(a, axis=-1, keepdims=True) > 0.5, a, np.array([0.0, 0.0, 1.0]))
+    return safe / np.linalg.norm(safe, axis=-1, keepdims=True)
+
+
+class LightBuffers(eqx.Module):
+    """Per-pixel buffers of the light-aware terms, camera space (x right, y up, z to the camera).
+
+    Parameters
+    ----------
+    normal : array, shape (H, W, 3), optional
+        Unit surface normals (the ``grazing`` term).
+    light : array, shape (H, W, 3), optional
+        Unit vectors from the surface point towards the light (the ``shift``
+        term); for a point light ``normalize(light_position - position)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from invsss.light_terms import LightBuffers
+    >>> up = np.zeros((2, 3, 3)); up[..., 1] = 1.0
+    >>> LightBuffers(light=up).light.shape
+    (2, 3, 3)
+    """
+
+    normal: Float[Array, "H W 3"] | None = None
+    light: Float[Array, "H W 3"] | None = None
+
+    def checked(self, shape, mask, name: str = "light_buffers") -> "LightBuffers":
+        """Validated, normalised float64 NumPy copies for an image of ``shape`` (H, W)."""
+        return LightBuffers(
+            None if self.normal is None else _check_unit_vectors(self.normal, shape, mask, f"{name}.normal"),
+            None if self.light is None else _check_unit_vectors(self.light, shape, mask, f"{name}.light"),
+        )
+
+    def require(self, terms, name: str = "light_buffers") -> None:
+        """Raise unless every buffer the named ``terms`` need is present."""
+        for term in terms:
+            if getattr(self, NEEDED_BUFFER[term]) is None:
+                raise InvalidInputError(
+                    f"{name}.{NEEDED_BUFFER[term]}: the {term!r} term needs this buffer "
+                    f"(camera-space unit vectors, shape (H, W, 3))"
+                )
+
+
+def propagation_offsets(light: Float[Array, "H W 3"]) -> Float[Array, "H W 2"]:
+    """``p = (-l_x, l_y)``: the propagation direction's image components (x right, rows down)."""
+    return jnp.stack([-light[..., 0], light[..., 1]], axis=-1)
+
+
+def grazing_field(normal: Float[Array, "H W 3"]) -> Float[Array, "H W"]:
+    """``1 - clip(n_z, 0, 1)``: 0 facing the camera, 1 at a silhouette."""
+    return 1.0 - jnp.clip(normal[..., 2], 0.0, 1.0)
+
+
+def shift_image(image: Float[Array, "H W C"], offset: Float[Array, "H W 2"]) -> Float[Array, "H W C"]:
+    """``image`` read at ``(x - dx, y - dy)`` per pixel: bilinear, clamped to the edge.
+
+    ``offset[..., 0]`` is ``dx`` (columns), ``offset[..., 1]`` is ``dy`` (rows), in
+    pixels; a positive offset moves the content right or down. Pixel centres are
+    at integer coordinates, as in :func:`invsss.sample_along`.
+    """
+    h, w, c = image.shape
+    dtype = image.dtype
+    cols = jnp.clip(jnp.arange(w, dtype=dtype)[None, :] - offset[..., 0], 0.0, w - 1.0)
+    rows = jnp.clip(jnp.arange(h, dtype=dtype)[:, None] - offset[..., 1], 0.0, h - 1.0)
+    # The lower neighbour stops one short of the edge so that the upper one
+    # exists; at the edge the fraction is then 1.
+    c0 = jnp.clip(jnp.floor(cols).astype(jnp.int32), 0, max(w - 2, 0))
+    r0 = jnp.clip(jnp.floor(rows).astype(jnp.int32), 0, max(h - 2, 0))
+    fc = (cols - c0)[..., None]
+    fr = (rows - r0)[..., None]
+    c1 = jnp.minimum(c0 + 1, w - 1)
+    r1 = jnp.minimum(r0 + 1, h - 1)
+    flat = image.reshape(h * w, c)
+
+    def at(r, col):
+        return flat.at[r * w + col].get(mode="promise_in_bounds")
+
+    top = at(r0, c0) + fc * (at(r0, c1) - at(r0, c0))
+    bottom = at(r1, c0) + fc * (at(r1, c1) - at(r1, c0))
+    return top + fr * (bottom - top)
+
+
+def light_transport(
+    blurred: Float[Array, "H W C"],
+    mask: Float[Array, "H W"],
+    stretch: tuple[Float[Array, "H W"], Float[Array, "H W"]],
+    terms: LightTerms,
+    offsets: Float[Array, "H W 2"] | None = None,
+    grazing: Float[Array, "H W"] | None = None,
+) -> Float[Array, "H W C"]:
+    """The terms of section 8 on a blurred image, from precomputed fields.
+
+    ``offsets`` is :func:`propagation_offsets` of the light buffer and ``grazing``
+    is :func:`grazing_field` of the normals; a term whose field is None is off.
+    This is the traced core the estimator calls once per basis image.
+    """
+    out = blurred
+    if offsets is not None:
+        s_x, s_y = stretch
+        delta = terms.shift * jnp.stack([s_x * offsets[..., 0], s_y * offsets[..., 1]], axis=-1)
+        out = shift_image(out, delta)
+    if grazing is not None:
+        out = out * (1.0 + terms.grazing * grazing)[..., None]
+    return blurred + mask[..., None] * (out - blurred)
+
+
+def apply_light_terms(blurred, depth, mask, params, terms: LightTerms, buffers: LightBuffers):
+    """Apply the light-aware terms to an image :func:`invsss.render` produced.
+
+    Parameters
+    ----------
+    blurred : array, shape (H, W, C)
+        The screen-space model's output.
+    depth, mask : arrays, shape (H, W)
+        As given to :func:`invsss.render` (depth already valid everywhere).
+    params : SSSParams
+        Its stretch parameters set the shift's scale (section 2).
+    terms : LightTerms
+    buffers : LightBuffers
+        A term is applied when its buffer is present.
+
+    Returns
+    -------
+    array, shape (H, W, C)
+    """
+    stretch = stretch_factors(depth, params.sss_level, params.correction, params.maxdd)
+    offsets = None if buffers.light is None else propagation_offsets(jnp.asarray(buffers.light, blurred.dtype))
+    grazing = None if buffers.normal is None else grazing_field(jnp.asarray(buffers.normal, blurred.dtype))
+    return light_transport(blurred, mask, stretch, terms, offsets, grazing)

@@ -1,0 +1,60 @@
+"""Light-aware terms (twin of :mod:`invsss.light_terms`, docs/model.md, section 8).
+
+The shifted image is sampled with :func:`kornia.geometry.transform.remap`
+(bilinear, ``padding_mode="border"``, ``align_corners=True``) at the per-pixel
+position ``(x - dx, y - dy)``, where the JAX core gathers four neighbours by hand.
+"""
+
+from __future__ import annotations
+
+import torch
+from kornia.geometry.transform import remap
+
+from .stretch import stretch_factors
+
+__all__ = ["propagation_offsets", "grazing_field", "shift_image", "light_transport", "apply_light_terms"]
+
+
+def propagation_offsets(light: torch.Tensor) -> torch.Tensor:
+    """(H, W, 3) camera-space unit vectors towards the light -> (H, W, 2) ``(-l_x, l_y)``."""
+    return torch.stack([-light[..., 0], light[..., 1]], dim=-1)
+
+
+def grazing_field(normal: torch.Tensor) -> torch.Tensor:
+    """(H, W, 3) camera-space normals -> (H, W) ``1 - clip(n_z, 0, 1)``."""
+    return 1.0 - normal[..., 2].clamp(0.0, 1.0)
+
+
+def shift_image(image: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:
+    """``image`` (H, W, C) read at ``(x - dx, y - dy)``; ``offset`` (H, W, 2) is ``(dx, dy)`` in pixels."""
+    h, w, _ = image.shape
+    cols = torch.arange(w, dtype=image.dtype, device=image.device)[None, :] - offset[..., 0]
+    rows = torch.arange(h, dtype=image.dtype, device=image.device)[:, None] - offset[..., 1]
+    sampled = remap(
+        image.permute(2, 0, 1)[None], cols[None], rows[None],
+        mode="bilinear", padding_mode="border", align_corners=True,
+    )
+    return sampled[0].permute(1, 2, 0)
+
+
+def light_transport(blurred, mask, stretch, shift, grazing_gain, offsets=None, grazing=None) -> torch.Tensor:
+    """The terms on a blurred (H, W, C) image; ``shift`` is kappa, ``grazing_gain`` is gamma."""
+    out = blurred
+    if offsets is not None:
+        s_x, s_y = stretch
+        out = shift_image(out, shift * torch.stack([s_x * offsets[..., 0], s_y * offsets[..., 1]], dim=-1))
+    if grazing is not None:
+        out = out * (1.0 + grazing_gain * grazing)[..., None]
+    return blurred + mask[..., None] * (out - blurred)
+
+
+def apply_light_terms(blurred, depth, mask, params, shift=0.0, grazing_gain=0.0, normal=None, light=None):
+    """Twin of :func:`invsss.apply_light_terms` with the terms and buffers as plain arguments.
+
+    ``params`` is an :class:`invsss.torch.SSSParams`; ``normal`` and ``light`` are
+    (H, W, 3) tensors or None (that term off).
+    """
+    stretch = stretch_factors(depth, params.sss_level, params.correction, params.maxdd)
+    offsets = None if light is None else propagation_offsets(light)
+    field = None if normal is None else grazing_field(normal)
+    return light_transport(blurred, mask, stretch, shift, grazing_gain, offsets, field)
