@@ -156,19 +156,22 @@ class LightBuffers(eqx.Module):
     normal: Float[Array, "H W 3"] | None = None
     light: Float[Array, "H W 3"] | None = None
 
-    def checked(self, shape, mask, name: str = "light_buffers") -> "LightBuffers":
-        """Validated, normalised float64 NumPy copies for an image of ``shape`` (H, W)."""
+    def checked(self, shape, mask, prefix: str = "light_buffers.") -> "LightBuffers":
+        """Validated, normalised float64 NumPy copies for an image of ``shape`` (H, W).
+
+        Errors name the buffer as ``prefix + "normal"`` (or ``"light"``).
+        """
         return LightBuffers(
-            None if self.normal is None else _check_unit_vectors(self.normal, shape, mask, f"{name}.normal"),
-            None if self.light is None else _check_unit_vectors(self.light, shape, mask, f"{name}.light"),
+            None if self.normal is None else _check_unit_vectors(self.normal, shape, mask, f"{prefix}normal"),
+            None if self.light is None else _check_unit_vectors(self.light, shape, mask, f"{prefix}light"),
         )
 
-    def require(self, terms, name: str = "light_buffers") -> None:
+    def require(self, terms, prefix: str = "light_buffers.") -> None:
         """Raise unless every buffer the named ``terms`` need is present."""
         for term in terms:
             if getattr(self, NEEDED_BUFFER[term]) is None:
                 raise InvalidInputError(
-                    f"{name}.{NEEDED_BUFFER[term]}: the {term!r} term needs this buffer "
+                    f"{prefix}{NEEDED_BUFFER[term]}: the {term!r} term needs this buffer "
                     f"(camera-space unit vectors, shape (H, W, 3))"
                 )
 

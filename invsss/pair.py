@@ -44,6 +44,9 @@ class ImagePair(eqx.Module):
         mask is on). The model still treats every masked pixel as skin; this only
         leaves pixels out of the comparison (an aligned fit drops the mask's rim,
         whose resampled values are least reliable).
+    normal, light : array, shape (H, W, 3), or None
+        Camera-space unit normals and unit vectors towards the light, the buffers
+        of the light-aware terms (:mod:`invsss.light_terms`; None without them).
 
     Examples
     --------
@@ -61,6 +64,8 @@ class ImagePair(eqx.Module):
     mask: Float[Array, "H W"]
     target_ndim: int = eqx.field(static=True, default=3)
     fit_weight: Float[Array, "H W"] | None = None
+    normal: Float[Array, "H W 3"] | None = None
+    light: Float[Array, "H W 3"] | None = None
 
     @property
     def residual_weight(self) -> Float[Array, "H W"]:
@@ -85,8 +90,14 @@ class ImagePair(eqx.Module):
             jnp.asarray(np.asarray(self.depth, dtype=np.float64)),
             jnp.asarray(np.asarray(self.mask, dtype=np.float64)),
             target_ndim,
-            None if self.fit_weight is None else jnp.asarray(np.asarray(self.fit_weight, dtype=np.float64)),
+            _float64_or_none(self.fit_weight),
+            _float64_or_none(self.normal),
+            _float64_or_none(self.light),
         )
+
+
+def _float64_or_none(x):
+    return None if x is None else jnp.asarray(np.asarray(x, dtype=np.float64))
 
 
 def fill_background_depth(depth):

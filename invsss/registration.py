@@ -313,3 +313,25 @@ def align_source(source, depth, mask, warp: Warp, shape):
     moved_depth = _sample(depth[..., None], positions, shape, 1)[..., 0]
     moved_mask = _sample(np.asarray(mask, np.float64)[..., None], positions, shape, 1)[..., 0]
     return moved, moved_depth, np.where(inside, np.clip(moved_mask, 0.0, 1.0), 0.0)
+
+
+def align_vectors(vectors, warp: Warp, shape):
+    """A buffer of unit vectors (H, W, 3) resampled onto the target's grid, renormalised.
+
+    For the light-aware terms' normal and light buffers (:mod:`invsss.light_terms`):
+    linear interpolation, then unit length again. The vectors themselves are not
+    rotated with a similarity warp; a rotation of a degree or two turns them by as
+    much, far below what the terms resolve. ``None`` passes through.
+
+    Examples
+    --------
+    >>> v = np.zeros((3, 3, 3)); v[..., 2] = 1.0
+    >>> align_vectors(v, Warp("translation", (0.5, 0.0), (1.0, 1.0)), (3, 3))[1, 1].tolist()
+    [0.0, 0.0, 1.0]
+    """
+    if vectors is None:
+        return None
+    positions = warp.inverse_map_points(_grid(shape))
+    moved = _sample(np.asarray(vectors, np.float64), positions, shape, 1)
+    length = np.linalg.norm(moved, axis=-1, keepdims=True)
+    return np.where(length > 1e-6, moved / np.maximum(length, 1e-12), np.array([0.0, 0.0, 1.0]))

@@ -143,6 +143,14 @@ def _parameter_lines(result) -> list[str]:
         errors = ", ".join("?" if e is None else f"{e:.2g}" for e in vignetting["stderr"])
         lines.append(f"vignetting: corner gain {vignetting['corner_gain']:.3f} "
                      f"(1 + {a1:+.3f} rho^2 {a2:+.3f} rho^4; stderr {errors})")
+    terms = getattr(result, "light_terms", None)
+    if terms is not None:
+        parts = []
+        for name, unit in (("shift", " mm"), ("grazing", "")):
+            if name in terms:
+                err = terms["stderr"].get(name)
+                parts.append(f"{name} {terms[name]:+.3g}{unit} (stderr {'?' if err is None else f'{err:.2g}'})")
+        lines.append("light terms: " + ", ".join(parts))
     lines.extend(textwrap.wrap(_CONDITIONAL_NOTE, width=_TEXT_WIDTH, subsequent_indent="  "))
     for message in result.warnings:
         lines.extend(textwrap.wrap("! " + message, width=_TEXT_WIDTH, subsequent_indent="  "))

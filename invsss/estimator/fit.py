@@ -35,11 +35,12 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import ndimage
 
+from ..light_terms import LightBuffers
 from ..pair import ImagePair
 from ..params import PARAM_NAMES, SSSParams
 from ..validation import InvalidInputError
 from .diagnostics import MISALIGNMENT_PX, masked_psnr, masked_ssim, misalignment
-from ..registration import Warp, align_source, align_target, estimate_warp, match_photometry
+from ..registration import Warp, align_source, align_target, align_vectors, estimate_warp, match_photometry
 from .inputs import prepare_pairs
 from .options import FitOptions
 from .problem import build_problem
@@ -82,6 +83,8 @@ def fit_pair(
     align: str = "none",
     vignetting: bool = False,
     highlights: bool = False,
+    light_terms=(),
+    light_buffers=None,
     options: FitOptions | None = None,
     stop=None,
 ) -> FitResult:
@@ -156,8 +159,16 @@ def fit_pair(
         standard deviations of the residual (smoothed over 1 px; dilated by 1 px)
         are excluded from the comparison and the pair is fitted again. Reported in
         :attr:`FitResult.highlights`.
+    light_terms : sequence of {"shift", "grazing"}
+        Fit the light-aware terms of docs/model.md, section 8, on top of the
+        blur: a shift of the scattered light away from the light (``kappa``, mm)
+        and a gain towards grazing view (``gamma``). Each needs its buffer in
+        ``light_buffers``; reported in :attr:`FitResult.light_terms`.
+    light_buffers : LightBuffers, optional
+        Camera-space ``light`` (unit vectors towards the light) and ``normal``
+        buffers of shape (H, W, 3), on the source's grid.
     options : FitOptions, optional
-        All of the above options (``model`` to ``highlights``) in one checked value;
+        All of the above options (``model`` to ``light_terms``) in one checked value;
         then leave those keywords at their defaults.
     stop : callable, optional
         ``stop() -> bool``, polled after every solver step (and once before the
@@ -193,8 +204,14 @@ def fit_pair(
     """
     given = dict(model=model, profile=profile, fix=fix, gauge=gauge, solver=solver, n_starts=n_starts,
                  max_steps=max_steps, tap_weights=tap_weights, robust=robust, align=align,
-                 vignetting=vignetting, highlights=highlights)
-    return _fit([(source, target, depth, mask)], True, _options(options, given), progress, stop)
+                 vignetting=vignetting, highlights=highlights, light_terms=light_terms)
+    if light_buffers is None:
+        pair = (source, target, depth, mask)
+    elif isinstance(light_buffers, LightBuffers):
+        pair = ImagePair(source, target, depth, mask, normal=light_buffers.normal, light=light_buffers.light)
+    else:
+        raise InvalidInputError(f"light_buffers: expected an invsss.LightBuffers, got {type(light_buffers).__name__}")
+    return _fit([pair], True, _options(options, given), progress, stop)
 
 
 def fit_pairs(
@@ -213,6 +230,7 @@ def fit_pairs(
     align: str = "none",
     vignetting: bool = False,
     highlights: bool = False,
+    light_terms=(),
     options: FitOptions | None = None,
     stop=None,
 ) -> FitResult:
@@ -227,7 +245,7 @@ def fit_pairs(
     """
     given = dict(model=model, profile=profile, fix=fix, gauge=gauge, solver=solver, n_starts=n_starts,
                  max_steps=max_steps, tap_weights=tap_weights, robust=robust, align=align,
-                 vignetting=vignetting, highlights=highlights)
+                 vignetting=vignetting, highlights=highlights, light_terms=light_terms)
     return _fit(pairs, False, _options(options, given), progress, stop)
 
 
@@ -364,7 +382,8 @@ def _fit_without_highlights(data, first, single, options, progress, stop, nuisan
         fractions.append(counts[-1] / max(float(region.sum()), 1.0))
         keep = np.where(bright, 0.0, 1.0 if pair.fit_weight is None else np.asarray(pair.fit_weight))
         pairs.append(ImagePair(pair.source, pair.target, pair.depth, pair.mask, pair.target_ndim,
-                               fit_weight=keep if (keep * np.asarray(pair.mask)).any() else None))
+                               fit_weight=keep if (keep * np.asarray(pair.mask)).any() else None,
+                               normal=pair.normal, light=pair.light))
     record = {
         "method": f"residual of a first fit smoothed over 1 px, brighter than the prediction by "
                   f"{HIGHLIGHT_SIGMAS:g} robust standard deviations, dilated by 1 px",
@@ -381,16 +400,17 @@ def _fit_aligned(pairs, single, options, progress, stop) -> FitResult:
     """A fit with the source side registered onto the target (``align``; see :func:`fit_pair`)."""
     from ..screen_space import render
 
+    prepared = prepare_pairs(pairs)
     checked = [
         (np.asarray(p.source, np.float64), np.asarray(p.target, np.float64), np.asarray(p.depth, np.float64),
          np.asarray(p.mask, np.float64), p.target_ndim)
-        for p in prepare_pairs(pairs)
+        for p in prepared
     ]
     plain = dataclasses.replace(options, align="none")
 
     def aligned(warps):
         out = []
-        for (source, target, depth, mask, ndim), warp in zip(checked, warps):
+        for (source, target, depth, mask, ndim), warp, pair in zip(checked, warps, prepared):
             moved, moved_depth, kept = align_source(source, depth, mask, warp, target.shape[:2])
             if not (kept > 0).any():
                 raise InvalidInputError("align: the registered source does not overlap the target")
@@ -401,7 +421,8 @@ def _fit_aligned(pairs, single, options, progress, stop) -> FitResult:
             if not inner.any():
                 inner = None
             out.append(ImagePair(moved, target[..., 0] if ndim == 2 else target, moved_depth, kept,
-                                 fit_weight=inner))
+                                 fit_weight=inner, normal=align_vectors(pair.normal, warp, target.shape[:2]),
+                                 light=align_vectors(pair.light, warp, target.shape[:2])))
         return out
 
     warps = [estimate_warp(target, match_photometry(source, target, mask), mask, options.align)
@@ -456,6 +477,9 @@ def _estimate(result) -> dict:
         out["mix"] = result.mix
     if result.vignetting is not None:
         out["vignetting"] = np.asarray(result.vignetting["coefficients"])
+    if result.light_terms is not None:
+        out.update({k: result.light_terms[name] for k, name in (("light_shift", "shift"), ("grazing", "grazing"))
+                    if name in result.light_terms})
     return out
 
 
@@ -759,7 +783,22 @@ def _report(problem, path, single, steps, nuisance=None) -> FitResult:
             "variances": np.asarray(problem.variances, np.float64),
         },
         vignetting=_vignetting_record(natural, unc),
+        light_terms=_light_terms_record(natural, unc),
     )
+
+
+def _light_terms_record(natural, unc) -> dict | None:
+    """The fitted light-aware terms as params.json writes them (None when none was fitted)."""
+    names = {"light_shift": "shift", "grazing": "grazing"}
+    fitted = [k for k in names if k in natural]
+    if not fitted:
+        return None
+    record = {names[k]: float(natural[k]) for k in fitted}
+    record["stderr"] = {}
+    for k in fitted:
+        err = float(np.asarray(unc.stderr[k]))
+        record["stderr"][names[k]] = err if np.isfinite(err) else None
+    return record
 
 
 def _vignetting_record(natural, unc) -> dict | None:

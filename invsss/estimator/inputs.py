@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..light_terms import LightBuffers
 from ..pair import ImagePair, fill_background_depth
 from ..validation import InvalidInputError, check_pair
 
@@ -32,10 +33,13 @@ def _check_fit_weight(fit_weight, shape, mask, name: str):
     return weight
 
 
-def prepare_pair(source, target, depth, mask=None, *, fit_weight=None, name: str = "") -> ImagePair:
+def prepare_pair(source, target, depth, mask=None, *, fit_weight=None, normal=None, light=None,
+                 name: str = "") -> ImagePair:
     """Validate one pair and convert it to float64 (call under ``jax.enable_x64``).
 
     ``mask=None`` fits every pixel. ``name`` prefixes the input names in errors.
+    ``normal`` and ``light`` are the optional buffers of the light-aware terms
+    (:class:`invsss.LightBuffers`), checked and normalised here.
 
     Examples
     --------
@@ -53,14 +57,16 @@ def prepare_pair(source, target, depth, mask=None, *, fit_weight=None, name: str
     depth = fill_background_depth(depth)
     if fit_weight is not None:
         fit_weight = _check_fit_weight(fit_weight, np.shape(mask), mask, f"{name}fit_weight")
-    return ImagePair(source, target, depth, mask, fit_weight=fit_weight).as_float64()
+    buffers = LightBuffers(normal, light).checked(np.shape(mask), mask, prefix=name)
+    return ImagePair(source, target, depth, mask, fit_weight=fit_weight, normal=buffers.normal,
+                     light=buffers.light).as_float64()
 
 
 def _unpack(pair, index: int):
     if isinstance(pair, ImagePair):
-        return pair.source, pair.target, pair.depth, pair.mask, pair.fit_weight
+        return pair.source, pair.target, pair.depth, pair.mask, pair.fit_weight, pair.normal, pair.light
     if isinstance(pair, (tuple, list)) and len(pair) in (3, 4):
-        return (*pair, None, None) if len(pair) == 3 else (*pair, None)
+        return (*pair, None, None, None, None) if len(pair) == 3 else (*pair, None, None, None)
     raise InvalidInputError(
         f"pairs[{index}]: expected a (source, target, depth, mask) tuple or an "
         f"invsss.ImagePair, got {type(pair).__name__}"
@@ -73,8 +79,8 @@ def prepare_pairs(pairs) -> tuple[ImagePair, ...]:
         raise InvalidInputError("pairs: expected a non-empty sequence of (source, target, depth, mask)")
     out = []
     for i, p in enumerate(pairs):
-        source, target, depth, mask, fit_weight = _unpack(p, i)
-        out.append(prepare_pair(source, target, depth, mask, fit_weight=fit_weight,
+        source, target, depth, mask, fit_weight, normal, light = _unpack(p, i)
+        out.append(prepare_pair(source, target, depth, mask, fit_weight=fit_weight, normal=normal, light=light,
                                 name=f"pairs[{i}]." if len(pairs) > 1 else ""))
     out = tuple(out)
     layouts = {p.channels for p in out}

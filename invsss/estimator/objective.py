@@ -20,15 +20,31 @@ the (robustly weighted) mean squared error on the mask in the target's units.
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from ..light_terms import LightTerms, grazing_field, light_transport, propagation_offsets
+from ..stretch import stretch_factors
 from .basis import basis_images
 from .parametrisation import Parametrisation
 from .projection import combine, solve_linear
 from .vignetting import vignetting_field
 
 __all__ = ["Objective"]
+
+
+def _light_terms(images, pair, natural):
+    """The light-aware terms (docs/model.md, section 8) on every basis image of a pair.
+
+    Both terms are linear in the image, so applying them to each basis image
+    and then mixing equals mixing and then applying them: the weights stay linear.
+    """
+    terms = LightTerms(natural.get("light_shift", 0.0), natural.get("grazing", 0.0))
+    stretch = stretch_factors(pair.depth, natural["sss_level"], natural["correction"], natural["maxdd"])
+    offsets = propagation_offsets(pair.light) if "light_shift" in natural else None
+    grazing = grazing_field(pair.normal) if "grazing" in natural else None
+    return jax.vmap(lambda x: light_transport(x, pair.mask, stretch, terms, offsets, grazing))(images)
 
 
 class Objective(eqx.Module):
@@ -78,6 +94,8 @@ class Objective(eqx.Module):
             basis_images(p, natural, self.model, self.tap_weights, self.linear_weights)
             for p in self.pairs
         )
+        if "light_shift" in natural or "grazing" in natural:
+            images = tuple(_light_terms(x, p, natural) for x, p in zip(images, self.pairs))
         if "vignetting" not in natural:
             return images
         # The lens shades whatever the scattering delivers; the offset stays flat.

@@ -17,6 +17,7 @@ import types
 import jax
 import numpy as np
 
+from ..light_terms import LIGHT_TERM_NAMES
 from ..models import get_model
 from ..passes import tap_weights as tap_weight_set
 from ..validation import InvalidInputError
@@ -57,6 +58,11 @@ class FitOptions:
         Fit the camera's radial fall-off as a gain field (:mod:`invsss.estimator.vignetting`).
     highlights : bool
         Refit with the first fit's specular highlights left out (see :func:`invsss.fit_pair`).
+    light_terms : tuple of str
+        Light-aware terms to fit (:data:`invsss.light_terms.LIGHT_TERM_NAMES`:
+        ``"shift"``, ``"grazing"``); a list or a comma-separated string is
+        accepted and stored as a tuple in that order. Each needs its buffer on
+        every pair.
 
     Raises
     ------
@@ -87,6 +93,7 @@ class FitOptions:
     align: str = "none"
     vignetting: bool = False
     highlights: bool = False
+    light_terms: tuple = ()
 
     def __post_init__(self):
         from ..registration import ALIGN_KINDS
@@ -96,6 +103,7 @@ class FitOptions:
         for name in ("vignetting", "highlights"):
             if not isinstance(getattr(self, name), bool):
                 raise InvalidInputError(f"{name}: expected true or false, got {getattr(self, name)!r}")
+        object.__setattr__(self, "light_terms", check_light_terms(self.light_terms))
         get_model(self.model)  # one-line error naming the known models
         if self.gauge not in GAUGES:
             raise InvalidInputError(f"gauge: expected one of {', '.join(GAUGES)}, got {self.gauge!r}")
@@ -141,3 +149,28 @@ class FitOptions:
     def profile_label(self) -> str:
         """The profile's name or path ("" for a profile given as numbers)."""
         return os.fspath(self.profile) if isinstance(self.profile, (str, os.PathLike)) else ""
+
+
+def check_light_terms(terms) -> tuple[str, ...]:
+    """``terms`` (names, or one comma-separated string; "none" or empty for none) in canonical order.
+
+    Examples
+    --------
+    >>> check_light_terms("grazing, shift")
+    ('shift', 'grazing')
+    """
+    if terms is None:
+        return ()
+    if isinstance(terms, str):
+        terms = [] if terms.strip() in ("", "none") else [t.strip() for t in terms.split(",")]
+    try:
+        names = list(terms)
+    except TypeError:
+        raise InvalidInputError(f"light_terms: expected names of terms, got {terms!r}") from None
+    unknown = [t for t in names if t not in LIGHT_TERM_NAMES]
+    if unknown:
+        raise InvalidInputError(
+            f"light_terms: unknown term(s) {', '.join(map(repr, unknown))}; expected some of "
+            + ", ".join(LIGHT_TERM_NAMES)
+        )
+    return tuple(t for t in LIGHT_TERM_NAMES if t in names)

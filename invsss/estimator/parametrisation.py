@@ -31,6 +31,10 @@ mix            ``softmax([0, z_1, z_2])``            equal mix
 gain_ratio     ``exp(z)``                            1 (pair p's gain / pair 0's)
 vignetting     ``z``                                 0 (no fall-off; see
                                                      :mod:`invsss.estimator.vignetting`)
+light_shift    ``ref * z``                           the scene length one pixel
+                                                     covers at the start (docs/model.md,
+                                                     section 8)
+grazing        ``z``                                 0 (no grazing-view gain)
 =============  ====================================  ===============================
 
 ``softplus`` keeps the correction non-negative while letting it approach 0
@@ -208,7 +212,7 @@ class Parametrisation(eqx.Module):
                 out[name] = _simplex(u, axis=0)
             elif name == "gain_ratio":
                 out[name] = jnp.exp(u)
-            elif name == "vignetting":
+            elif name in ("vignetting", "light_shift", "grazing"):
                 out[name] = ref * u
             else:  # pragma: no cover - blocks are built by this module
                 raise AssertionError(name)
@@ -227,7 +231,7 @@ class Parametrisation(eqx.Module):
             elif name in ("weights", "mix"):
                 logs = np.log(np.maximum(x, 1e-12))
                 u = (logs - logs[:1])[1:]
-            elif name == "vignetting":
+            elif name in ("vignetting", "light_shift", "grazing"):
                 u = x / ref
             else:
                 u = np.log(x)

@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..light_terms import LightBuffers
 from ..params import PARAM_NAMES
 from ..validation import InvalidInputError
 from .initial import blur_reference, choose_starts, data_scales
@@ -39,7 +40,7 @@ def _initial_weights(profile_weights, k, channels):
     return w / w.sum(axis=0)
 
 
-def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False):
+def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, light_terms=()):
     """The parametrisation and the natural starting values of the free blocks."""
     c_src, c_tgt = pairs[0].channels
     variances = fixed.get("variances", profile_v)
@@ -95,6 +96,19 @@ def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False):
         blocks.append(("vignetting", (VIGNETTING_ORDER,)))
         start["vignetting"] = np.zeros(VIGNETTING_ORDER)
         reference["vignetting"] = 1.0
+    for i, pair in enumerate(pairs):
+        LightBuffers(pair.normal, pair.light).require(light_terms, f"pairs[{i}]." if len(pairs) > 1 else "")
+    if "shift" in light_terms:
+        # One unit of z shifts by about a pixel at the start: kappa is in scene
+        # units, and a pixel covers depth / L of them.
+        level = reference["sss_level"] if "sss_level" in reference else float(values["sss_level"])
+        blocks.append(("light_shift", ()))
+        start["light_shift"] = 0.0
+        reference["light_shift"] = scales.depth / float(level)
+    if "grazing" in light_terms:
+        blocks.append(("grazing", ()))
+        start["grazing"] = 0.0
+        reference["grazing"] = 1.0
     param = Parametrisation(
         tuple(blocks), {k_: jnp.asarray(v) for k_, v in reference.items()}, values
     )
@@ -161,7 +175,8 @@ class FitProblem:
         self.roles = assign_roles(options.model, options.gauge, self.fixed)
         self.scales = data_scales(self.data)
         self.param, self.z_base = _build(
-            self.data, self.roles, self.fixed, profile_w, profile_v, self.scales, options.vignetting
+            self.data, self.roles, self.fixed, profile_w, profile_v, self.scales, options.vignetting,
+            options.light_terms,
         )
         self.variances = np.asarray(self.fixed.get("variances", profile_v))
         self.channels = self.data[0].channels[1]

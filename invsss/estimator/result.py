@@ -102,6 +102,11 @@ class FitResult(eqx.Module):
     highlights : dict or None
         With ``highlights=True``: ``{"method", "excluded_pixels", "fraction"}``,
         per pair the pixels left out as specular highlights. None without it.
+    light_terms : dict or None
+        With ``light_terms``: the fitted terms of docs/model.md, section 8, as
+        ``{"shift": kappa, "grazing": gamma, "stderr": {...}}`` with only the
+        fitted terms present (:meth:`light_terms_params` gives them as an
+        :class:`invsss.LightTerms`). None without them.
     gain, offset : numpy.ndarray
         Photometric fit ``pred = gain * out + offset`` per target channel: shape
         (C',) for one pair, (P, C') for :func:`fit_pairs`.
@@ -145,6 +150,15 @@ class FitResult(eqx.Module):
     alignment: tuple = ()
     vignetting: dict | None = None
     highlights: dict | None = None
+    light_terms: dict | None = None
+
+    def light_terms_params(self):
+        """The fitted light-aware terms as an :class:`invsss.LightTerms` (None without them)."""
+        if self.light_terms is None:
+            return None
+        from ..light_terms import LightTerms
+
+        return LightTerms(**{k: v for k, v in self.light_terms.items() if k in ("shift", "grazing")})
 
     def history_by_stage(self) -> dict:
         """``{label: losses}`` for each solve of the fit (see ``stages``).
@@ -185,7 +199,7 @@ class FitResult(eqx.Module):
         ``model``, ``tap_weights``, ``stderr``, ``undetermined``, ``loss``,
         ``psnr``, ``ssim``, ``converged``, ``interrupted``, ``iterations``,
         ``fixed``, ``gauge``, ``gain``, ``offset``, ``sigma``, ``solver``,
-        ``warnings``, ``alignment``, ``vignetting``, ``highlights`` and ``estimate`` (every parameter as a number, undetermined
+        ``warnings``, ``alignment``, ``vignetting``, ``highlights``, ``light_terms`` and ``estimate`` (every parameter as a number, undetermined
         ones included: what produced the fitted image). The loss history is not
         written.
         """
@@ -220,6 +234,8 @@ class FitResult(eqx.Module):
         out["vignetting"] = copy.deepcopy(self.vignetting)
         # The pixels left out as specular highlights (fit --highlights), else null.
         out["highlights"] = copy.deepcopy(self.highlights)
+        # The fitted light-aware terms (fit --light-terms), else null.
+        out["light_terms"] = copy.deepcopy(self.light_terms)
         # The numbers that produced the fitted image, undetermined ones included:
         # what a renderer uses when it needs a value anyway. Always written, so a
         # params file has one shape whatever the data determined.

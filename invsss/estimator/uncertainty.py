@@ -91,7 +91,7 @@ def _reported(objective, linear_weights: bool, sizes, theta) -> dict:
     natural = objective.param.natural(z)
     out = {
         k: natural[k]
-        for k in ("sss_level", "correction", "maxdd", "variances", "vignetting")
+        for k in ("sss_level", "correction", "maxdd", "variances", "vignetting", "light_shift", "grazing")
         if k in objective.param.free
     }
     if linear_weights:
@@ -198,9 +198,9 @@ def gauss_newton_uncertainty(
             vague = std > WEIGHT_VAGUE
         elif name == "correction":
             vague = std > np.maximum(np.abs(val), correction_ref)
-        elif name == "vignetting":
-            # 0 (no fall-off) is a value like any other; only a null direction
-            # leaves a coefficient undetermined.
+        elif name in ("vignetting", "light_shift", "grazing"):
+            # 0 (no fall-off, no shift) is a value like any other; only a null
+            # direction leaves a coefficient undetermined.
             vague = np.zeros(val.shape, bool)
         else:
             vague = std > np.abs(val)

@@ -132,6 +132,8 @@ class ParamsFile(BaseModel):
     """Fit report: the camera's fitted radial fall-off (fit --vignetting): model, coefficients, stderr, corner_gain; or null."""
     highlights: Any = None
     """Fit report: pixels left out as specular highlights (fit --highlights): method, excluded_pixels, fraction; or null."""
+    light_terms: Any = None
+    """Fit report: the fitted light-aware terms (fit --light-terms; docs/model.md, section 8): shift (mm), grazing, stderr; or null."""
     warnings: Optional[list[str]] = None
     """Fit report: warnings the fit raised."""
 
