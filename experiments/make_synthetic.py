@@ -858,8 +858,9 @@ the shape of the Lee Perry-Smith scan (`invsss scene experiments/scenes/<name>.t
 `docs/README.md`). Each folder holds what `invsss scene` writes: `source.exr` (Lambertian,
 albedo calibrated to the medium's total reflectance), `target.exr` (the mean of two
 independently seeded half renders), `depth.exr` (eye z in mm, 0 off the head), `mask.png`,
-`normal.exr`, `coverage.exr` and `scene.json` (the resolved scene, seeds, spp, render
-times and the noise estimate). There are no true screen-space parameters: these pairs
+`normal.exr`, `coverage.exr`, `light.exr` (camera-space unit vectors towards the key
+light, the buffer of the `shift` light term) and `scene.json` (the resolved scene, seeds,
+spp, render times and the noise estimate). There are no true screen-space parameters: these pairs
 measure how well the model can match real light transport (`experiments/fidelity.py`).
 The boundary is index-matched (no refraction or Fresnel reflection): with a rough
 dielectric boundary the path tracer needs about 50 times the samples for the same noise.

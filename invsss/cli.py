@@ -52,7 +52,8 @@ from .profiles import PROFILE_NAMES
 from .result_dir import ResultDir, ResultWriteError
 from .screen_space import MODELS, render
 from .params import check_plausible
-from .pair import fill_background_depth
+from .light_terms import LightBuffers
+from .pair import ImagePair, fill_background_depth
 from .validation import InvalidInputError, check_depth, check_same_frame
 
 __all__ = ["build_parser", "main"]
@@ -229,6 +230,17 @@ def _add_fit_parser(subparsers) -> None:
     parser.add_argument("--highlights", action="store_true",
                         help="refit with the specular highlights of a first fit's residual left out "
                         "(for photographs without cross-polarisation; their count goes into params.json)")
+    parser.add_argument("--light-terms", default="none", metavar="TERMS",
+                        help="fit light-aware terms on top of the blur (docs/model.md, section 8): "
+                        "'shift' (light exits displaced away from the light; needs --light), "
+                        "'grazing' (brighter or darker at grazing view; needs --normal), or "
+                        "'shift,grazing' (default: none)")
+    parser.add_argument("--light", action="append", default=[], metavar="FILE",
+                        help="camera-space unit vectors towards the light, float EXR or NPY (H, W, 3), "
+                        "on the source's grid (repeat per pair)")
+    parser.add_argument("--normal", action="append", default=[], metavar="FILE",
+                        help="camera-space unit normals (x right, y up, z to the camera), float EXR or "
+                        "NPY (H, W, 3) (repeat per pair)")
     parser.add_argument(
         "--linear-codes",
         action="store_true",
@@ -286,6 +298,26 @@ def _check_pair_counts(args: argparse.Namespace) -> int:
             f"(one per pair), got {given}"
         )
     return counts["source"]
+
+
+def _with_light_buffers(pairs, args):
+    """The pairs with the --normal and --light buffers attached (read as linear floats)."""
+    for flag in ("light", "normal"):
+        given = getattr(args, flag)
+        if given and len(given) != len(pairs):
+            raise InvalidInputError(f"--{flag}: expected one per pair ({len(pairs)}), got {len(given)}")
+    out = []
+    for k, pair in enumerate(pairs):
+        normal = read_image(args.normal[k], linear=True) if args.normal else None
+        light = read_image(args.light[k], linear=True) if args.light else None
+        for flag, buffer, path in (("normal", normal, args.normal), ("light", light, args.light)):
+            if buffer is not None and buffer.shape != (*pair.mask.shape, 3):
+                raise InvalidInputError(
+                    f"{path[k]}: expected a 3-channel image of the source's size {pair.mask.shape} "
+                    f"for --{flag}, got shape {buffer.shape}"
+                )
+        out.append(ImagePair(pair.source, pair.target, pair.depth, pair.mask, normal=normal, light=light))
+    return out
 
 
 class _ProgressLine:
@@ -375,10 +407,11 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
             load_pair(s, t, d, m, depth_scale=args.depth_scale, linear_codes=args.linear_codes)
             for s, t, d, m in zip(args.source, args.target, args.depth, args.mask)
         ]
+        pairs = _with_light_buffers(pairs, args)
         options = dict(
             model=args.model, profile=args.profile, fix=fix or None, gauge=args.gauge,
             solver=args.solver, n_starts=args.starts, max_steps=args.max_steps, align=args.align,
-            vignetting=args.vignetting, highlights=args.highlights,
+            vignetting=args.vignetting, highlights=args.highlights, light_terms=args.light_terms,
         )
         compiled_before = _compile_seconds()
         progress = _ProgressLine(sys.stderr, lambda: _compile_seconds() - compiled_before)
@@ -399,9 +432,11 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
             try:
                 if count == 1:
                     pair = pairs[0]
+                    buffers = LightBuffers(pair.normal, pair.light)
                     result = fit_pair(
-                        pair.source, pair.target, pair.depth, pair.mask,
-                        progress=progress, stop=stop, **options,
+                        pair.source, pair.target, pair.depth, pair.mask, progress=progress, stop=stop,
+                        light_buffers=None if buffers.normal is None and buffers.light is None else buffers,
+                        **options,
                     )
                 else:
                     result = fit_pairs(pairs, progress=progress, stop=stop, **options)

@@ -247,7 +247,7 @@ def test_scene_command_writes_a_pair_folder(tmp_path, capsys):
     assert main(["scene", str(_write_toml(tmp_path)), "--out", str(out), "--width", "16"]) == 0
     files = sorted(os.listdir(out))
     assert files == sorted(["source.exr", "target.exr", "depth.exr", "mask.png", "normal.exr",
-                            "coverage.exr", "scene.json", "invsss-manifest.json"])
+                            "coverage.exr", "light.exr", "scene.json", "invsss-manifest.json"])
     info = json.loads((out / "scene.json").read_text())
     assert info["config"]["camera"]["width"] == 16 and info["config"]["camera"]["height"] == 16
     assert info["mitsuba_version"] == mitsuba.__version__ and info["spp"]["target_per_half"] == 2
@@ -308,3 +308,22 @@ def test_example_scenes_render(name):
     assert result.info["mesh"] is None or len(result.info["mesh"]["sha256"]) == 64
     # Depth in mm: the camera is 0.5-0.8 m from the object.
     assert 300.0 < float(np.median(result.depth[result.mask > 0])) < 900.0
+
+
+def test_light_directions_point_from_the_surface_to_the_light():
+    # Rebuild each pixel centre's surface point from the camera's definition
+    # (_pixel_rays, with one sample at the pixel centre) and the depth, and compare
+    # its direction towards the point light with the light buffer.
+    from invsss.scenes.render import light_directions
+
+    config = _config()
+    depth = np.full((config.camera.height, config.camera.width), 250.0)
+    depth[:3] = 0.0  # nothing seen
+    origin, directions, (right, up, forward) = _pixel_rays(config, n=1)
+    points = origin + depth[..., None] * directions[:, :, 0, 0]
+    towards = np.asarray(POINT_LIGHT["position"], float) - points
+    towards /= np.linalg.norm(towards, axis=-1, keepdims=True)
+    expected = np.stack([towards @ right, towards @ up, -(towards @ forward)], axis=-1)
+    got = light_directions(config, depth)
+    np.testing.assert_allclose(got[3:], expected[3:], atol=1e-12)
+    assert np.all(got[:3] == 0.0)

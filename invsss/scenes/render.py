@@ -13,6 +13,8 @@ one unit through :class:`invsss.result_dir.ResultDir`:
 ``mask.png``    255 where skin covers at least half the pixel, else 0
 ``normal.exr``  unit shading normals in camera space (x right, y up, z towards
                 the camera); 0 where no skin is seen
+``light.exr``   unit vectors from the surface towards the first (key) light,
+                camera space (:func:`light_directions`); 0 where no skin is seen
 ``coverage.exr`` fraction of the pixel where skin is seen (occluders excluded)
 ``scene.json``  the resolved scene, medium, calibration, seeds, spp, Mitsuba
                 version, render times and the noise estimate (:mod:`~invsss.scenes.noise`)
@@ -47,10 +49,11 @@ from .config import SceneConfig
 from .mitsuba_scene import import_mitsuba, load_mesh_ply, scene_dict
 from .noise import half_render_noise
 
-__all__ = ["SCENE_FILES", "SceneRender", "render_scene", "scene_writers", "write_scene"]
+__all__ = ["SCENE_FILES", "SceneRender", "light_directions", "render_scene", "scene_writers", "write_scene"]
 
 #: The files of a scene folder, in the order they are written.
-SCENE_FILES = ("source.exr", "target.exr", "depth.exr", "mask.png", "normal.exr", "coverage.exr", "scene.json")
+SCENE_FILES = ("source.exr", "target.exr", "depth.exr", "mask.png", "normal.exr", "coverage.exr", "light.exr",
+               "scene.json")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,6 +68,7 @@ class SceneRender:
     coverage: np.ndarray  # (H, W) float32 in [0, 1]
     info: dict
     target_halves: tuple[np.ndarray, np.ndarray]
+    light: np.ndarray | None = None  # (H, W, 3) float32; None: computed from the depth when written
 
 
 def _camera_frame(config: SceneConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -269,6 +273,7 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         coverage=coverage.astype(np.float32),
         info=info,
         target_halves=(halves[0].astype(np.float32), halves[1].astype(np.float32)),
+        light=light_directions(config, depth).astype(np.float32),
     )
 
 
@@ -291,6 +296,53 @@ def _depth_and_normal(config: SceneConfig, aovs: dict) -> tuple[np.ndarray, np.n
     return depth, normal
 
 
+def light_directions(config: SceneConfig, depth) -> np.ndarray:
+    """Unit vectors (H, W, 3) from each seen surface point towards the scene's first light.
+
+    Camera space (x right, y up, z towards the camera), as the light-aware terms
+    read them (:class:`invsss.LightBuffers`). The point is rebuilt from the eye-space
+    ``depth`` (mm) through the pixel centre; a point, spot or area light is taken
+    at its position (an area light at its centre), a directional light as its
+    constant reversed direction. 0 where ``depth`` is 0 (no skin seen).
+
+    Examples
+    --------
+    >>> from invsss.scenes import parse_config
+    >>> config = parse_config({"object": {"primitive": "sphere", "radius": 40.0},
+    ...     "camera": {"position": [0.0, 0.0, 300.0], "look_at": [0.0, 0.0, 0.0],
+    ...                "fov": 20.0, "width": 2, "height": 2},
+    ...     "lights": [{"type": "directional", "direction": [0.0, 0.0, -1.0], "irradiance": 1.0}],
+    ...     "medium": {"preset": "thesis-940"}})
+    >>> light_directions(config, np.full((2, 2), 300.0))[0, 0].tolist()
+    [0.0, 0.0, 1.0]
+    """
+    depth = np.asarray(depth, np.float64)
+    camera = config.camera
+    origin, right, up, forward = _camera_frame(config)
+    rotation = np.stack([right, up, -forward])  # world -> camera
+    h, w = depth.shape
+    f = camera.focal_length_px
+    x = (np.arange(w)[None, :] + 0.5 - w / 2) / f * depth
+    y = -(np.arange(h)[:, None] + 0.5 - h / 2) / f * depth
+    points = np.stack(np.broadcast_arrays(x, y, -depth), axis=-1)
+    key = config.lights[0]
+    if key.type == "directional":
+        towards = np.broadcast_to(-(rotation @ np.asarray(key.direction, np.float64)), points.shape)
+    else:
+        place = key.center if key.type == "area" else key.position
+        towards = rotation @ (np.asarray(place, np.float64) - origin) - points
+    towards = towards / np.linalg.norm(towards, axis=-1, keepdims=True)
+    return np.where((depth > 0)[..., None], towards, 0.0)
+
+
+def _light_buffer(result: SceneRender) -> np.ndarray:
+    if result.light is not None:
+        return result.light
+    from .config import parse_config
+
+    return light_directions(parse_config(result.info["config"], "scene.json"), result.depth).astype(np.float32)
+
+
 def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
     """``{file name: writer(path)}`` for :meth:`invsss.result_dir.ResultDir.commit`.
 
@@ -298,7 +350,7 @@ def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
     --------
     >>> image, plane = np.ones((4, 4, 1), np.float32), np.ones((4, 4), np.float32)
     >>> flat = SceneRender(image, image, 500 * plane, plane, np.zeros((4, 4, 3), np.float32),
-    ...                    plane, {"spp": 2}, (image, image))
+    ...                    plane, {"spp": 2}, (image, image), light=np.zeros((4, 4, 3), np.float32))
     >>> list(scene_writers(flat)) == list(SCENE_FILES)
     True
     """
@@ -310,6 +362,7 @@ def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
         "mask.png": lambda path: write_image(path, result.mask),
         "normal.exr": lambda path: write_image(path, result.normal),
         "coverage.exr": lambda path: write_image(path, result.coverage),
+        "light.exr": lambda path: write_image(path, _light_buffer(result)),
         "scene.json": lambda path: write_text_atomic(path, text),
     }
 
