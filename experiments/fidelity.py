@@ -18,8 +18,12 @@ target over the eroded mask, one row per way of predicting the target:
 ``fit (medium's dipole)``
     the same with the profile fixed to a 5-Gaussian fit of the medium's dipole
     (``scene.json``'s sigma_s', sigma_a, eta);
-``fit from <other pair>``
-    the default fit of another pair of the same medium, applied to this one (does
+``fit + shift``, ``fit + grazing``, ``fit + shift + grazing``
+    the default fit with the light-aware terms of docs/model.md, section 8 (the
+    scattered light displaced away from the key light; a gain towards grazing
+    view), read from the pair's ``light.exr`` and ``normal.exr``;
+``fit from <other pair>`` (and ``fit + shift + grazing from <other pair>``)
+    the fit of another pair of the same medium, applied to this one (does
     a fit carry over to another view?);
 ``noise ceiling``
     the best PSNR a noise-free prediction can reach against this Monte Carlo target
@@ -56,6 +60,8 @@ import invsss
 from invsss.estimator.diagnostics import masked_psnr, masked_ssim
 
 THESIS_HAND_VALUES = ((0.5, 2000.0), (0.7, 7500.0), (0.4, 4500.0))
+#: The light-aware term sets fitted on top of the plain fit; the last is all of them.
+LIGHT_TERM_ROWS = (("shift",), ("grazing",), ("shift", "grazing"))
 #: The thesis gives no maxdd; this one (mm per pixel) never clamps a slope.
 THESIS_MAXDD_MM = 1000.0
 
@@ -77,6 +83,10 @@ def load_scene_pair(folder: pathlib.Path) -> dict:
         "mask": invsss.read_mask(folder / "mask.png"),
         "depth": depth[rows, cols].astype(np.float32),
         "info": json.loads((folder / "scene.json").read_text()),
+        "buffers": invsss.LightBuffers(
+            normal=invsss.read_image(folder / "normal.exr") if (folder / "normal.exr").is_file() else None,
+            light=invsss.read_image(folder / "light.exr") if (folder / "light.exr").is_file() else None,
+        ),
     }
 
 
@@ -186,6 +196,16 @@ def main() -> None:
         dipole = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"],
                                  profile=dipole_profile(pair["info"]), **fit_options)
         rows["fit (medium's dipole)"] = score(dipole.fitted[0], pair, mask)
+        for terms in LIGHT_TERM_ROWS:
+            buffers = pair["buffers"]
+            if any(getattr(buffers, invsss.light_terms.NEEDED_BUFFER[t]) is None for t in terms):
+                continue
+            lit = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"],
+                                  light_terms=terms, light_buffers=buffers, **fit_options)
+            label = "fit + " + " + ".join(terms)
+            fits[(pair["name"], terms)] = lit
+            rows[label] = score(lit.fitted[0], pair, mask)
+            rows[label]["light_terms"] = lit.light_terms
         rows["noise ceiling"] = {"psnr": pair["info"]["noise"]["noise_ceiling_db"], "ssim": None, "coarse": None,
                                  "residual": None}
         table[pair["name"]] = rows
@@ -195,6 +215,12 @@ def main() -> None:
             mask = eroded(b["mask"], args.erode)
             prediction = invsss.render(b["source"], b["depth"], b["mask"], fits[a["name"]].params, model="sog")
             table[b["name"]][f"fit from {a['name']}"] = score(prediction, b, mask)
+            lit = fits.get((a["name"], LIGHT_TERM_ROWS[-1]))
+            if lit is not None and (b["name"], LIGHT_TERM_ROWS[-1]) in fits:
+                prediction = invsss.render(b["source"], b["depth"], b["mask"], lit.params, model="sog",
+                                           light_terms=lit.light_terms_params(), light_buffers=b["buffers"])
+                label = f"fit + {' + '.join(LIGHT_TERM_ROWS[-1])} from {a['name']}"
+                table[b["name"]][label] = score(prediction, b, mask)
 
     args.out.mkdir(parents=True, exist_ok=True)
     summary = {}
@@ -209,7 +235,8 @@ def main() -> None:
                 slug = "".join(ch if ch.isalnum() else "_" for ch in row).strip("_")
                 save_residual(args.out / name / f"residual_{slug}.png", result["residual"],
                               eroded(next(p for p in pairs if p["name"] == name)["mask"], args.erode))
-        summary[name] = {row: {"psnr": r["psnr"], "ssim": r["ssim"], "coarse_share": r["coarse"]}
+        summary[name] = {row: {"psnr": r["psnr"], "ssim": r["ssim"], "coarse_share": r["coarse"],
+                               "light_terms": r.get("light_terms")}
                          for row, r in rows.items()}
     (args.out / "fidelity.json").write_text(json.dumps(summary, indent=2) + "\n")
 

@@ -35,6 +35,7 @@ import jax
 import numpy as np
 
 from .io import read_params, write_text_atomic
+from .light_terms import LightTerms
 from .models import get_model, resolve_tap_weights
 from .params import SSSParams
 from .passes import TAP_OFFSETS, tap_spread
@@ -90,7 +91,8 @@ def _blend_factors(w: np.ndarray) -> np.ndarray:
 
 
 def shader_constants(
-    params: SSSParams, model: str = "sog", tap_weights=None, taps: int = 17, strength: float = 1.0
+    params: SSSParams, model: str = "sog", tap_weights=None, taps: int = 17, strength: float = 1.0,
+    light_terms=None,
 ) -> dict:
     """Everything a real-time shader needs to reproduce :func:`~invsss.render`.
 
@@ -107,6 +109,11 @@ def shader_constants(
         ``separable`` only: number of kernel taps (odd; 11, 17 or 25 in Jimenez's code).
     strength : float
         ``separable`` only: blend of the kernel with the identity.
+    light_terms : LightTerms or mapping, optional
+        The light-aware terms of docs/model.md, section 8 (a fit's
+        ``light_terms`` record works too): adds ``lightShift`` (kappa, scene
+        units) and ``grazingGain`` (gamma), and :func:`to_hlsl` then adds the
+        function that applies them (:data:`LIGHT_TERMS_HLSL`).
 
     Returns
     -------
@@ -153,7 +160,41 @@ def shader_constants(
     }
     options = {"tap_weights": tap_weights, "taps": taps, "strength": strength}
     constants.update(_RECIPES[entry.layout](entry, weights, variances, options))
+    if light_terms is not None:
+        if not isinstance(light_terms, LightTerms):
+            if not hasattr(light_terms, "get"):
+                raise InvalidInputError(
+                    f"light_terms: expected an invsss.LightTerms or a mapping, got {type(light_terms).__name__}"
+                )
+            values = (light_terms.get("shift", 0.0), light_terms.get("grazing", 0.0))
+        else:
+            values = (light_terms.shift, light_terms.grazing)
+        # Checked as LightTerms, written from the given numbers: LightTerms holds
+        # JAX's default float32 outside x64, which would round them.
+        shift, grazing = (float(np.asarray(v, np.float64)) for v in values)
+        LightTerms(shift, grazing).check()
+        constants["lightShift"] = shift
+        constants["grazingGain"] = grazing
     return constants
+
+
+#: The HLSL function :func:`to_hlsl` appends when the constants hold the light-aware
+#: terms (docs/model.md, section 8). Call it in the final pass on the blurred
+#: image; ``stretch`` is (s_x, s_y) of that pixel, as the blur passes compute it.
+LIGHT_TERMS_HLSL = """
+// Light-aware terms (invsss docs/model.md, section 8), applied to the blurred
+// image in the final pass. toLight and normal are unit vectors in view space
+// with x right, y up and z towards the camera (negate z for a +z-forward view
+// space); texel is 1 / resolution; the sampler is bilinear, clamp to edge.
+float3 invsssLightTerms(Texture2D blurred, SamplerState linearClamp, float2 uv, float2 texel,
+                        float2 stretch, float3 toLight, float3 normal)
+{
+    float2 travel = float2(-toLight.x, toLight.y);        // image axes: x right, rows down
+    float2 delta = {prefix}lightShift * stretch * travel;  // pixels
+    float3 shifted = blurred.SampleLevel(linearClamp, uv - delta * texel, 0).rgb;
+    return shifted * (1.0 + {prefix}grazingGain * (1.0 - saturate(normal.z)));
+}
+"""
 
 
 def _pass_constants(entry, weights, variances, options) -> dict:
@@ -284,7 +325,10 @@ def to_hlsl(constants: dict, prefix: str = "") -> str:
     for key, value in constants.items():
         if not isinstance(value, str):
             lines.append(_hlsl_declaration(prefix + key, value))
-    return "\n".join(lines) + "\n"
+    text = "\n".join(lines) + "\n"
+    if "lightShift" in constants:
+        text += LIGHT_TERMS_HLSL.replace("{prefix}", prefix)
+    return text
 
 
 def to_json(constants: dict) -> str:
@@ -331,7 +375,8 @@ def export_params(
         params, extras = read_params(params_json_path)
     model = model or extras.get("model", "sog")
     tap_weights = tap_weights or extras.get("tap_weights")
-    constants = shader_constants(params, model, tap_weights=tap_weights, taps=taps, strength=strength)
+    constants = shader_constants(params, model, tap_weights=tap_weights, taps=taps, strength=strength,
+                                 light_terms=extras.get("light_terms"))
     text = to_json(constants) if format == "json" else to_hlsl(constants)
     if out_path is not None:
         write_text_atomic(out_path, text)

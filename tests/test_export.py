@@ -313,3 +313,28 @@ def test_cli_export_errors(params_file, tmp_path, capsys):
     assert main(["export", str(params_file), "--format", "glsl"]) == 2
     assert main(["export", str(params_file), "--model", "separable", "--taps", "4"]) == 2
     assert "taps" in capsys.readouterr().err
+
+
+def test_light_terms_export_constants_and_the_snippet(tmp_path):
+    import invsss
+
+    params = invsss.SSSParams(900.0, 2.0, 0.5, [0.3, 0.7], [2.0, 0.5])
+    plain = invsss.shader_constants(params)
+    lit = invsss.shader_constants(params, light_terms={"shift": 1.25, "grazing": -0.2, "stderr": {}})
+    assert {k: v for k, v in lit.items() if k not in ("lightShift", "grazingGain")} == plain
+    assert (lit["lightShift"], lit["grazingGain"]) == (1.25, -0.2)
+    hlsl = invsss.to_hlsl(lit, prefix="sss_")
+    assert "static const float sss_lightShift = 1.25;" in hlsl
+    assert "float3 invsssLightTerms(" in hlsl and "sss_grazingGain * (1.0 - saturate(normal.z))" in hlsl
+    # Every constant the snippet reads is declared above it.
+    snippet = hlsl[hlsl.index("float3 invsssLightTerms"):]
+    for name in re.findall(r"\bsss_\w+", snippet):
+        assert f"static const float {name} " in hlsl
+    assert "invsssLightTerms" not in invsss.to_hlsl(plain)
+    with pytest.raises(invsss.InvalidInputError, match="light_terms.grazing: expected a value > -1"):
+        invsss.shader_constants(params, light_terms={"grazing": -1.5})
+    # A params file with a fit's light_terms record exports them.
+    path = tmp_path / "params.json"
+    invsss.write_params(path, {"sss_level": 900.0, "correction": 0.0, "maxdd": 1.0, "weights": [1.0],
+                               "variances": [2.0], "light_terms": {"shift": 1.1, "stderr": {"shift": 0.1}}})
+    assert "static const float lightShift = 1.1;" in invsss.export_params(path, format="hlsl")
