@@ -12,7 +12,14 @@ from scipy import ndimage
 import invsss
 from invsss.light_terms import LightBuffers, LightTerms, apply_light_terms, shift_image
 
-jax.config.update("jax_enable_x64", True)
+
+
+@pytest.fixture(autouse=True)
+def _float64():
+    # These tests compare against float64 references; x64 is switched on for each
+    # test only, so other tests in the same worker keep JAX's float32 default.
+    with jax.enable_x64(True):
+        yield
 
 H, W = 12, 15
 
@@ -189,7 +196,7 @@ class TestTorchTwin:
         x = torch.tensor(x0, dtype=torch.float64, requires_grad=True)
         p = itorch.SSSParams(x[2], float(params.correction), float(params.maxdd),
                              np.array(params.weights), np.array(params.variances))
-        t = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float64)  # noqa: E731
+        t = lambda a: torch.as_tensor(np.array(a), dtype=torch.float64)  # noqa: E731
         out_torch = itorch.apply_light_terms(t(blurred), t(depth), t(mask), p, shift=x[0], grazing_gain=x[1],
                                              normal=t(normal), light=t(light))
         (t(weights) * out_torch).sum().backward()

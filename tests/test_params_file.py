@@ -128,6 +128,7 @@ def test_a_fit_result_round_trips_with_every_report_key(tmp_path):
         "vignetting": {"model": "gain field", "coefficients": [-0.2, 0.01], "stderr": [0.004, None],
                        "corner_gain": 0.81},
         "highlights": {"method": "residual", "excluded_pixels": [12], "fraction": [0.01]},
+        "light_terms": {"shift": 1.3, "grazing": 0.2, "stderr": {"shift": 0.1, "grazing": None}},
     }
     path = tmp_path / "p.json"
     write_params(path, {**PARAMS, **report})
