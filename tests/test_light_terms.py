@@ -317,3 +317,14 @@ def test_cli_fit_with_light_terms(tmp_path, capsys):
     assert main(["fit", *common, "--light-terms", "shift", "--out", str(tmp_path / "bad")]) != 0
     err = capsys.readouterr().err
     assert "light: the 'shift' term needs this buffer" in err and "Traceback" not in err
+
+
+def test_an_aligned_fit_with_the_shift_warns_that_the_warp_can_take_it():
+    source, depth, mask, buffers = _lit_pair(32)
+    truth = invsss.SSSParams(600.0, 0.0, 1.0, [0.6, 0.4], [0.5, 2.0])
+    target = np.asarray(invsss.render(source, depth, mask, truth, light_terms=LightTerms(shift=1.0),
+                                      light_buffers=buffers))
+    fit = invsss.fit_pair(source, target, depth, mask, profile=PROFILE, fix=FIX, n_starts=1, max_steps=30,
+                          align="translation", light_terms="shift", light_buffers=buffers)
+    assert any(w.startswith("light_terms: the shift term moves the image") for w in fit.warnings)
+    assert fit.light_terms is not None and "shift" in fit.light_terms

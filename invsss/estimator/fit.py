@@ -467,6 +467,13 @@ def _fit_aligned(pairs, single, options, progress, stop) -> FitResult:
             "error (-3 to -5 % on a model-made face). "
             "For final numbers render the source again with the fitted warp and fit without align",
         )
+    if "shift" in options.light_terms:
+        messages += (
+            "light_terms: the shift term moves the image along the light's direction, and where that "
+            "direction varies little over the mask so does a translation of the warp: one pair cannot "
+            "tell them apart, and the split between the fitted shift and the warp is not determined "
+            "(measure the shift on a pair whose registration is known)",
+        )
     return dataclasses.replace(result, alignment=sensitivity.records(), warnings=messages)
 
 
