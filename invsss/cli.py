@@ -234,7 +234,8 @@ def _add_fit_parser(subparsers) -> None:
                         help="fit light-aware terms on top of the blur (docs/model.md, section 8): "
                         "'shift' (light exits displaced away from the light; needs --light), "
                         "'grazing' (brighter or darker at grazing view; needs --normal), or "
-                        "'shift,grazing' (default: none)")
+                        "'shift,grazing'; 'shift=1.3' holds kappa at a value measured on a registered pair "
+                        "(for --align) (default: none)")
     parser.add_argument("--light", action="append", default=[], metavar="FILE",
                         help="camera-space unit vectors towards the light, float EXR or NPY (H, W, 3), "
                         "on the source's grid (repeat per pair)")

@@ -59,10 +59,14 @@ class FitOptions:
     highlights : bool
         Refit with the first fit's specular highlights left out (see :func:`invsss.fit_pair`).
     light_terms : tuple of str
-        Light-aware terms to fit (:data:`invsss.light_terms.LIGHT_TERM_NAMES`:
-        ``"shift"``, ``"grazing"``); a list or a comma-separated string is
-        accepted and stored as a tuple in that order. Each needs its buffer on
-        every pair.
+        Light-aware terms in the model (:data:`invsss.light_terms.LIGHT_TERM_NAMES`:
+        ``"shift"``, ``"grazing"``), stored as a tuple in that order. Given as
+        names (a list, or a comma-separated string), each term is fitted; given
+        as a mapping ``{name: value}`` (or ``"shift=1.3,grazing"``), a term with
+        a number is held at it and one with None is fitted. Each needs its
+        buffer on every pair.
+    light_fixed : mapping
+        The held values (filled from ``light_terms``; read-only).
 
     Raises
     ------
@@ -94,6 +98,7 @@ class FitOptions:
     vignetting: bool = False
     highlights: bool = False
     light_terms: tuple = ()
+    light_fixed: object = None
 
     def __post_init__(self):
         from ..registration import ALIGN_KINDS
@@ -103,7 +108,11 @@ class FitOptions:
         for name in ("vignetting", "highlights"):
             if not isinstance(getattr(self, name), bool):
                 raise InvalidInputError(f"{name}: expected true or false, got {getattr(self, name)!r}")
-        object.__setattr__(self, "light_terms", check_light_terms(self.light_terms))
+        terms, held = check_light_terms(self.light_terms)
+        if self.light_fixed:
+            held = {**held, **check_light_terms(dict(self.light_fixed))[1]}
+        object.__setattr__(self, "light_terms", tuple(t for t in LIGHT_TERM_NAMES if t in terms or t in held))
+        object.__setattr__(self, "light_fixed", types.MappingProxyType(held))
         get_model(self.model)  # one-line error naming the known models
         if self.gauge not in GAUGES:
             raise InvalidInputError(f"gauge: expected one of {', '.join(GAUGES)}, got {self.gauge!r}")
@@ -151,26 +160,52 @@ class FitOptions:
         return os.fspath(self.profile) if isinstance(self.profile, (str, os.PathLike)) else ""
 
 
-def check_light_terms(terms) -> tuple[str, ...]:
-    """``terms`` (names, or one comma-separated string; "none" or empty for none) in canonical order.
+def check_light_terms(terms) -> tuple[tuple[str, ...], dict[str, float]]:
+    """``(names, held)``: the terms in canonical order and the values of those held fixed.
+
+    ``terms``: names (a sequence, or one comma-separated string; "none" or empty
+    for none), a mapping ``{name: value or None}``, or a string mixing both
+    (``"shift=1.3,grazing"``).
 
     Examples
     --------
     >>> check_light_terms("grazing, shift")
-    ('shift', 'grazing')
+    (('shift', 'grazing'), {})
+    >>> check_light_terms("shift=1.3,grazing")
+    (('shift', 'grazing'), {'shift': 1.3})
     """
     if terms is None:
-        return ()
+        return (), {}
     if isinstance(terms, str):
-        terms = [] if terms.strip() in ("", "none") else [t.strip() for t in terms.split(",")]
-    try:
-        names = list(terms)
-    except TypeError:
-        raise InvalidInputError(f"light_terms: expected names of terms, got {terms!r}") from None
-    unknown = [t for t in names if t not in LIGHT_TERM_NAMES]
+        parts = [] if terms.strip() in ("", "none") else [t.strip() for t in terms.split(",")]
+        entries = {}
+        for part in parts:
+            name, _, value = part.partition("=")
+            entries[name.strip()] = value.strip() if value else None
+    elif hasattr(terms, "items"):
+        entries = dict(terms)
+    else:
+        try:
+            entries = dict.fromkeys(terms)
+        except TypeError:
+            raise InvalidInputError(f"light_terms: expected names of terms, got {terms!r}") from None
+    unknown = [t for t in entries if t not in LIGHT_TERM_NAMES]
     if unknown:
         raise InvalidInputError(
             f"light_terms: unknown term(s) {', '.join(map(repr, unknown))}; expected some of "
             + ", ".join(LIGHT_TERM_NAMES)
         )
-    return tuple(t for t in LIGHT_TERM_NAMES if t in names)
+    held = {}
+    for name, value in entries.items():
+        if value is None:
+            continue
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            raise InvalidInputError(f"light_terms[{name!r}]: expected a number or None (fitted), got {value!r}") from None
+        if not np.isfinite(number) or (name == "grazing" and number <= -1.0):
+            raise InvalidInputError(
+                f"light_terms[{name!r}]: expected a finite number{' > -1' if name == 'grazing' else ''}, got {value!r}"
+            )
+        held[name] = number
+    return tuple(t for t in LIGHT_TERM_NAMES if t in entries), held

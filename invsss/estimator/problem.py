@@ -40,7 +40,7 @@ def _initial_weights(profile_weights, k, channels):
     return w / w.sum(axis=0)
 
 
-def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, light_terms=()):
+def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, light_terms=(), light_fixed=None):
     """The parametrisation and the natural starting values of the free blocks."""
     c_src, c_tgt = pairs[0].channels
     variances = fixed.get("variances", profile_v)
@@ -98,14 +98,20 @@ def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, 
         reference["vignetting"] = 1.0
     for i, pair in enumerate(pairs):
         LightBuffers(pair.normal, pair.light).require(light_terms, f"pairs[{i}]." if len(pairs) > 1 else "")
-    if "shift" in light_terms:
+    light_fixed = dict(light_fixed or {})
+    # A held term is a value like a fixed parameter's; the objective applies a
+    # term whenever its name is among the natural values.
+    for term, name in (("shift", "light_shift"), ("grazing", "grazing")):
+        if term in light_fixed:
+            values[name] = jnp.asarray(light_fixed[term], jnp.float64)
+    if "shift" in light_terms and "shift" not in light_fixed:
         # One unit of z shifts by about a pixel at the start: kappa is in scene
         # units, and a pixel covers depth / L of them.
         level = reference["sss_level"] if "sss_level" in reference else float(values["sss_level"])
         blocks.append(("light_shift", ()))
         start["light_shift"] = 0.0
         reference["light_shift"] = scales.depth / float(level)
-    if "grazing" in light_terms:
+    if "grazing" in light_terms and "grazing" not in light_fixed:
         blocks.append(("grazing", ()))
         start["grazing"] = 0.0
         reference["grazing"] = 1.0
@@ -176,7 +182,7 @@ class FitProblem:
         self.scales = data_scales(self.data)
         self.param, self.z_base = _build(
             self.data, self.roles, self.fixed, profile_w, profile_v, self.scales, options.vignetting,
-            options.light_terms,
+            options.light_terms, options.light_fixed,
         )
         self.variances = np.asarray(self.fixed.get("variances", profile_v))
         self.channels = self.data[0].channels[1]
