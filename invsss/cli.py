@@ -433,11 +433,9 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
             try:
                 if count == 1:
                     pair = pairs[0]
-                    buffers = LightBuffers(pair.normal, pair.light)
                     result = fit_pair(
                         pair.source, pair.target, pair.depth, pair.mask, progress=progress, stop=stop,
-                        light_buffers=None if buffers.normal is None and buffers.light is None else buffers,
-                        **options,
+                        light_buffers=LightBuffers(pair.normal, pair.light), **options,
                     )
                 else:
                     result = fit_pairs(pairs, progress=progress, stop=stop, **options)

@@ -46,6 +46,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .params import _as_float
 from .stretch import stretch_factors
 from .validation import InvalidInputError, is_concrete
 
@@ -67,10 +68,6 @@ NEEDED_BUFFER = {"shift": "light", "grazing": "normal"}
 #: How far from unit length a buffer's vectors may be before it is refused
 #: (8-bit normal maps are off by about 1 %; a wrongly decoded map by far more).
 UNIT_TOLERANCE = 0.05
-
-
-def _as_float(x) -> Array:
-    return jnp.asarray(x, dtype=jnp.result_type(float))
 
 
 class LightTerms(eqx.Module):

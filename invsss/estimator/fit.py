@@ -43,6 +43,7 @@ from .diagnostics import MISALIGNMENT_PX, masked_psnr, masked_ssim, misalignment
 from ..registration import Warp, align_source, align_target, align_vectors, estimate_warp, match_photometry
 from .inputs import prepare_pairs
 from .options import FitOptions
+from .parametrisation import LIGHT_UNKNOWNS
 from .problem import build_problem
 from .result import FitResult, masked_list
 from .robust import robust_scale, robust_weights
@@ -499,8 +500,8 @@ def _estimate(result) -> dict:
     if result.vignetting is not None:
         out["vignetting"] = np.asarray(result.vignetting["coefficients"])
     if result.light_terms is not None:
-        out.update({k: result.light_terms[name] for k, name in (("light_shift", "shift"), ("grazing", "grazing"))
-                    if name in result.light_terms})
+        out.update({LIGHT_UNKNOWNS[term]: value for term, value in result.light_terms.items()
+                    if term in LIGHT_UNKNOWNS})
     return out
 
 
@@ -813,19 +814,18 @@ def _light_terms_record(natural, unc) -> dict | None:
 
     A held term has a null standard error and is listed under ``fixed``.
     """
-    names = {"light_shift": "shift", "grazing": "grazing"}
-    used = [k for k in names if k in natural]
+    used = {term: k for term, k in LIGHT_UNKNOWNS.items() if k in natural}
     if not used:
         return None
-    record = {names[k]: float(natural[k]) for k in used}
+    record = {term: float(natural[k]) for term, k in used.items()}
     record["stderr"], record["fixed"] = {}, []
-    for k in used:
+    for term, k in used.items():
         if k not in unc.stderr:
-            record["stderr"][names[k]] = None
-            record["fixed"].append(names[k])
+            record["stderr"][term] = None
+            record["fixed"].append(term)
             continue
         err = float(np.asarray(unc.stderr[k]))
-        record["stderr"][names[k]] = err if np.isfinite(err) else None
+        record["stderr"][term] = err if np.isfinite(err) else None
     return record
 
 

@@ -65,6 +65,7 @@ from ..validation import InvalidInputError
 __all__ = [
     "PARAM_NAMES",
     "GAUGES",
+    "LIGHT_UNKNOWNS",
     "resolve_profile",
     "softplus_inverse",
     "check_fix",
@@ -73,6 +74,10 @@ __all__ = [
 ]
 
 GAUGES = ("variances", "sss_level")
+
+#: The estimator's unknown for each light-aware term (docs/model.md, section 8);
+#: ``shift`` is ``light_shift`` here so that it is not read as a warp's shift.
+LIGHT_UNKNOWNS = {"shift": "light_shift", "grazing": "grazing"}
 _SCALARS = ("sss_level", "correction", "maxdd")
 
 

@@ -21,7 +21,7 @@ from .initial import blur_reference, choose_starts, data_scales
 from .inputs import prepare_pairs
 from .objective import Objective
 from .options import FitOptions
-from .parametrisation import Parametrisation, assign_roles, resolve_profile
+from .parametrisation import LIGHT_UNKNOWNS, Parametrisation, assign_roles, resolve_profile
 from .vignetting import ORDER as VIGNETTING_ORDER
 
 __all__ = ["FitProblem", "build_problem"]
@@ -101,7 +101,7 @@ def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, 
     light_fixed = dict(light_fixed or {})
     # A held term is a value like a fixed parameter's; the objective applies a
     # term whenever its name is among the natural values.
-    for term, name in (("shift", "light_shift"), ("grazing", "grazing")):
+    for term, name in LIGHT_UNKNOWNS.items():
         if term in light_fixed:
             values[name] = jnp.asarray(light_fixed[term], jnp.float64)
     if "shift" in light_terms and "shift" not in light_fixed:

@@ -103,10 +103,11 @@ class FitResult(eqx.Module):
         With ``highlights=True``: ``{"method", "excluded_pixels", "fraction"}``,
         per pair the pixels left out as specular highlights. None without it.
     light_terms : dict or None
-        With ``light_terms``: the fitted terms of docs/model.md, section 8, as
-        ``{"shift": kappa, "grazing": gamma, "stderr": {...}}`` with only the
-        fitted terms present (:meth:`light_terms_params` gives them as an
-        :class:`invsss.LightTerms`). None without them.
+        With ``light_terms``: the terms of docs/model.md, section 8, as
+        ``{"shift": kappa, "grazing": gamma, "stderr": {...}, "fixed": [...]}``
+        with only the terms in use present; a held term is listed in ``fixed``
+        and has a None standard error (:meth:`light_terms_params` gives the
+        values as an :class:`invsss.LightTerms`). None without them.
     gain, offset : numpy.ndarray
         Photometric fit ``pred = gain * out + offset`` per target channel: shape
         (C',) for one pair, (P, C') for :func:`fit_pairs`.
