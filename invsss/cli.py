@@ -52,7 +52,7 @@ from .profiles import PROFILE_NAMES
 from .result_dir import ResultDir, ResultWriteError
 from .screen_space import MODELS, render
 from .params import check_plausible
-from .light_terms import LightBuffers
+from .light_terms import NEEDED_BUFFER, LightBuffers, LightTerms
 from .pair import ImagePair, fill_background_depth
 from .validation import InvalidInputError, check_depth, check_same_frame
 
@@ -119,10 +119,46 @@ def _add_render_parser(subparsers) -> None:
         action="store_true",
         help="the image's integer codes are linear values: do not decode 8-bit files as sRGB",
     )
+    parser.add_argument("--light", metavar="FILE",
+                        help="camera-space unit vectors towards the light, float EXR or NPY (H, W, 3): "
+                        "needed when PARAMS holds a fitted 'shift' light term")
+    parser.add_argument("--normal", metavar="FILE",
+                        help="camera-space unit normals, float EXR or NPY (H, W, 3): needed when PARAMS "
+                        "holds a fitted 'grazing' light term")
+    parser.add_argument("--no-light-terms", action="store_true",
+                        help="render the blur alone, leaving out the light terms PARAMS may hold")
     _add_model_arguments(parser)
     parser.add_argument("--out", required=True, help="output image (.exr, .png, .tif, .jpg, .npy)")
     _add_no_cache_argument(parser)
     parser.set_defaults(func=_run_render)
+
+
+def _render_light_terms(args, extras, shape):
+    """The light terms of PARAMS (None without them, or with --no-light-terms) and
+    the buffers they need, read and checked."""
+    record = None if args.no_light_terms else extras.get("light_terms")
+    if not record:
+        return None, None
+    terms = LightTerms(record.get("shift", 0.0), record.get("grazing", 0.0))
+    terms.check(f"{args.params}: light_terms")
+    buffers = {}
+    for term in ("shift", "grazing"):
+        if term not in record:
+            continue
+        flag = NEEDED_BUFFER[term]
+        path = getattr(args, flag)
+        if path is None:
+            raise InvalidInputError(
+                f"{args.params}: holds the {term!r} light term, which needs --{flag} "
+                f"(or --no-light-terms to render without the light terms)"
+            )
+        buffers[flag] = read_image(path, linear=True)
+        if buffers[flag].shape != (*shape, 3):
+            raise InvalidInputError(
+                f"{path}: expected a 3-channel image of the image's size {shape} for --{flag}, "
+                f"got shape {buffers[flag].shape}"
+            )
+    return terms, LightBuffers(**buffers)
 
 
 def _run_render(args: argparse.Namespace, stop: StopSignals) -> int:
@@ -143,10 +179,13 @@ def _run_render(args: argparse.Namespace, stop: StopSignals) -> int:
             f"{args.params}: weights have {weights_shape[1]} columns (one per channel) "
             f"but {args.image} has {image.shape[2]} channel(s)"
         )
-    out = render(image, depth, mask, params, model, tap_weights=tap_weights)
+    terms, buffers = _render_light_terms(args, extras, mask.shape)
+    out = render(image, depth, mask, params, model, tap_weights=tap_weights, light_terms=terms,
+                 light_buffers=buffers)
     write_image(args.out, np.asarray(out, dtype=np.float32))
     height, width, channels = image.shape
-    print(f"wrote {args.out} ({width}x{height}, {channels} channel(s), model {model})")
+    extra = "" if terms is None else f", light terms shift={terms.shift:g} mm, grazing={terms.grazing:g}"
+    print(f"wrote {args.out} ({width}x{height}, {channels} channel(s), model {model}{extra})")
     return 0
 
 

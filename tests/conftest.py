@@ -7,6 +7,10 @@ before any test runs and removed at the end. ``invsss ... --no-cache`` sets
 ``INVSSS_NO_CACHE`` in the process environment (for a sweep's workers); the
 autouse fixture puts both variables back after every test so one test's flag
 does not switch the cache off for the next.
+
+Tests marked ``slow`` (a fit that takes more than about 5 s on 2 cores) run in CI
+with the rest; ``pytest -m "not slow"`` leaves them out for a quick run while
+developing. Doctests cannot carry a marker, so the slow ones are named here.
 """
 
 from __future__ import annotations
@@ -25,6 +29,21 @@ def pytest_configure(config):
     global _session_cache
     _session_cache = tempfile.mkdtemp(prefix="invsss-test-jax-cache-")
     os.environ["INVSSS_CACHE_DIR"] = _session_cache
+
+
+#: Docstring examples that run a whole fit (more than about 5 s on 2 cores).
+SLOW_DOCTESTS = frozenset({
+    "invsss.estimator.result.FitResult.history_by_stage",
+    "invsss.report.plot_fit_report",
+    "invsss.estimator.fit.fit_pair",
+    "invsss.estimator.problem.build_problem",
+})
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.name in SLOW_DOCTESTS:
+            item.add_marker(pytest.mark.slow)
 
 
 def pytest_unconfigure(config):

@@ -46,6 +46,7 @@ def test_render_with_renderer_background_equals_finite_background(background):
     np.testing.assert_allclose(got[mask > 0], expected[mask > 0], rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_fit_with_renderer_background_equals_finite_background():
     image, depth, mask = _scene()
     target = np.asarray(invsss.render(image, depth, mask, PARAMS, model="sog"))

@@ -72,6 +72,7 @@ def single_fit(scene, tmp_path_factory):
     return {"code": code, "out": out, "stdout": stdout.getvalue(), "stderr": err.getvalue()}
 
 
+@pytest.mark.slow
 def test_fit_writes_params_prediction_and_report(single_fit, scene):
     assert single_fit["code"] == 0, single_fit["stderr"]
     out = single_fit["out"]
@@ -114,6 +115,7 @@ def test_fit_prints_summary_and_progress(single_fit):
     assert all(line.startswith(("fit: ", "invsss: warning: ")) for line in lines if line)
 
 
+@pytest.mark.slow
 def test_several_pairs_share_one_fit(scene, tmp_path, capsys):
     out = tmp_path / "two"
     code = main(["fit", *pair_args(*scene["pairs"]), "--profile", str(scene["profile"]),

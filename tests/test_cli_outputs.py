@@ -114,6 +114,7 @@ def test_a_rerun_into_a_finished_result_is_refused_and_leaves_it_untouched(small
     assert _snapshot(out) == before
 
 
+@pytest.mark.slow
 def test_overwrite_replaces_the_result_and_its_stale_files_but_keeps_the_users(small_pair, tmp_path, capsys):
     out = tmp_path / "run"
     out.mkdir()
@@ -142,6 +143,7 @@ def test_a_result_name_taken_by_a_directory_is_refused_before_the_fit(small_pair
     assert "params.json: is in the way" in _one_error_line(capsys, code)
 
 
+@pytest.mark.slow
 def test_a_second_fit_into_a_busy_directory_is_refused_while_the_first_finishes(small_pair, tmp_path):
     out = tmp_path / "run"
     first = _start(["fit", *small_pair, "--out", str(out)])
@@ -162,6 +164,7 @@ def test_a_second_fit_into_a_busy_directory_is_refused_while_the_first_finishes(
 # ------------------------------------------------------------------------ signals
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_a_signal_during_the_fit_saves_the_best_estimate_and_exits_cleanly(tmp_path, sig, status):
     out = tmp_path / "run"
@@ -199,6 +202,7 @@ def test_a_signal_before_any_solver_step_leaves_nothing_behind(small_pair, tmp_p
         assert json.loads((out / "params.json").read_text())["interrupted"] is True
 
 
+@pytest.mark.slow
 def test_sigkill_in_the_write_phase_leaves_a_result_that_render_refuses(small_pair, tmp_path, capsys):
     out = tmp_path / "run"
     _fake_result(out)
@@ -230,6 +234,7 @@ _SMALL_FILES_ONLY = (
 )
 
 
+@pytest.mark.slow
 def test_a_write_failure_after_the_fit_keeps_the_estimate(small_pair, tmp_path):
     out = tmp_path / "run"
     env = {"TMPDIR": str(tmp_path)}

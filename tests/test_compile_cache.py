@@ -108,6 +108,7 @@ def test_bad_inputs(tmp_path):
     assert any("cannot create it" in str(w.message) for w in caught)
 
 
+@pytest.mark.slow
 def test_a_second_process_loads_instead_of_compiling(tmp_path):
     first, _ = _finish(_child(tmp_path))
     assert first["used"] == str(tmp_path)
@@ -124,6 +125,7 @@ def test_no_cache_in_a_child_process(tmp_path):
     assert not (tmp_path / "c").exists()
 
 
+@pytest.mark.slow
 def test_concurrent_processes_share_one_directory(tmp_path):
     # Three processes start together on an empty directory and write the same
     # entries; none may fail or read a half-written entry (JAX would warn).

@@ -54,6 +54,7 @@ def recovered():
 # ----------------------------------------------------------------- recovery
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["face", "wave"])
 def test_recovers_known_parameters_in_default_gauge(recovered, name):
     result, _, _, noise = recovered[name]
@@ -109,6 +110,7 @@ def test_standard_errors_match_the_scatter():
     assert 0.4 < np.sqrt(np.mean(z**2)) < 2.0
 
 
+@pytest.mark.slow
 def test_thesis_profile_reports_coinciding_gaussians():
     """The default profile (thesis Table 5.1) has two variances 1.5 % apart: the
     split of weight between them is reported undetermined, not as numbers."""
@@ -155,6 +157,7 @@ def test_maxdd_above_every_slope_is_undetermined():
 # ----------------------------------------------------------------- other setups
 
 
+@pytest.mark.slow
 def test_sss_level_gauge_recovers_variances():
     source, target, depth, mask, _ = scene("wave", seed=4)
     start = {"weights": [1.0, 1.0, 1.0], "variances": [0.5, 1.0, 2.0]}
@@ -167,6 +170,7 @@ def test_sss_level_gauge_recovers_variances():
     assert result.stderr["sss_level"] is None and len(result.stderr["variances"]) == 3
 
 
+@pytest.mark.slow
 def test_several_pairs_share_parameters_with_their_own_exposure():
     pairs = []
     for k, name in enumerate(("face", "wave")):
@@ -181,6 +185,7 @@ def test_several_pairs_share_parameters_with_their_own_exposure():
     assert len(result.fitted) == 2 and result.fitted[1].shape == pairs[1][1].shape
 
 
+@pytest.mark.slow
 def test_grey_target_from_rgb_source_fits_the_mix():
     source, target, depth, mask, _ = scene("face", seed=7, source_channels=3, target="grey", mix=(0.5, 0.3, 0.2))
     target = target[..., 0]  # a plain (H, W) grey photograph
@@ -200,6 +205,7 @@ def test_misaligned_target_is_reported():
     assert len(shifted) == 1 and "2.0" in shifted[0]
 
 
+@pytest.mark.slow
 def test_fit_weight_leaves_pixels_out_of_the_comparison_only():
     source, target, depth, mask, _ = scene("wave", seed=9)
     spoiled = target.copy()
@@ -341,6 +347,7 @@ def test_projection_is_weighted_least_squares():
         assert float(coef0[1, 0]) == 0.0 and float(coef0[1, 1]) == pytest.approx(float(coef[1, 1]))
 
 
+@pytest.mark.slow
 def test_projected_residual_jacobian_matches_finite_differences():
     """The solver's derivative (dense Jacobian through the projection) against
     central differences of the projected residual, in float64."""
@@ -375,6 +382,7 @@ def test_projected_residual_jacobian_matches_finite_differences():
             assert np.linalg.norm(jac[:, k] - fd) < 1e-4 * np.linalg.norm(fd)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("solver", ["gauss-newton", "bfgs"])
 def test_other_solvers_reach_the_same_fit(solver):
     source, target, depth, mask, _ = scene("face", size=32, seed=12)
@@ -389,6 +397,7 @@ def test_other_solvers_reach_the_same_fit(solver):
 # ----------------------------------------------------------------- options and interruption
 
 
+@pytest.mark.slow
 def test_options_object_gives_the_same_fit_as_keywords():
     source, target, depth, mask, _ = scene("face", size=32, seed=12)
     kw = {"profile": PROFILE3, "fix": {"correction": 300.0, "maxdd": 2.0}, "n_starts": 2, "robust": None}
@@ -411,6 +420,7 @@ def test_fit_options_are_checked_at_construction(field, value):
     assert "\n" not in str(err.value)
 
 
+@pytest.mark.slow
 def test_stop_interrupts_and_reports_the_best_point_so_far():
     source, target, depth, mask, _ = scene("face", size=32, seed=12)
     kw = {"profile": PROFILE3, "n_starts": 3}
@@ -440,6 +450,7 @@ def test_stop_before_the_first_step_raises():
         fit_pair(source, target, depth, mask, profile=PROFILE3, n_starts=1, stop=lambda: True)
 
 
+@pytest.mark.slow
 def test_history_holds_every_start_and_round(recovered):
     result, calls, _, _ = recovered["face"]
     assert result.iterations == len(calls) == len(result.history)
@@ -477,6 +488,7 @@ def test_report_draws_every_start_and_both_profiles(recovered):
     assert any("conditional on the chosen profile" in line for line in _parameter_lines(result))
 
 
+@pytest.mark.slow
 def test_an_interrupted_fit_still_reports_a_valid_profile():
     """The thesis profile's coinciding Gaussians make the unconstrained weights
     negative; an interrupted fit holds them at 0 (no re-solve) so its estimate
@@ -491,6 +503,7 @@ def test_an_interrupted_fit_still_reports_a_valid_profile():
     invsss.SSSParams(**result.to_dict()["estimate"]).check("estimate")
 
 
+@pytest.mark.slow
 def test_one_compiled_step_serves_starts_rounds_and_refinement():
     # A size no other test uses, so this fit compiles its own step: the looser
     # start solves, the robust rounds, the active set and a robust-free refinement

@@ -44,6 +44,7 @@ def test_highlight_map_finds_bright_blobs_and_little_else(scene):
     assert _highlight_map(target, clean, region).sum() < 0.01 * region.sum()
 
 
+@pytest.mark.slow
 def test_leaving_highlights_out_recovers_the_truth(scene):
     source, target, photo, depth, mask, _ = scene
     kw = {"profile": PROFILE3, "n_starts": 2}

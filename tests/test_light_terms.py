@@ -245,6 +245,7 @@ PROFILE = {"weights": [0.5, 0.5], "variances": [0.5, 2.0]}
 FIX = {"correction": 0.0, "maxdd": 1.0}
 
 
+@pytest.mark.slow
 def test_fit_recovers_the_terms_and_the_blur():
     source, depth, mask, buffers = _lit_pair()
     truth = invsss.SSSParams(600.0, 0.0, 1.0, [0.6, 0.4], [0.5, 2.0])
@@ -269,6 +270,7 @@ def test_fit_recovers_the_terms_and_the_blur():
     assert set(record) == {"shift", "grazing", "stderr", "fixed"} and record["fixed"] == []
 
 
+@pytest.mark.slow
 def test_params_file_keeps_the_terms(tmp_path):
     source, depth, mask, buffers = _lit_pair(24)
     target = np.asarray(invsss.render(source, depth, mask, invsss.SSSParams(600.0, 0.0, 1.0, [0.6, 0.4], [0.5, 2.0]),
@@ -293,6 +295,7 @@ def test_fit_without_the_buffer_names_it():
         invsss.fit_pair(source, source, depth, mask, light_terms=["tilt"], light_buffers=buffers)
 
 
+@pytest.mark.slow
 def test_cli_fit_with_light_terms(tmp_path, capsys):
     import json
 
@@ -318,7 +321,30 @@ def test_cli_fit_with_light_terms(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "light: the 'shift' term needs this buffer" in err and "Traceback" not in err
 
+    # invsss render applies the fitted terms: the library's render with the same
+    # values, and not the blur alone.
+    params_path = str(tmp_path / "fit" / "params.json")
+    scene = ["--image", str(paths["source"]), "--depth", str(paths["depth"]), "--mask", str(paths["mask"]),
+             "--params", params_path]
+    assert main(["render", *scene, "--light", str(tmp_path / "light.exr"), "--out", str(tmp_path / "lit.exr")]) == 0
+    assert "light terms shift=" in capsys.readouterr().out
+    fitted, _ = invsss.read_params(params_path)
+    expected = np.asarray(invsss.render(source, depth, mask, fitted,
+                                        light_terms=LightTerms(shift=stored["light_terms"]["shift"]),
+                                        light_buffers=LightBuffers(light=invsss.read_image(tmp_path / "light.exr"))))
+    rendered = invsss.read_image(tmp_path / "lit.exr")
+    np.testing.assert_allclose(rendered, expected.reshape(rendered.shape), atol=1e-5)
+    assert main(["render", *scene, "--no-light-terms", "--out", str(tmp_path / "plain.exr")]) == 0
+    plain = invsss.read_image(tmp_path / "plain.exr")
+    assert np.abs(plain - rendered).max() > 1e-2
+    # Terms in the params file without their buffer: one line naming the flag.
+    capsys.readouterr()
+    assert main(["render", *scene, "--out", str(tmp_path / "bad.exr")]) != 0
+    err = capsys.readouterr().err
+    assert "holds the 'shift' light term, which needs --light" in err and "Traceback" not in err
 
+
+@pytest.mark.slow
 def test_an_aligned_fit_with_the_shift_warns_that_the_warp_can_take_it():
     source, depth, mask, buffers = _lit_pair(32)
     truth = invsss.SSSParams(600.0, 0.0, 1.0, [0.6, 0.4], [0.5, 2.0])
@@ -330,6 +356,7 @@ def test_an_aligned_fit_with_the_shift_warns_that_the_warp_can_take_it():
     assert fit.light_terms is not None and "shift" in fit.light_terms
 
 
+@pytest.mark.slow
 def test_a_held_shift_is_kept_and_stops_pulling_the_warp():
     # kappa measured on a registered pair and held while aligning: the
     # registration rounds render the prediction with the held shift, so the warp
@@ -358,3 +385,64 @@ def test_held_values_are_checked(terms, message):
 
     with pytest.raises(invsss.InvalidInputError, match=message):
         FitOptions(light_terms=terms)
+
+
+@pytest.mark.slow
+def test_sweep_fits_the_terms_from_pair_folder_buffers(tmp_path):
+    """A sweep reads normal.exr and light.exr from the pair folder when a trial asks
+    for light terms, reports kappa and gamma beside the parameters, recovers them as
+    fit_pair does, and keeps the ids of trials without terms."""
+    import invsss.experiments as ex
+    from invsss.experiments.trials import trial_id
+
+    source, depth, mask, buffers = _lit_pair(32)
+    truth = invsss.SSSParams(600.0, 0.0, 1.0, [0.6, 0.4], [0.5, 2.0])
+    target = np.asarray(invsss.render(source, depth, mask, truth, light_terms=LightTerms(shift=1.2, grazing=0.3),
+                                      light_buffers=buffers))
+    folder = tmp_path / "data" / "card"
+    folder.mkdir(parents=True)
+    for name, image in (("source.exr", source), ("target.exr", target), ("depth.exr", depth), ("mask.png", mask),
+                        ("normal.exr", buffers.normal), ("light.exr", buffers.light)):
+        invsss.write_image(folder / name, np.asarray(image, np.float32))
+    text = ('task = "fit"\n[data]\npairs = ["data/*/"]\n[base]\nn_starts = 1\nrobust = "none"\n'
+            'profile = {weights = [0.5, 0.5], variances = [0.5, 2.0]}\nfix = {correction = 0.0, maxdd = 1.0}\n'
+            '[grid]\nlight_terms = ["", "shift,grazing"]\n')
+    path = tmp_path / "lit.toml"
+    path.write_text(text)
+    experiment = ex.load(path)
+    assert [t.options["light_terms"] for t in experiment.trials] == ["", "shift,grazing"]
+    plain, lit = experiment.trials[0], experiment.trials[1]
+    assert {"normal", "light"} <= set(plain.pairs[0])
+    # Without terms the buffers and the option do not enter the id: the id of a
+    # sweep made before either existed.
+    older = {**plain.config, "pairs": [{k: v for k, v in plain.pairs[0].items() if k not in ("normal", "light")}]}
+    older["options"] = {k: v for k, v in older["options"].items() if k != "light_terms"}
+    assert plain.id == trial_id(older)
+    assert "normal" in lit.config["pairs"][0]
+
+    ex.run(path, tmp_path / "out")
+    rows = {r["light_terms"]: r for r in ex.results(tmp_path / "out", frame=False)}
+    assert all(r["status"] == "done" for r in rows.values())
+    assert rows["shift,grazing"]["param.light_shift"] == pytest.approx(1.2, abs=0.05)
+    assert rows["shift,grazing"]["param.grazing"] == pytest.approx(0.3, abs=0.01)
+    assert rows["shift,grazing"]["stderr.light_shift"] > 0
+    assert rows[""]["param.light_shift"] is None and rows[""]["param.grazing"] is None
+    assert rows["shift,grazing"]["psnr"] > rows[""]["psnr"] + 3.0
+
+
+def test_sweep_refuses_light_terms_without_the_buffer(tmp_path):
+    import invsss.experiments as ex
+
+    source, depth, mask, _ = _lit_pair(16)
+    folder = tmp_path / "data" / "card"
+    folder.mkdir(parents=True)
+    for name, image in (("source.exr", source), ("target.exr", source), ("depth.exr", depth), ("mask.png", mask)):
+        invsss.write_image(folder / name, np.asarray(image, np.float32))
+    path = tmp_path / "lit.toml"
+    path.write_text('task = "fit"\n[data]\npairs = ["data/card/"]\n[base]\nlight_terms = ["shift"]\n')
+    with pytest.raises(invsss.InvalidInputError, match=r"lit\.toml: trial 1 \(pair='card'\): light term 'shift' needs light\.exr "
+                                                        r"in pair 'card'"):
+        ex.load(path)
+    path.write_text('task = "fit"\n[data]\npairs = ["data/card/"]\n[base]\nlight_terms = "tilt"\n')
+    with pytest.raises(invsss.InvalidInputError, match=r"light_terms: unknown term"):
+        ex.load(path)

@@ -41,6 +41,7 @@ def _photographs():
     return skin, spectralon
 
 
+@pytest.mark.slow
 def test_recovers_known_profile_from_synthetic_photographs():
     skin, spectralon = _photographs()
     # A few saturated pixels in the band (dust, a hair's glint) must be left out.

@@ -72,6 +72,7 @@ def test_pair_images_agree_with_scene_json(name):
     assert np.all(np.isfinite(target)) and float(np.median(target[skin])) > 20 * info["noise"]["noise_rms"]
 
 
+@pytest.mark.slow
 def test_fit_on_a_path_traced_pair_beats_source_and_thesis_values():
     folder = DATA / "pt_face_940"
     pair = invsss.load_pair(*(folder / f for f in ("source.exr", "target.exr", "depth.exr", "mask.png")))

@@ -28,6 +28,7 @@ def _truth():
     return SumOfGaussians(jnp.asarray(TRUTH_W), jnp.asarray(TRUTH_V))
 
 
+@pytest.mark.slow
 def test_recovers_known_sum_of_gaussians():
     with jax.enable_x64(True):
         r = jnp.linspace(0.0, 12.0, N)
@@ -80,6 +81,7 @@ def test_refit_of_thesis_table_reproduces_its_curve():
     assert total == pytest.approx(0.4232, rel=1e-6)
 
 
+@pytest.mark.slow
 def test_fits_jensen_dipole_skin1_per_channel():
     s, a = np.array(JENSEN_SKIN1["sigma_s_prime"]), np.array(JENSEN_SKIN1["sigma_a"])
     with jax.enable_x64(True):

@@ -51,6 +51,7 @@ def _measure(skin, reference):
                            lit_radius_mm=1.5)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sigma_s_prime, sigma_a", MEDIA)
 def test_dipole_fit_recovers_the_slab_medium(sigma_s_prime, sigma_a):
     measured = _measure(*_spot_images(sigma_s_prime, sigma_a))

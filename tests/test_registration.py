@@ -121,6 +121,7 @@ FIT = dict(profile={"weights": [1.0], "variances": [1.0]}, fix={"correction": 0.
            n_starts=1, max_steps=60, robust=None)
 
 
+@pytest.mark.slow
 def test_fit_with_align_recovers_the_blur_of_a_shifted_target():
     source, target, depth, mask = _shifted_pair()
     plain = invsss.fit_pair(source, target, depth, mask, **FIT)

@@ -74,6 +74,7 @@ def test_arrived_ends_a_solve_as_converged():
     assert record.steps == 1 and record.converged
 
 
+@pytest.mark.slow
 def test_starts_that_reach_a_known_basin_end_there(monkeypatch):
     profile = {"weights": [0.3, 0.45, 0.25], "variances": [0.25, 1.2, 5.0]}
     truth = invsss.SSSParams(700.0, 300.0, 2.0, profile["weights"], profile["variances"])

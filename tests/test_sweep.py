@@ -204,6 +204,7 @@ def _sweep_until(path, out, done, stdout):
     return process
 
 
+@pytest.mark.slow
 def test_sweep_killed_mid_run_resumes_to_one_done_row_per_trial(root):
     path = _experiment(root, "kill.toml", RENDER)
     out = root / "killed"
@@ -237,6 +238,7 @@ def test_sweep_killed_mid_run_resumes_to_one_done_row_per_trial(root):
     assert ex.run(path, out, log=None).ran == 0
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_between_trials_and_a_rerun_resumes(root):
     path = _experiment(root, "sigint.toml", RENDER)
     out = root / "sigint"
@@ -296,6 +298,7 @@ def test_process_pool_gives_the_in_process_results(root):
     _check_artefacts_match(str(root / "pool"), pooled)
 
 
+@pytest.mark.slow
 def test_fit_sweep_on_dask_local_cluster_matches_local(root):
     pytest.importorskip("distributed")
     text = f"""
@@ -327,6 +330,7 @@ profile = {PROFILE}
     assert isinstance(table, pandas.DataFrame) and list(table["pair"]) == ["a", "b"]
 
 
+@pytest.mark.slow
 def test_dask_worker_processes_use_the_compilation_cache(root, tmp_path, monkeypatch):
     # Dask starts its own worker processes, which never pass through the CLI's
     # cache switch; the sweep's choice must reach them with the trials.

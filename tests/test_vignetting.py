@@ -46,6 +46,7 @@ def test_field_matches_its_definition():
     np.testing.assert_allclose(field, 1.0 - 0.3 * expected + 0.1 * expected**2, rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_projected_residual_derivative_in_the_vignetting_block():
     source, depth, mask, _, photo = _photographs()
     problem = build_problem([(source[:24, :24], photo[:24, :24], depth[:24, :24], mask[:24, :24])],
@@ -74,6 +75,7 @@ def fits():
     }
 
 
+@pytest.mark.slow
 def test_fitted_vignetting_recovers_the_unshaded_fit(fits):
     reference, fitted = fits["reference"], fits["shaded, fitted"]
     for name in ("sss_level", "correction", "maxdd"):
@@ -93,6 +95,7 @@ def test_fitted_vignetting_recovers_the_unshaded_fit(fits):
     assert not any(line.startswith("vignetting:") for line in _parameter_lines(fits["reference"]))
 
 
+@pytest.mark.slow
 def test_ignoring_vignetting_biases_the_fit(fits):
     reference, ignored = fits["reference"], fits["shaded"]
     worst = max(abs(float(ignored.values[n]) - float(reference.values[n])) / reference.stderr[n]
@@ -106,6 +109,7 @@ def test_vignetting_option_is_checked():
         FitOptions(vignetting="yes")
 
 
+@pytest.mark.slow
 def test_cli_fit_writes_the_field_into_params_json(tmp_path):
     import json
 

@@ -46,6 +46,7 @@ def _uncertainty(problem, lin, nuisance=None):
         return gauss_newton_uncertainty(problem.objective, lin, problem.scales.correction, None, nuisance)
 
 
+@pytest.mark.slow
 def test_a_nuisance_column_gives_the_marginal_covariance(linearised):
     problem, lin = linearised
     J, r = lin["jacobian"], lin["residual"]

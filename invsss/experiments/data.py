@@ -1,7 +1,8 @@
 """Which pairs an experiment uses: folders, globs and explicit file sets.
 
 A pair folder holds ``source.exr``, ``target.exr``, ``depth.exr`` and ``mask.png``
-(the layout of ``data_synthetic/``); a glob such as ``data_synthetic/*/`` names
+(the layout of ``data_synthetic/``), and may hold ``normal.exr`` and ``light.exr``
+(the light-aware terms' buffers, which ``invsss scene`` writes); a glob such as ``data_synthetic/*/`` names
 every pair folder it matches, in sorted order (other folders it matches, such
 as ``LICENSES/``, are passed over). Paths are relative to the experiment
 file's folder, so an experiment runs the same from any working directory. Each
@@ -20,10 +21,14 @@ import os
 from ..validation import InvalidInputError
 from .schema import DataSpec
 
-__all__ = ["PAIR_FILES", "resolve_pairs"]
+__all__ = ["PAIR_FILES", "BUFFER_FILES", "resolve_pairs"]
 
 #: The files of a pair folder, by role.
 PAIR_FILES = {"source": "source.exr", "target": "target.exr", "depth": "depth.exr", "mask": "mask.png"}
+
+#: Optional files of a pair folder: the buffers of the light-aware terms
+#: (:class:`invsss.LightBuffers`), recorded when present.
+BUFFER_FILES = {"normal": "normal.exr", "light": "light.exr"}
 
 
 def _relative(path: str, root: str) -> str:
@@ -31,7 +36,8 @@ def _relative(path: str, root: str) -> str:
 
 
 def resolve_pairs(data: DataSpec, root: str, name: str) -> list[dict]:
-    """The pairs of ``data`` as ``{"name", "source", "target", "depth", "mask"}`` dicts.
+    """The pairs of ``data`` as ``{"name", "source", "target", "depth", "mask"}`` dicts,
+    with ``"normal"`` and ``"light"`` where the folder or file set has them.
 
     Paths in the result are relative to ``root`` (the experiment file's folder)
     and normalised, so the same experiment gives the same trial ids wherever it
@@ -79,11 +85,21 @@ def resolve_pairs(data: DataSpec, root: str, name: str) -> list[dict]:
                         f"(a pair folder holds {', '.join(PAIR_FILES.values())})"
                     )
                 files[role] = _relative(path, root)
+            for role, file in BUFFER_FILES.items():
+                if os.path.isfile(os.path.join(folder, file)):
+                    files[role] = _relative(os.path.join(folder, file), root)
             pairs.append({"name": os.path.basename(os.path.normpath(folder)), **files})
     for i, fileset in enumerate(data.files):
         files = {}
         for role in PAIR_FILES:
             path = getattr(fileset, role)
+            if not os.path.isfile(os.path.join(root, path)):
+                raise InvalidInputError(f"{name}: data.files[{i}].{role}: {path} not found (relative to {root})")
+            files[role] = _relative(path, root)
+        for role in BUFFER_FILES:
+            path = getattr(fileset, role)
+            if path is None:
+                continue
             if not os.path.isfile(os.path.join(root, path)):
                 raise InvalidInputError(f"{name}: data.files[{i}].{role}: {path} not found (relative to {root})")
             files[role] = _relative(path, root)

@@ -104,13 +104,26 @@ def _pair_rows(spec: ExperimentSpec, rows: list[dict], pairs: list[dict], name: 
 
 
 def _check_trial(trial: Trial, name: str, label: str) -> None:
-    """Check the options as the task will use them."""
+    """Check the options as the task will use them, and that every pair has the
+    buffers its light terms read."""
+    from ..estimator.options import check_light_terms
+    from ..light_terms import NEEDED_BUFFER
+    from .data import BUFFER_FILES
     from .tasks import check_task_options
 
     try:
         check_task_options(trial.task, trial.options)
     except InvalidInputError as err:
         raise InvalidInputError(f"{name}: {label}: {err}") from None
+    terms, held = check_light_terms(trial.options.get("light_terms") or None)
+    for term in (*terms, *held):
+        role = NEEDED_BUFFER[term]
+        for pair in trial.pairs:
+            if role not in pair:
+                raise InvalidInputError(
+                    f"{name}: {label}: light term {term!r} needs {BUFFER_FILES[role]} in pair "
+                    f"{pair['name']!r} (or {role} = ... in its data.files entry)"
+                )
 
 
 def _label(index: int, row: dict) -> str:

@@ -4,7 +4,8 @@ One flat row per trial, the shape a table or a plot wants: ``id``,
 ``status``, one column per varied key (``sss_level``, ``fix.maxdd``, ``pair``),
 the metrics (``loss``, ``psnr``, ``ssim``, and for fits ``sigma``,
 ``converged``, ``iterations``), the parameters (``param.sss_level``,
-``param.weights``...), their standard errors (``stderr.sss_level``...),
+``param.weights``...; ``param.light_shift`` and ``param.grazing`` where a
+trial fitted light terms), their standard errors (``stderr.sss_level``...),
 ``seconds`` (the trial's total time), ``compute_seconds`` (the fit or render
 alone), ``host``, ``pid``, ``attempts``, ``warnings`` and ``error``. A pandas
 ``DataFrame`` when pandas is installed (``pip install 'invsss[report]'``),
@@ -19,6 +20,9 @@ from ..params import PARAM_NAMES
 from ..validation import InvalidInputError
 from .store import DATABASE_NAME, ResultsStore
 
+#: The light terms' unknowns a fit trial may report beside the five parameters.
+LIGHT_PARAMS = ("light_shift", "grazing")
+
 __all__ = ["results", "flat_rows"]
 
 
@@ -32,6 +36,8 @@ def flat_rows(out) -> tuple[list[dict], dict]:
     # The file's order (grid keys first, then zip, sample, pair), then any key of older trials.
     axes = list(dict.fromkeys([*meta.get("axes", []), "pair", *(k for row in stored for k in row["axes"])]))
     axes = [key for key in axes if any(key in row["axes"] for row in stored)]
+    # The light terms' columns, only in a sweep where some trial fitted them.
+    light = [name for name in LIGHT_PARAMS if any(name in (row["params"] or {}) for row in stored)]
     rows = []
     for row in stored:
         flat = {"id": row["id"], "status": row["status"]}
@@ -44,6 +50,9 @@ def flat_rows(out) -> tuple[list[dict], dict]:
             flat[f"param.{name}"] = (row["params"] or {}).get(name)
         if row["task"] != "render":
             for name in PARAM_NAMES:
+                flat[f"stderr.{name}"] = (row["stderr"] or {}).get(name)
+            for name in light:
+                flat[f"param.{name}"] = (row["params"] or {}).get(name)
                 flat[f"stderr.{name}"] = (row["stderr"] or {}).get(name)
         timings = row["timings"] or {}
         flat["seconds"] = timings.get("total")

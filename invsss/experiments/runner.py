@@ -23,6 +23,7 @@ import warnings
 
 from ..result_dir import ResultDir
 from ..validation import InvalidInputError
+from .data import BUFFER_FILES
 from .tasks import TrialInterrupted, run_task
 from .trials import Trial
 
@@ -42,13 +43,21 @@ def _one_line(err: BaseException) -> str:
 
 
 def _load(trial: Trial) -> list:
-    from ..io import load_pair
+    import dataclasses
 
-    return [
-        load_pair(*(os.path.join(trial.root, pair[role]) for role in ("source", "target", "depth", "mask")),
-                  depth_scale=trial.depth_scale, linear_codes=trial.linear_codes)
-        for pair in trial.pairs
-    ]
+    from ..io import load_pair, read_image
+
+    pairs = []
+    for pair in trial.pairs:
+        data = load_pair(*(os.path.join(trial.root, pair[role]) for role in ("source", "target", "depth", "mask")),
+                         depth_scale=trial.depth_scale, linear_codes=trial.linear_codes)
+        if trial.options.get("light_terms"):
+            # Only a trial with light terms reads the buffers; the fit checks them.
+            buffers = {role: read_image(os.path.join(trial.root, pair[role]), linear=True)
+                       for role in BUFFER_FILES if role in pair}
+            data = dataclasses.replace(data, **buffers)
+        pairs.append(data)
+    return pairs
 
 
 def execute(trial: dict, out: str, stop=None) -> dict:

@@ -17,6 +17,7 @@ are required)::
 
     [base]                            # the task's options, shared by every trial
     n_starts = 1
+    light_terms = "shift,grazing"     # needs normal.exr / light.exr in each pair
 
     [grid]                            # Cartesian product of value lists
     profile = ["thesis-nir", "deon-skin"]
@@ -43,7 +44,7 @@ from __future__ import annotations
 import difflib
 from typing import Literal, Optional, Union
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from ..validation import InvalidInputError
 
@@ -77,7 +78,8 @@ _Taps = Optional[Union[str, _Numbers]]
 
 
 class FileSet(BaseModel):
-    """One pair given file by file (``[[data.files]]``)."""
+    """One pair given file by file (``[[data.files]]``); ``normal`` and ``light``
+    are the optional buffers of the light-aware terms."""
 
     model_config = _STRICT
     name: Optional[str] = None
@@ -85,6 +87,8 @@ class FileSet(BaseModel):
     target: str
     depth: str
     mask: str
+    normal: Optional[str] = None
+    light: Optional[str] = None
 
 
 class DataSpec(BaseModel):
@@ -126,6 +130,10 @@ class FitTaskOptions(BaseModel):
     """Options of a ``fit`` / ``fit-joint`` trial: those of :func:`invsss.fit_pair`.
 
     ``robust = "none"`` turns the robust loss off (TOML has no null).
+    ``light_terms`` takes the names as one string (``"shift,grazing"``, or
+    ``"shift=1.3,grazing"`` to hold the shift) or a list of names; it needs
+    ``normal.exr`` and ``light.exr`` in each pair folder (or ``normal`` and
+    ``light`` in a file set).
     """
 
     model_config = _STRICT
@@ -141,6 +149,18 @@ class FitTaskOptions(BaseModel):
     align: str = "none"
     vignetting: bool = False
     highlights: bool = False
+    light_terms: str = ""
+
+    @field_validator("light_terms", mode="before")
+    @classmethod
+    def _one_string(cls, value):
+        # One spelling per choice ("shift,grazing"), so that equal choices give
+        # equal trial ids; FitOptions checks the names.
+        if isinstance(value, list) and all(isinstance(v, str) for v in value):
+            value = ",".join(value)
+        if isinstance(value, str) and value.strip().lower() in ("", "none"):
+            return ""
+        return value
 
 
 class RenderTaskOptions(BaseModel):

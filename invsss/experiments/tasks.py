@@ -116,9 +116,18 @@ def _fit_output(result, names: list[str]) -> TaskOutput:
     for name, image in zip(names, result.fitted):
         files[name] = _image_writer(image)
     metrics = {k: content[k] for k in (*METRICS, "sigma", "converged", "iterations")}
+    from ..estimator.parametrisation import LIGHT_UNKNOWNS
+
+    params, stderr = {k: content[k] for k in PARAM_NAMES}, dict(content["stderr"] or {})
+    # The light terms' values sit beside the five parameters, under the names the
+    # estimator gives their unknowns (a held term is reported at its value).
+    for term, value in (content.get("light_terms") or {}).items():
+        if term in LIGHT_UNKNOWNS:
+            params[LIGHT_UNKNOWNS[term]] = value
+            stderr[LIGHT_UNKNOWNS[term]] = content["light_terms"]["stderr"].get(term)
     return TaskOutput(
-        params={k: content[k] for k in PARAM_NAMES},
-        stderr=content["stderr"],
+        params=params,
+        stderr=stderr,
         metrics=metrics,
         warnings=list(result.warnings),
         files=files,
@@ -130,12 +139,14 @@ def run_task(task: str, options: dict, pairs: list, stop=None) -> TaskOutput:
     if task == "render":
         return _render(options, pairs[0])
     from ..estimator import FitInterrupted, fit_pair, fit_pairs
+    from ..light_terms import LightBuffers
 
     try:
         if task == "fit":
             pair = pairs[0]
+            # A pair without buffers hands an empty LightBuffers, as the CLI does.
             result = fit_pair(pair.source, pair.target, pair.depth, pair.mask, stop=stop,
-                              **_fit_keywords(options))
+                              light_buffers=LightBuffers(pair.normal, pair.light), **_fit_keywords(options))
         else:
             result = fit_pairs(pairs, stop=stop, **_fit_keywords(options))
     except FitInterrupted:

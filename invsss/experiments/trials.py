@@ -21,6 +21,7 @@ from pydantic import ValidationError
 
 from ..validation import InvalidInputError
 from .axes import set_path
+from .data import BUFFER_FILES
 from .schema import FIX_NAMES, FitTaskOptions, RenderTaskOptions, first_error, nearest
 
 __all__ = ["Trial", "trial_id", "task_options_model", "check_option_key", "resolve_options"]
@@ -47,7 +48,7 @@ def trial_id(config: dict) -> str:
 
 #: Fit options added after the first release, with the defaults that leave a
 #: trial's id unchanged.
-LATER_OPTIONS = {"align": "none", "vignetting": False, "highlights": False}
+LATER_OPTIONS = {"align": "none", "vignetting": False, "highlights": False, "light_terms": ""}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,7 +66,8 @@ class Trial:
     options : dict
         The task's options, every default filled in.
     pairs : tuple of dict
-        ``{"name", "source", "target", "depth", "mask"}``, paths relative to ``root``.
+        ``{"name", "source", "target", "depth", "mask"}`` and, where present,
+        ``"normal"`` and ``"light"``; paths relative to ``root``.
     axes : dict
         The values this trial varies (``{"fix.maxdd": 0.05, "pair": "fran_front"}``):
         what reports plot against.
@@ -95,10 +97,13 @@ class Trial:
         """
         options = {k: v for k, v in self.options.items()
                    if not (k in LATER_OPTIONS and v == LATER_OPTIONS[k])}
+        # The buffers count only for a trial that reads them: a folder that
+        # gained light.exr keeps the ids of its trials without light terms.
+        buffers = () if self.options.get("light_terms") else BUFFER_FILES
         return {
             "task": self.task,
             "options": options,
-            "pairs": [dict(p) for p in self.pairs],
+            "pairs": [{k: v for k, v in p.items() if k not in buffers} for p in self.pairs],
             "depth_scale": self.depth_scale,
             "linear_codes": self.linear_codes,
         }
