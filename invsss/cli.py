@@ -152,13 +152,18 @@ def _render_light_terms(args, extras, shape):
                 f"{args.params}: holds the {term!r} light term, which needs --{flag} "
                 f"(or --no-light-terms to render without the light terms)"
             )
-        buffers[flag] = read_image(path, linear=True)
-        if buffers[flag].shape != (*shape, 3):
-            raise InvalidInputError(
-                f"{path}: expected a 3-channel image of the image's size {shape} for --{flag}, "
-                f"got shape {buffers[flag].shape}"
-            )
+        buffers[flag] = _read_light_buffer(path, flag, shape)
     return terms, LightBuffers(**buffers)
+
+
+def _read_light_buffer(path, flag: str, shape):
+    """A --light or --normal buffer, read as linear floats, of the image's size."""
+    buffer = read_image(path, linear=True)
+    if buffer.shape != (*shape, 3):
+        raise InvalidInputError(
+            f"{path}: expected a 3-channel image of the source's size {shape} for --{flag}, got shape {buffer.shape}"
+        )
+    return buffer
 
 
 def _run_render(args: argparse.Namespace, stop: StopSignals) -> int:
@@ -348,14 +353,8 @@ def _with_light_buffers(pairs, args):
             raise InvalidInputError(f"--{flag}: expected one per pair ({len(pairs)}), got {len(given)}")
     out = []
     for k, pair in enumerate(pairs):
-        normal = read_image(args.normal[k], linear=True) if args.normal else None
-        light = read_image(args.light[k], linear=True) if args.light else None
-        for flag, buffer, path in (("normal", normal, args.normal), ("light", light, args.light)):
-            if buffer is not None and buffer.shape != (*pair.mask.shape, 3):
-                raise InvalidInputError(
-                    f"{path[k]}: expected a 3-channel image of the source's size {pair.mask.shape} "
-                    f"for --{flag}, got shape {buffer.shape}"
-                )
+        normal = _read_light_buffer(args.normal[k], "normal", pair.mask.shape) if args.normal else None
+        light = _read_light_buffer(args.light[k], "light", pair.mask.shape) if args.light else None
         out.append(ImagePair(pair.source, pair.target, pair.depth, pair.mask, normal=normal, light=light))
     return out
 
