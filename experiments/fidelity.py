@@ -18,11 +18,12 @@ target over the eroded mask, one row per way of predicting the target:
 ``fit (medium's dipole)``
     the same with the profile fixed to a 5-Gaussian fit of the medium's dipole
     (``scene.json``'s sigma_s', sigma_a, eta);
-``fit + shift``, ``fit + grazing``, ``fit + shift + grazing``
+``fit + shift``, ``fit + grazing``, ``fit + incidence``, ``fit + shift + grazing``,
+``fit + shift + grazing + incidence``
     the default fit with the light-aware terms of docs/model.md, section 8 (the
     scattered light displaced away from the key light; a gain towards grazing
     view), read from the pair's ``light.exr`` and ``normal.exr``;
-``fit from <other pair>`` (and ``fit + shift + grazing from <other pair>``)
+``fit from <other pair>`` (and the same for the last two rows above)
     the fit of another pair of the same medium, applied to this one (does
     a fit carry over to another view?);
 ``noise ceiling``
@@ -61,7 +62,7 @@ from invsss.estimator.diagnostics import masked_psnr, masked_ssim
 
 THESIS_HAND_VALUES = ((0.5, 2000.0), (0.7, 7500.0), (0.4, 4500.0))
 #: The light-aware term sets fitted on top of the plain fit; the last is all of them.
-LIGHT_TERM_ROWS = (("shift",), ("grazing",), ("shift", "grazing"))
+LIGHT_TERM_ROWS = (("shift",), ("grazing",), ("incidence",), ("shift", "grazing"), ("shift", "grazing", "incidence"))
 #: The thesis gives no maxdd; this one (mm per pixel) never clamps a slope.
 THESIS_MAXDD_MM = 1000.0
 
@@ -198,7 +199,7 @@ def main() -> None:
         rows["fit (medium's dipole)"] = score(dipole.fitted[0], pair, mask)
         for terms in LIGHT_TERM_ROWS:
             buffers = pair["buffers"]
-            if any(getattr(buffers, invsss.light_terms.NEEDED_BUFFER[t]) is None for t in terms):
+            if any(getattr(buffers, b) is None for t in terms for b in invsss.light_terms.NEEDED_BUFFERS[t]):
                 continue
             lit = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"],
                                   light_terms=terms, light_buffers=buffers, **fit_options)
@@ -215,12 +216,12 @@ def main() -> None:
             mask = eroded(b["mask"], args.erode)
             prediction = invsss.render(b["source"], b["depth"], b["mask"], fits[a["name"]].params, model="sog")
             table[b["name"]][f"fit from {a['name']}"] = score(prediction, b, mask)
-            lit = fits.get((a["name"], LIGHT_TERM_ROWS[-1]))
-            if lit is not None and (b["name"], LIGHT_TERM_ROWS[-1]) in fits:
-                prediction = invsss.render(b["source"], b["depth"], b["mask"], lit.params, model="sog",
-                                           light_terms=lit.light_terms_params(), light_buffers=b["buffers"])
-                label = f"fit + {' + '.join(LIGHT_TERM_ROWS[-1])} from {a['name']}"
-                table[b["name"]][label] = score(prediction, b, mask)
+            for terms in LIGHT_TERM_ROWS[-2:]:
+                lit = fits.get((a["name"], terms))
+                if lit is not None and (b["name"], terms) in fits:
+                    prediction = invsss.render(b["source"], b["depth"], b["mask"], lit.params, model="sog",
+                                               light_terms=lit.light_terms_params(), light_buffers=b["buffers"])
+                    table[b["name"]][f"fit + {' + '.join(terms)} from {a['name']}"] = score(prediction, b, mask)
 
     args.out.mkdir(parents=True, exist_ok=True)
     summary = {}

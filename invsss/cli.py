@@ -52,7 +52,7 @@ from .profiles import PROFILE_NAMES
 from .result_dir import ResultDir, ResultWriteError
 from .screen_space import MODELS, render
 from .params import check_plausible
-from .light_terms import NEEDED_BUFFER, LightBuffers, LightTerms
+from .light_terms import LIGHT_TERM_NAMES, NEEDED_BUFFERS, LightBuffers, LightTerms
 from .pair import ImagePair, fill_background_depth
 from .validation import InvalidInputError, check_depth, check_same_frame
 
@@ -121,10 +121,10 @@ def _add_render_parser(subparsers) -> None:
     )
     parser.add_argument("--light", metavar="FILE",
                         help="camera-space unit vectors towards the light, float EXR or NPY (H, W, 3): "
-                        "needed when PARAMS holds a fitted 'shift' light term")
+                        "needed when PARAMS holds a fitted 'shift' or 'incidence' light term")
     parser.add_argument("--normal", metavar="FILE",
                         help="camera-space unit normals, float EXR or NPY (H, W, 3): needed when PARAMS "
-                        "holds a fitted 'grazing' light term")
+                        "holds a fitted 'grazing' or 'incidence' light term")
     parser.add_argument("--no-light-terms", action="store_true",
                         help="render the blur alone, leaving out the light terms PARAMS may hold")
     _add_model_arguments(parser)
@@ -139,20 +139,19 @@ def _render_light_terms(args, extras, shape):
     record = None if args.no_light_terms else extras.get("light_terms")
     if not record:
         return None, None
-    terms = LightTerms(record.get("shift", 0.0), record.get("grazing", 0.0))
+    terms = LightTerms(**{term: record.get(term, 0.0) for term in LIGHT_TERM_NAMES})
     terms.check(f"{args.params}: light_terms")
     buffers = {}
-    for term in ("shift", "grazing"):
-        if term not in record:
-            continue
-        flag = NEEDED_BUFFER[term]
-        path = getattr(args, flag)
-        if path is None:
-            raise InvalidInputError(
-                f"{args.params}: holds the {term!r} light term, which needs --{flag} "
-                f"(or --no-light-terms to render without the light terms)"
-            )
-        buffers[flag] = _read_light_buffer(path, flag, shape)
+    for term in LIGHT_TERM_NAMES:
+        for flag in NEEDED_BUFFERS[term] if term in record else ():
+            path = getattr(args, flag)
+            if path is None:
+                raise InvalidInputError(
+                    f"{args.params}: holds the {term!r} light term, which needs --{flag} "
+                    f"(or --no-light-terms to render without the light terms)"
+                )
+            if flag not in buffers:
+                buffers[flag] = _read_light_buffer(path, flag, shape)
     return terms, LightBuffers(**buffers)
 
 
@@ -277,8 +276,10 @@ def _add_fit_parser(subparsers) -> None:
     parser.add_argument("--light-terms", default="none", metavar="TERMS",
                         help="fit light-aware terms on top of the blur (docs/model.md, section 8): "
                         "'shift' (light exits displaced away from the light; needs --light), "
-                        "'grazing' (brighter or darker at grazing view; needs --normal), or "
-                        "'shift,grazing'; 'shift=1.3' holds kappa at a value measured on a registered pair "
+                        "'grazing' (brighter or darker at grazing view; needs --normal), "
+                        "'incidence' (brighter or darker where the key light grazes the skin or misses it; "
+                        "needs --normal and --light), or a list such as 'shift,grazing,incidence'; "
+                        "'shift=1.3' holds kappa at a value measured on a registered pair "
                         "(for --align) (default: none)")
     parser.add_argument("--light", action="append", default=[], metavar="FILE",
                         help="camera-space unit vectors towards the light, float EXR or NPY (H, W, 3), "

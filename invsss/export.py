@@ -35,7 +35,7 @@ import jax
 import numpy as np
 
 from .io import read_params, write_text_atomic
-from .light_terms import LightTerms
+from .light_terms import LIGHT_TERM_NAMES, LightTerms
 from .models import get_model, resolve_tap_weights
 from .params import SSSParams
 from .passes import TAP_OFFSETS, tap_spread
@@ -112,8 +112,9 @@ def shader_constants(
     light_terms : LightTerms or mapping, optional
         The light-aware terms of docs/model.md, section 8 (a fit's
         ``light_terms`` record works too): adds ``lightShift`` (kappa, scene
-        units) and ``grazingGain`` (gamma), and :func:`to_hlsl` then adds the
-        function that applies them (:data:`LIGHT_TERMS_HLSL`).
+        units), ``grazingGain`` (gamma) and ``incidenceGain`` (beta), 0 for a
+        term not in use, and :func:`to_hlsl` then adds the function that
+        applies them (:data:`LIGHT_TERMS_HLSL`).
 
     Returns
     -------
@@ -166,15 +167,16 @@ def shader_constants(
                 raise InvalidInputError(
                     f"light_terms: expected an invsss.LightTerms or a mapping, got {type(light_terms).__name__}"
                 )
-            values = (light_terms.get("shift", 0.0), light_terms.get("grazing", 0.0))
+            values = [light_terms.get(term, 0.0) for term in LIGHT_TERM_NAMES]
         else:
-            values = (light_terms.shift, light_terms.grazing)
+            values = [getattr(light_terms, term) for term in LIGHT_TERM_NAMES]
         # Checked as LightTerms, written from the given numbers: LightTerms holds
         # JAX's default float32 outside x64, which would round them.
-        shift, grazing = (float(np.asarray(v, np.float64)) for v in values)
-        LightTerms(shift, grazing).check()
+        shift, grazing, incidence = (float(np.asarray(v, np.float64)) for v in values)
+        LightTerms(shift, grazing, incidence).check()
         constants["lightShift"] = shift
         constants["grazingGain"] = grazing
+        constants["incidenceGain"] = incidence
     return constants
 
 
@@ -192,7 +194,8 @@ float3 invsssLightTerms(Texture2D blurred, SamplerState linearClamp, float2 uv, 
     float2 travel = float2(-toLight.x, toLight.y);        // image axes: x right, rows down
     float2 delta = {prefix}lightShift * stretch * travel;  // pixels
     float3 shifted = blurred.SampleLevel(linearClamp, uv - delta * texel, 0).rgb;
-    return shifted * (1.0 + {prefix}grazingGain * (1.0 - saturate(normal.z)));
+    return shifted * (1.0 + {prefix}grazingGain * (1.0 - saturate(normal.z)))
+                   * (1.0 + {prefix}incidenceGain * (1.0 - saturate(dot(normal, toLight))));
 }
 """
 

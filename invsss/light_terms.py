@@ -1,9 +1,9 @@
 """Light-aware terms applied after the screen-space blur (docs/model.md, section 8).
 
 The blur of sections 3-5 is radially symmetric: it spreads light equally in every
-direction. Two effects of real light transport are not symmetric, and each is
-added here as a switch with one fitted parameter, using per-pixel buffers a
-deferred renderer already has:
+direction, and it keeps the source's Lambertian shading. Three effects of real
+light transport do neither, and each is added here as a switch with one fitted
+parameter, using per-pixel buffers a deferred renderer already has:
 
 ``shift`` (``kappa``, scene units, needs the light buffer)
     Light that enters obliquely travels on along its direction before it
@@ -24,8 +24,16 @@ deferred renderer already has:
     ``1 + gamma * (1 - n_z)``, with ``n_z`` the camera-space normal's component
     towards the camera (the cosine of the view angle for a distant camera),
     clipped to ``[0, 1]``.
+``incidence`` (``beta``, dimensionless, needs the normal and light buffers)
+    Nor does a scattering medium reflect the same share of the light at every
+    angle of incidence: light that enters obliquely scatters nearer the surface
+    and more of it comes back out. The image is multiplied by
+    ``1 + beta * (1 - clip(n . l, 0, 1))``: 1 where the key light meets the
+    surface head-on, ``1 + beta`` where it grazes it or does not reach it (there
+    only the other lights shine, whose balance with the key light the source's
+    Lambertian shading also gets wrong).
 
-Both terms are linear in the image, so a blurred image and its layers can be
+All terms are linear in the image, so a blurred image and its layers can be
 passed through them alike; off the mask the image is returned unchanged
 (``out = B + m (T(B) - B)``, as a pass blends).
 
@@ -56,14 +64,15 @@ __all__ = [
     "LightBuffers",
     "propagation_offsets",
     "grazing_field",
+    "incidence_field",
     "shift_image",
     "light_transport",
     "apply_light_terms",
 ]
 
-#: The terms, in the order of docs/model.md, section 8, with the buffer each needs.
-LIGHT_TERM_NAMES = ("shift", "grazing")
-NEEDED_BUFFER = {"shift": "light", "grazing": "normal"}
+#: The terms, in the order of docs/model.md, section 8, with the buffers each needs.
+LIGHT_TERM_NAMES = ("shift", "grazing", "incidence")
+NEEDED_BUFFERS = {"shift": ("light",), "grazing": ("normal",), "incidence": ("normal", "light")}
 
 #: How far from unit length a buffer's vectors may be before it is refused
 #: (8-bit normal maps are off by about 1 %; a wrongly decoded map by far more).
@@ -81,6 +90,9 @@ class LightTerms(eqx.Module):
     grazing : float
         ``gamma``: relative brightening at grazing view (negative: darkening);
         must be > -1 so the gain stays positive.
+    incidence : float
+        ``beta``: relative brightening where the key light arrives at grazing
+        incidence or not at all (negative: darkening); must be > -1.
 
     Examples
     --------
@@ -91,6 +103,7 @@ class LightTerms(eqx.Module):
 
     shift: Float[Array, ""] = eqx.field(converter=_as_float, default=0.0)
     grazing: Float[Array, ""] = eqx.field(converter=_as_float, default=0.0)
+    incidence: Float[Array, ""] = eqx.field(converter=_as_float, default=0.0)
 
     def check(self, name: str = "light_terms") -> None:
         """Raise :class:`InvalidInputError` for values outside the model's domain."""
@@ -100,8 +113,10 @@ class LightTerms(eqx.Module):
                 continue
             if np.ndim(value) != 0 or not np.isfinite(float(value)):
                 raise InvalidInputError(f"{name}.{field}: expected one finite number, got {np.asarray(value)!r}")
-        if is_concrete(self.grazing) and float(self.grazing) <= -1.0:
-            raise InvalidInputError(f"{name}.grazing: expected a value > -1, got {float(self.grazing):g}")
+        for field in ("grazing", "incidence"):
+            value = getattr(self, field)
+            if is_concrete(value) and float(value) <= -1.0:
+                raise InvalidInputError(f"{name}.{field}: expected a value > -1, got {float(value):g}")
 
     def to_dict(self) -> dict:
         return {field: float(getattr(self, field)) for field in LIGHT_TERM_NAMES}
@@ -166,11 +181,12 @@ class LightBuffers(eqx.Module):
     def require(self, terms, prefix: str = "light_buffers.") -> None:
         """Raise unless every buffer the named ``terms`` need is present."""
         for term in terms:
-            if getattr(self, NEEDED_BUFFER[term]) is None:
-                raise InvalidInputError(
-                    f"{prefix}{NEEDED_BUFFER[term]}: the {term!r} term needs this buffer "
-                    f"(camera-space unit vectors, shape (H, W, 3))"
-                )
+            for buffer in NEEDED_BUFFERS[term]:
+                if getattr(self, buffer) is None:
+                    raise InvalidInputError(
+                        f"{prefix}{buffer}: the {term!r} term needs this buffer "
+                        f"(camera-space unit vectors, shape (H, W, 3))"
+                    )
 
 
 def propagation_offsets(light: Float[Array, "H W 3"]) -> Float[Array, "H W 2"]:
@@ -181,6 +197,12 @@ def propagation_offsets(light: Float[Array, "H W 3"]) -> Float[Array, "H W 2"]:
 def grazing_field(normal: Float[Array, "H W 3"]) -> Float[Array, "H W"]:
     """``1 - clip(n_z, 0, 1)``: 0 facing the camera, 1 at a silhouette."""
     return 1.0 - jnp.clip(normal[..., 2], 0.0, 1.0)
+
+
+def incidence_field(normal: Float[Array, "H W 3"], light: Float[Array, "H W 3"]) -> Float[Array, "H W"]:
+    """``1 - clip(n . l, 0, 1)``: 0 where the key light meets the surface head-on, 1 where
+    it grazes the surface or does not reach it."""
+    return 1.0 - jnp.clip(jnp.sum(normal * light, axis=-1), 0.0, 1.0)
 
 
 def shift_image(image: Float[Array, "H W C"], offset: Float[Array, "H W 2"]) -> Float[Array, "H W C"]:
@@ -219,11 +241,13 @@ def light_transport(
     terms: LightTerms,
     offsets: Float[Array, "H W 2"] | None = None,
     grazing: Float[Array, "H W"] | None = None,
+    incidence: Float[Array, "H W"] | None = None,
 ) -> Float[Array, "H W C"]:
     """The terms of section 8 on a blurred image, from precomputed fields.
 
-    ``offsets`` is :func:`propagation_offsets` of the light buffer and ``grazing``
-    is :func:`grazing_field` of the normals; a term whose field is None is off.
+    ``offsets`` is :func:`propagation_offsets` of the light buffer, ``grazing``
+    is :func:`grazing_field` of the normals and ``incidence`` is
+    :func:`incidence_field` of both; a term whose field is None is off.
     This is the traced core the estimator calls once per basis image.
     """
     out = blurred
@@ -233,6 +257,8 @@ def light_transport(
         out = shift_image(out, delta)
     if grazing is not None:
         out = out * (1.0 + terms.grazing * grazing)[..., None]
+    if incidence is not None:
+        out = out * (1.0 + terms.incidence * incidence)[..., None]
     return blurred + mask[..., None] * (out - blurred)
 
 
@@ -249,7 +275,7 @@ def apply_light_terms(blurred, depth, mask, params, terms: LightTerms, buffers: 
         Its stretch parameters set the shift's scale (section 2).
     terms : LightTerms
     buffers : LightBuffers
-        A term is applied when its buffer is present.
+        A term is applied when its buffers are present.
 
     Returns
     -------
@@ -257,5 +283,8 @@ def apply_light_terms(blurred, depth, mask, params, terms: LightTerms, buffers: 
     """
     stretch = stretch_factors(depth, params.sss_level, params.correction, params.maxdd)
     offsets = None if buffers.light is None else propagation_offsets(jnp.asarray(buffers.light, blurred.dtype))
-    grazing = None if buffers.normal is None else grazing_field(jnp.asarray(buffers.normal, blurred.dtype))
-    return light_transport(blurred, mask, stretch, terms, offsets, grazing)
+    normal = None if buffers.normal is None else jnp.asarray(buffers.normal, blurred.dtype)
+    light = None if buffers.light is None else jnp.asarray(buffers.light, blurred.dtype)
+    grazing = None if normal is None else grazing_field(normal)
+    incidence = None if normal is None or light is None else incidence_field(normal, light)
+    return light_transport(blurred, mask, stretch, terms, offsets, grazing, incidence)

@@ -146,7 +146,7 @@ def _parameter_lines(result) -> list[str]:
     terms = getattr(result, "light_terms", None)
     if terms is not None:
         parts = []
-        for name, unit in (("shift", " mm"), ("grazing", "")):
+        for name, unit in (("shift", " mm"), ("grazing", ""), ("incidence", "")):
             if name in terms:
                 err = terms["stderr"].get(name)
                 parts.append(f"{name} {terms[name]:+.3g}{unit} (stderr {'?' if err is None else f'{err:.2g}'})")

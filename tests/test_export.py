@@ -321,11 +321,17 @@ def test_light_terms_export_constants_and_the_snippet(tmp_path):
     params = invsss.SSSParams(900.0, 2.0, 0.5, [0.3, 0.7], [2.0, 0.5])
     plain = invsss.shader_constants(params)
     lit = invsss.shader_constants(params, light_terms={"shift": 1.25, "grazing": -0.2, "stderr": {}})
-    assert {k: v for k, v in lit.items() if k not in ("lightShift", "grazingGain")} == plain
-    assert (lit["lightShift"], lit["grazingGain"]) == (1.25, -0.2)
+    assert {k: v for k, v in lit.items() if k not in ("lightShift", "grazingGain", "incidenceGain")} == plain
+    # A term the record does not hold is written as 0 (off).
+    assert (lit["lightShift"], lit["grazingGain"], lit["incidenceGain"]) == (1.25, -0.2, 0.0)
     hlsl = invsss.to_hlsl(lit, prefix="sss_")
     assert "static const float sss_lightShift = 1.25;" in hlsl
     assert "float3 invsssLightTerms(" in hlsl and "sss_grazingGain * (1.0 - saturate(normal.z))" in hlsl
+    assert "sss_incidenceGain * (1.0 - saturate(dot(normal, toLight)))" in hlsl
+    terms = invsss.LightTerms(incidence=0.35)  # float32 outside x64: written as the object holds it
+    assert invsss.shader_constants(params, light_terms=terms)["incidenceGain"] == float(terms.incidence) != 0.0
+    with pytest.raises(invsss.InvalidInputError, match="light_terms.incidence: expected a value > -1"):
+        invsss.shader_constants(params, light_terms={"incidence": -1.0})
     # Every constant the snippet reads is declared above it.
     snippet = hlsl[hlsl.index("float3 invsssLightTerms"):]
     for name in re.findall(r"\bsss_\w+", snippet):

@@ -43,7 +43,7 @@ def _scene(seed=0):
     return image, depth, mask, _unit(light), _unit(normal), params
 
 
-def _reference(blurred, depth, mask, light, normal, params, shift, grazing):
+def _reference(blurred, depth, mask, light, normal, params, shift, grazing, incidence=0.0):
     """Section 8 written out with SciPy's bilinear interpolation (clamped coordinates)."""
     ddy, ddx = np.gradient(depth)
     L, c, delta = float(params.sss_level), float(params.correction), float(params.maxdd)
@@ -54,23 +54,25 @@ def _reference(blurred, depth, mask, light, normal, params, shift, grazing):
     coords = [np.clip(rows - dy, 0, H - 1), np.clip(cols - dx, 0, W - 1)]
     moved = np.stack([ndimage.map_coordinates(blurred[..., k], coords, order=1) for k in range(3)], -1)
     moved *= (1.0 + grazing * (1.0 - np.clip(normal[..., 2], 0.0, 1.0)))[..., None]
+    cos_incidence = np.einsum("hwc,hwc->hw", normal, light)
+    moved *= (1.0 + incidence * (1.0 - np.clip(cos_incidence, 0.0, 1.0)))[..., None]
     return blurred + mask[..., None] * (moved - blurred)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
-@pytest.mark.parametrize("shift, grazing", [(3.0, 0.3), (-1.5, -0.4), (0.0, 0.7)])
-def test_render_matches_the_definition(seed, shift, grazing):
+@pytest.mark.parametrize("shift, grazing, incidence", [(3.0, 0.3, 0.0), (-1.5, -0.4, 0.5), (0.0, 0.7, -0.3),
+                                                        (0.0, 0.0, 0.8)])
+def test_render_matches_the_definition(seed, shift, grazing, incidence):
     image, depth, mask, light, normal, params = _scene(seed)
-    terms = LightTerms(shift=shift, grazing=grazing)
+    terms = LightTerms(shift=shift, grazing=grazing, incidence=incidence)
     out = invsss.render(image, depth, mask, params, light_terms=terms,
                         light_buffers=LightBuffers(normal=normal, light=light))
     blurred = np.asarray(invsss.render(image, depth, mask, params))
-    expected = _reference(blurred, depth, mask, light, normal, params, shift, grazing)
+    expected = _reference(blurred, depth, mask, light, normal, params, shift, grazing, incidence)
     np.testing.assert_allclose(np.asarray(out), expected, rtol=0, atol=1e-12)
-    if shift != 0.0:
-        # Large enough to move content by more than a pixel somewhere, and the
-        # terms do something (otherwise the comparison above would prove little).
-        assert np.max(np.abs(np.asarray(out) - blurred)) > 0.05
+    # The terms do something (otherwise the comparison above would prove little);
+    # a shift moves content by more than a pixel somewhere.
+    assert np.max(np.abs(np.asarray(out) - blurred)) > 0.05
 
 
 def test_shift_moves_an_edge_away_from_the_light():
@@ -107,14 +109,14 @@ def test_gradients_match_finite_differences():
     def f(x):
         p = invsss.SSSParams(x[2], params.correction, params.maxdd, params.weights, params.variances)
         out = apply_light_terms(blurred, jnp.asarray(depth), jnp.asarray(mask), p,
-                                LightTerms(shift=x[0], grazing=x[1]), buffers)
+                                LightTerms(shift=x[0], grazing=x[1], incidence=x[3]), buffers)
         return jnp.sum(weights * out)
 
     # Away from integer sample positions (kinks of linear interpolation).
-    x0 = jnp.asarray([1.37, 0.21, 810.0])
+    x0 = jnp.asarray([1.37, 0.21, 810.0, -0.17])
     grad = np.asarray(jax.grad(f)(x0))
-    for i, h in enumerate([1e-6, 1e-6, 1e-3]):
-        e = np.zeros(3)
+    for i, h in enumerate([1e-6, 1e-6, 1e-3, 1e-6]):
+        e = np.zeros(4)
         e[i] = h
         fd = (float(f(x0 + e)) - float(f(x0 - e))) / (2 * h)
         assert grad[i] == pytest.approx(fd, rel=1e-5, abs=1e-8)
@@ -181,13 +183,13 @@ class TestTorchTwin:
 
         image, depth, mask, light, normal, params = _scene(1)
         blurred = np.asarray(invsss.render(image, depth, mask, params))
-        x0 = np.array([1.37, 0.21, 810.0])
+        x0 = np.array([1.37, 0.21, 810.0, 0.33])
         weights = np.random.default_rng(4).normal(size=(H, W, 3))
 
         def jax_f(x):
             p = invsss.SSSParams(x[2], params.correction, params.maxdd, params.weights, params.variances)
             out = apply_light_terms(jnp.asarray(blurred), jnp.asarray(depth), jnp.asarray(mask), p,
-                                    LightTerms(shift=x[0], grazing=x[1]),
+                                    LightTerms(shift=x[0], grazing=x[1], incidence=x[3]),
                                     LightBuffers(normal=jnp.asarray(normal), light=jnp.asarray(light)))
             return jnp.sum(jnp.asarray(weights) * out), out
 
@@ -198,7 +200,7 @@ class TestTorchTwin:
                              np.array(params.weights), np.array(params.variances))
         t = lambda a: torch.as_tensor(np.array(a), dtype=torch.float64)  # noqa: E731
         out_torch = itorch.apply_light_terms(t(blurred), t(depth), t(mask), p, shift=x[0], grazing_gain=x[1],
-                                             normal=t(normal), light=t(light))
+                                             normal=t(normal), light=t(light), incidence_gain=x[3])
         (t(weights) * out_torch).sum().backward()
         np.testing.assert_allclose(out_torch.detach().numpy(), np.asarray(out_jax), atol=1e-12)
         np.testing.assert_allclose(x.grad.numpy(), np.asarray(grad_jax), rtol=1e-9, atol=1e-12)
@@ -271,6 +273,45 @@ def test_fit_recovers_the_terms_and_the_blur():
 
 
 @pytest.mark.slow
+def _dome_pair(size=40):
+    """A model-made pair for the incidence term: a textured dome lit from the upper
+    left, so that the view angle (n_z) and the key light's incidence (n . l) vary
+    in different directions and the grazing and incidence gains can be told apart."""
+    rng = np.random.default_rng(2)
+    source = ndimage.gaussian_filter(rng.uniform(0.0, 1.0, (size, size)), 1.5) * 2.0 + 0.3
+    source[:, 14:17] *= 0.3
+    y, x = (np.mgrid[0:size, 0:size] - (size - 1) / 2.0) / (size / 2.0)
+    r2 = np.minimum(x**2 + y**2, 0.9)
+    normal = np.stack([0.9 * x, -0.9 * y, np.sqrt(1.0 - 0.81 * r2)], axis=-1)
+    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+    depth = 500.0 - 40.0 * np.sqrt(1.0 - 0.81 * r2)
+    light = np.broadcast_to(np.array([-0.6, 0.3, np.sqrt(1.0 - 0.45)]), (size, size, 3)).copy()
+    mask = (x**2 + y**2 < 0.85).astype(float)
+    return source, depth, mask, LightBuffers(normal=normal, light=light)
+
+
+@pytest.mark.slow
+def test_fit_recovers_the_incidence_gain_beside_the_other_terms():
+    source, depth, mask, buffers = _dome_pair()
+    truth = invsss.SSSParams(600.0, 0.0, 1.0, [0.6, 0.4], [0.5, 2.0])
+    terms = LightTerms(shift=1.0, grazing=0.3, incidence=0.4)
+    target = np.asarray(invsss.render(source, depth, mask, truth, light_terms=terms, light_buffers=buffers))
+    target = target + np.random.default_rng(1).normal(0.0, 0.002, target.shape)
+    fit = invsss.fit_pair(source, target, depth, mask, profile=PROFILE, fix=FIX, n_starts=2,
+                          light_terms="shift,grazing,incidence", light_buffers=buffers)
+    assert fit.converged
+    assert float(fit.params.sss_level) == pytest.approx(600.0, rel=0.03)
+    for name in ("shift", "grazing", "incidence"):
+        err, true = fit.light_terms["stderr"][name], getattr(terms, name)
+        assert err is not None and 0 < err < 0.1
+        assert abs(fit.light_terms[name] - float(true)) < 4 * err
+    # Without the incidence term the same data are fitted worse.
+    two = invsss.fit_pair(source, target, depth, mask, profile=PROFILE, fix=FIX, n_starts=2,
+                          light_terms="shift,grazing", light_buffers=buffers)
+    assert two.psnr < fit.psnr - 3.0
+    assert fit.light_terms_params().incidence == pytest.approx(fit.light_terms["incidence"])
+
+
 def test_params_file_keeps_the_terms(tmp_path):
     source, depth, mask, buffers = _lit_pair(24)
     target = np.asarray(invsss.render(source, depth, mask, invsss.SSSParams(600.0, 0.0, 1.0, [0.6, 0.4], [0.5, 2.0]),

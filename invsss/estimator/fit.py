@@ -160,13 +160,14 @@ def fit_pair(
         standard deviations of the residual (smoothed over 1 px; dilated by 1 px)
         are excluded from the comparison and the pair is fitted again. Reported in
         :attr:`FitResult.highlights`.
-    light_terms : sequence of {"shift", "grazing"}, or a mapping
+    light_terms : sequence of {"shift", "grazing", "incidence"}, or a mapping
         Add the light-aware terms of docs/model.md, section 8, to the blur: a
-        shift of the scattered light away from the light (``kappa``, mm) and a
-        gain towards grazing view (``gamma``). Names are fitted; a mapping
+        shift of the scattered light away from the light (``kappa``, mm), a
+        gain towards grazing view (``gamma``) and a gain towards grazing
+        incidence of the key light (``beta``). Names are fitted; a mapping
         ``{"shift": 1.3, "grazing": None}`` holds a term at a number (a value
         measured on a registered pair, for an aligned fit of a photograph) and
-        fits one given None. Each needs its buffer in ``light_buffers``;
+        fits one given None. Each needs its buffers in ``light_buffers``;
         reported in :attr:`FitResult.light_terms`.
     light_buffers : LightBuffers, optional
         Camera-space ``light`` (unit vectors towards the light) and ``normal``

@@ -24,10 +24,10 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ..light_terms import LightTerms, grazing_field, light_transport, propagation_offsets
+from ..light_terms import LightTerms, grazing_field, incidence_field, light_transport, propagation_offsets
 from ..stretch import stretch_factors
 from .basis import basis_images
-from .parametrisation import Parametrisation
+from .parametrisation import LIGHT_UNKNOWNS, Parametrisation
 from .projection import combine, solve_linear
 from .vignetting import vignetting_field
 
@@ -40,11 +40,12 @@ def _light_terms(images, pair, natural):
     Both terms are linear in the image, so applying them to each basis image
     and then mixing equals mixing and then applying them: the weights stay linear.
     """
-    terms = LightTerms(natural.get("light_shift", 0.0), natural.get("grazing", 0.0))
+    terms = LightTerms(natural.get("light_shift", 0.0), natural.get("grazing", 0.0), natural.get("incidence", 0.0))
     stretch = stretch_factors(pair.depth, natural["sss_level"], natural["correction"], natural["maxdd"])
     offsets = propagation_offsets(pair.light) if "light_shift" in natural else None
     grazing = grazing_field(pair.normal) if "grazing" in natural else None
-    return jax.vmap(lambda x: light_transport(x, pair.mask, stretch, terms, offsets, grazing))(images)
+    incidence = incidence_field(pair.normal, pair.light) if "incidence" in natural else None
+    return jax.vmap(lambda x: light_transport(x, pair.mask, stretch, terms, offsets, grazing, incidence))(images)
 
 
 class Objective(eqx.Module):
@@ -94,7 +95,7 @@ class Objective(eqx.Module):
             basis_images(p, natural, self.model, self.tap_weights, self.linear_weights)
             for p in self.pairs
         )
-        if "light_shift" in natural or "grazing" in natural:
+        if any(name in natural for name in LIGHT_UNKNOWNS.values()):
             images = tuple(_light_terms(x, p, natural) for x, p in zip(images, self.pairs))
         if "vignetting" not in natural:
             return images

@@ -60,7 +60,7 @@ class FitOptions:
         Refit with the first fit's specular highlights left out (see :func:`invsss.fit_pair`).
     light_terms : tuple of str
         Light-aware terms in the model (:data:`invsss.light_terms.LIGHT_TERM_NAMES`:
-        ``"shift"``, ``"grazing"``), stored as a tuple in that order. Given as
+        ``"shift"``, ``"grazing"``, ``"incidence"``), stored as a tuple in that order. Given as
         names (a list, or a comma-separated string), each term is fitted; given
         as a mapping ``{name: value}`` (or ``"shift=1.3,grazing"``), a term with
         a number is held at it and one with None is fitted. Each needs its
@@ -203,9 +203,10 @@ def check_light_terms(terms) -> tuple[tuple[str, ...], dict[str, float]]:
             number = float(value)
         except (TypeError, ValueError):
             raise InvalidInputError(f"light_terms[{name!r}]: expected a number or None (fitted), got {value!r}") from None
-        if not np.isfinite(number) or (name == "grazing" and number <= -1.0):
+        if not np.isfinite(number) or (name in ("grazing", "incidence") and number <= -1.0):
             raise InvalidInputError(
-                f"light_terms[{name!r}]: expected a finite number{' > -1' if name == 'grazing' else ''}, got {value!r}"
+                f"light_terms[{name!r}]: expected a finite number"
+                f"{' > -1' if name in ('grazing', 'incidence') else ''}, got {value!r}"
             )
         held[name] = number
     return tuple(t for t in LIGHT_TERM_NAMES if t in entries), held

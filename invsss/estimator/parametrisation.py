@@ -35,6 +35,7 @@ light_shift    ``ref * z``                           the scene length one pixel
                                                      covers at the start (docs/model.md,
                                                      section 8)
 grazing        ``z``                                 0 (no grazing-view gain)
+incidence      ``z``                                 0 (no incidence gain)
 =============  ====================================  ===============================
 
 ``softplus`` keeps the correction non-negative while letting it approach 0
@@ -77,7 +78,7 @@ GAUGES = ("variances", "sss_level")
 
 #: The estimator's unknown for each light-aware term (docs/model.md, section 8);
 #: ``shift`` is ``light_shift`` here so that it is not read as a warp's shift.
-LIGHT_UNKNOWNS = {"shift": "light_shift", "grazing": "grazing"}
+LIGHT_UNKNOWNS = {"shift": "light_shift", "grazing": "grazing", "incidence": "incidence"}
 _SCALARS = ("sss_level", "correction", "maxdd")
 
 
@@ -217,7 +218,7 @@ class Parametrisation(eqx.Module):
                 out[name] = _simplex(u, axis=0)
             elif name == "gain_ratio":
                 out[name] = jnp.exp(u)
-            elif name in ("vignetting", "light_shift", "grazing"):
+            elif name in ("vignetting", "light_shift", "grazing", "incidence"):
                 out[name] = ref * u
             else:  # pragma: no cover - blocks are built by this module
                 raise AssertionError(name)
@@ -236,7 +237,7 @@ class Parametrisation(eqx.Module):
             elif name in ("weights", "mix"):
                 logs = np.log(np.maximum(x, 1e-12))
                 u = (logs - logs[:1])[1:]
-            elif name in ("vignetting", "light_shift", "grazing"):
+            elif name in ("vignetting", "light_shift", "grazing", "incidence"):
                 u = x / ref
             else:
                 u = np.log(x)

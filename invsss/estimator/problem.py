@@ -111,10 +111,11 @@ def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, 
         blocks.append(("light_shift", ()))
         start["light_shift"] = 0.0
         reference["light_shift"] = scales.depth / float(level)
-    if "grazing" in light_terms and "grazing" not in light_fixed:
-        blocks.append(("grazing", ()))
-        start["grazing"] = 0.0
-        reference["grazing"] = 1.0
+    for gain in ("grazing", "incidence"):
+        if gain in light_terms and gain not in light_fixed:
+            blocks.append((gain, ()))
+            start[gain] = 0.0
+            reference[gain] = 1.0
     param = Parametrisation(
         tuple(blocks), {k_: jnp.asarray(v) for k_, v in reference.items()}, values
     )

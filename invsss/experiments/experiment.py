@@ -107,7 +107,7 @@ def _check_trial(trial: Trial, name: str, label: str) -> None:
     """Check the options as the task will use them, and that every pair has the
     buffers its light terms read."""
     from ..estimator.options import check_light_terms
-    from ..light_terms import NEEDED_BUFFER
+    from ..light_terms import NEEDED_BUFFERS
     from .data import BUFFER_FILES
     from .tasks import check_task_options
 
@@ -116,8 +116,7 @@ def _check_trial(trial: Trial, name: str, label: str) -> None:
     except InvalidInputError as err:
         raise InvalidInputError(f"{name}: {label}: {err}") from None
     terms, held = check_light_terms(trial.options.get("light_terms") or None)
-    for term in (*terms, *held):
-        role = NEEDED_BUFFER[term]
+    for term, role in ((t, r) for t in (*terms, *held) for r in NEEDED_BUFFERS[t]):
         for pair in trial.pairs:
             if role not in pair:
                 raise InvalidInputError(

@@ -4,7 +4,7 @@ One flat row per trial, the shape a table or a plot wants: ``id``,
 ``status``, one column per varied key (``sss_level``, ``fix.maxdd``, ``pair``),
 the metrics (``loss``, ``psnr``, ``ssim``, and for fits ``sigma``,
 ``converged``, ``iterations``), the parameters (``param.sss_level``,
-``param.weights``...; ``param.light_shift`` and ``param.grazing`` where a
+``param.weights``...; ``param.light_shift``, ``param.grazing`` and ``param.incidence`` where a
 trial fitted light terms), their standard errors (``stderr.sss_level``...),
 ``seconds`` (the trial's total time), ``compute_seconds`` (the fit or render
 alone), ``host``, ``pid``, ``attempts``, ``warnings`` and ``error``. A pandas
@@ -20,8 +20,10 @@ from ..params import PARAM_NAMES
 from ..validation import InvalidInputError
 from .store import DATABASE_NAME, ResultsStore
 
-#: The light terms' unknowns a fit trial may report beside the five parameters.
-LIGHT_PARAMS = ("light_shift", "grazing")
+#: The light terms' unknowns a fit trial may report beside the five parameters
+#: (the values of invsss.estimator.parametrisation.LIGHT_UNKNOWNS, written out so
+#: that reading results does not import JAX).
+LIGHT_PARAMS = ("light_shift", "grazing", "incidence")
 
 __all__ = ["results", "flat_rows"]
 

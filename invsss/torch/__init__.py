@@ -52,7 +52,7 @@ except ImportError as err:  # pragma: no cover - exercised only without the extr
         "(pip install 'invsss[torch]')"
     ) from err
 
-from .light_terms import apply_light_terms, grazing_field, propagation_offsets, shift_image
+from .light_terms import apply_light_terms, grazing_field, incidence_field, propagation_offsets, shift_image
 from .params import SSSParams
 from .passes import TAP_OFFSETS, TAP_WEIGHTS, directional_pass, sample_along, tap_spread, tap_weights
 from .profiles import gaussian, sum_of_gaussians
@@ -71,6 +71,7 @@ __all__ = [
     "SSSParams",
     "apply_light_terms",
     "grazing_field",
+    "incidence_field",
     "propagation_offsets",
     "shift_image",
     "TAP_OFFSETS",

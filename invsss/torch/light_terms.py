@@ -12,7 +12,8 @@ from kornia.geometry.transform import remap
 
 from .stretch import stretch_factors
 
-__all__ = ["propagation_offsets", "grazing_field", "shift_image", "light_transport", "apply_light_terms"]
+__all__ = ["propagation_offsets", "grazing_field", "incidence_field", "shift_image", "light_transport",
+           "apply_light_terms"]
 
 
 def propagation_offsets(light: torch.Tensor) -> torch.Tensor:
@@ -23,6 +24,11 @@ def propagation_offsets(light: torch.Tensor) -> torch.Tensor:
 def grazing_field(normal: torch.Tensor) -> torch.Tensor:
     """(H, W, 3) camera-space normals -> (H, W) ``1 - clip(n_z, 0, 1)``."""
     return 1.0 - normal[..., 2].clamp(0.0, 1.0)
+
+
+def incidence_field(normal: torch.Tensor, light: torch.Tensor) -> torch.Tensor:
+    """(H, W, 3) normals and light directions -> (H, W) ``1 - clip(n . l, 0, 1)``."""
+    return 1.0 - (normal * light).sum(dim=-1).clamp(0.0, 1.0)
 
 
 def shift_image(image: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:
@@ -37,24 +43,30 @@ def shift_image(image: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:
     return sampled[0].permute(1, 2, 0)
 
 
-def light_transport(blurred, mask, stretch, shift, grazing_gain, offsets=None, grazing=None) -> torch.Tensor:
-    """The terms on a blurred (H, W, C) image; ``shift`` is kappa, ``grazing_gain`` is gamma."""
+def light_transport(blurred, mask, stretch, shift, grazing_gain, offsets=None, grazing=None,
+                    incidence_gain=0.0, incidence=None) -> torch.Tensor:
+    """The terms on a blurred (H, W, C) image; ``shift`` is kappa, ``grazing_gain`` is gamma,
+    ``incidence_gain`` is beta."""
     out = blurred
     if offsets is not None:
         s_x, s_y = stretch
         out = shift_image(out, shift * torch.stack([s_x * offsets[..., 0], s_y * offsets[..., 1]], dim=-1))
     if grazing is not None:
         out = out * (1.0 + grazing_gain * grazing)[..., None]
+    if incidence is not None:
+        out = out * (1.0 + incidence_gain * incidence)[..., None]
     return blurred + mask[..., None] * (out - blurred)
 
 
-def apply_light_terms(blurred, depth, mask, params, shift=0.0, grazing_gain=0.0, normal=None, light=None):
+def apply_light_terms(blurred, depth, mask, params, shift=0.0, grazing_gain=0.0, normal=None, light=None,
+                      incidence_gain=0.0):
     """Twin of :func:`invsss.apply_light_terms` with the terms and buffers as plain arguments.
 
     ``params`` is an :class:`invsss.torch.SSSParams`; ``normal`` and ``light`` are
-    (H, W, 3) tensors or None (that term off).
+    (H, W, 3) tensors or None (the terms that need them off).
     """
     stretch = stretch_factors(depth, params.sss_level, params.correction, params.maxdd)
     offsets = None if light is None else propagation_offsets(light)
     field = None if normal is None else grazing_field(normal)
-    return light_transport(blurred, mask, stretch, shift, grazing_gain, offsets, field)
+    incidence = None if normal is None or light is None else incidence_field(normal, light)
+    return light_transport(blurred, mask, stretch, shift, grazing_gain, offsets, field, incidence_gain, incidence)
