@@ -188,7 +188,8 @@ def _run_render(args: argparse.Namespace, stop: StopSignals) -> int:
                  light_buffers=buffers)
     write_image(args.out, np.asarray(out, dtype=np.float32))
     height, width, channels = image.shape
-    extra = "" if terms is None else f", light terms shift={terms.shift:g} mm, grazing={terms.grazing:g}"
+    extra = "" if terms is None else ", light terms " + ", ".join(
+        f"{term}={float(getattr(terms, term)):g}" for term in LIGHT_TERM_NAMES if term in extras["light_terms"])
     print(f"wrote {args.out} ({width}x{height}, {channels} channel(s), model {model}{extra})")
     return 0
 

@@ -79,6 +79,10 @@ GAUGES = ("variances", "sss_level")
 #: The estimator's unknown for each light-aware term (docs/model.md, section 8);
 #: ``shift`` is ``light_shift`` here so that it is not read as a warp's shift.
 LIGHT_UNKNOWNS = {"shift": "light_shift", "grazing": "grazing", "incidence": "incidence"}
+
+#: Blocks that are ``ref * z`` with 0 a value like any other (no fall-off, no
+#: shift, no gain): the vignetting coefficients and the light terms.
+SCALED_BLOCKS = ("vignetting", *LIGHT_UNKNOWNS.values())
 _SCALARS = ("sss_level", "correction", "maxdd")
 
 
@@ -218,7 +222,7 @@ class Parametrisation(eqx.Module):
                 out[name] = _simplex(u, axis=0)
             elif name == "gain_ratio":
                 out[name] = jnp.exp(u)
-            elif name in ("vignetting", "light_shift", "grazing", "incidence"):
+            elif name in SCALED_BLOCKS:
                 out[name] = ref * u
             else:  # pragma: no cover - blocks are built by this module
                 raise AssertionError(name)
@@ -237,7 +241,7 @@ class Parametrisation(eqx.Module):
             elif name in ("weights", "mix"):
                 logs = np.log(np.maximum(x, 1e-12))
                 u = (logs - logs[:1])[1:]
-            elif name in ("vignetting", "light_shift", "grazing", "incidence"):
+            elif name in SCALED_BLOCKS:
                 u = x / ref
             else:
                 u = np.log(x)

@@ -45,6 +45,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .parametrisation import SCALED_BLOCKS
 from .robust import psi_and_slope
 
 __all__ = [
@@ -91,7 +92,7 @@ def _reported(objective, linear_weights: bool, sizes, theta) -> dict:
     natural = objective.param.natural(z)
     out = {
         k: natural[k]
-        for k in ("sss_level", "correction", "maxdd", "variances", "vignetting", "light_shift", "grazing", "incidence")
+        for k in ("sss_level", "correction", "maxdd", "variances", *SCALED_BLOCKS)
         if k in objective.param.free
     }
     if linear_weights:
@@ -210,7 +211,7 @@ def gauss_newton_uncertainty(
             vague = std > WEIGHT_VAGUE
         elif name == "correction":
             vague = std > np.maximum(np.abs(val), correction_ref)
-        elif name in ("vignetting", "light_shift", "grazing", "incidence"):
+        elif name in SCALED_BLOCKS:
             # 0 (no fall-off, no shift) is a value like any other; only a null
             # direction leaves a coefficient undetermined.
             vague = np.zeros(val.shape, bool)
