@@ -44,11 +44,11 @@ from ..registration import Warp, align_source, align_target, align_vectors, esti
 from .inputs import prepare_pairs
 from .options import FitOptions
 from .parametrisation import LIGHT_UNKNOWNS
-from .problem import build_problem
+from .problem import _evaluate, build_problem
 from .result import FitResult, masked_list
 from .robust import robust_scale, robust_weights
 from .solve import NOISE_TOL, RTOL, SCREEN_TOL, FitInterrupted, make_solver, run_solver
-from .uncertainty import gauss_newton_uncertainty, linearise, structural_reasons
+from .uncertainty import gauss_newton_uncertainty, structural_reasons
 
 __all__ = ["fit_pair", "fit_pairs"]
 
@@ -255,30 +255,6 @@ def fit_pairs(
 
 
 # ----------------------------------------------------------------- jitted pieces
-
-
-@eqx.filter_jit
-def _evaluate(objective, z, with_jacobian):
-    """Everything needed after a solve, in one compiled function: the linear
-    unknowns, predictions, loss and, if the traced flag ``with_jacobian`` is set,
-    the linearisation for the covariance (a ``lax.cond``: one compilation serves
-    the cheap calls of the refinement loops and the final one)."""
-    _, _, ratios, coef, offset = objective.linear(z)
-
-    def full():
-        return linearise(objective, z, coef, offset)
-
-    def skipped():
-        return jax.tree_util.tree_map(jnp.zeros_like, jax.eval_shape(full))
-
-    return {
-        "ratios": ratios,
-        "coef": coef,
-        "offset": offset,
-        "predictions": objective.predictions(z),
-        "loss": objective.loss(z),
-        "linearisation": jax.lax.cond(with_jacobian, full, skipped),
-    }
 
 
 # ----------------------------------------------------------------- the fit
