@@ -422,3 +422,15 @@ def test_a_nan_loss_fails_the_trial_and_writes_nothing(root, monkeypatch):
     outcome = runner.execute(trial.to_dict(), str(out))
     assert outcome["status"] == "failed" and "loss is nan" in outcome["error"]
     assert not os.path.exists(trial_folder(out, trial.id))
+
+
+def test_shipped_experiment_files_load():
+    """Every experiment file under experiments/ expands into checked trials (its
+    pairs exist, its keys and options are valid, light terms find their buffers)."""
+    import glob
+
+    files = sorted(glob.glob(os.path.join(os.path.dirname(__file__), "..", "experiments", "*.toml")))
+    assert len(files) >= 4
+    for path in files:
+        experiment = ex.load(path)
+        assert experiment.trials, path
