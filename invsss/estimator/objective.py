@@ -114,7 +114,9 @@ class Objective(eqx.Module):
         )
         return natural, bases, ratios, coef, offset
 
-    def _residual(self, bases, ratios, coef, offset) -> Float[Array, " N"]:
+    def mixed_residual(self, bases, ratios, coef, offset) -> Float[Array, " N"]:
+        """The weighted residual of the predictions mixed from given basis images
+        (linear in ``coef`` and ``offset``; the covariance differentiates it)."""
         parts = []
         for k, (pair, x, w) in enumerate(zip(self.pairs, bases, self.weights())):
             pred = combine(x, ratios[k], coef, offset[k])
@@ -123,12 +125,12 @@ class Objective(eqx.Module):
 
     def __call__(self, z, args=None):
         _, bases, ratios, coef, offset = self.linear(z)
-        return self._residual(bases, ratios, coef, offset), None
+        return self.mixed_residual(bases, ratios, coef, offset), None
 
     def explicit_residual(self, z, coef, offset) -> Float[Array, " N"]:
         """The residual with the linear unknowns given instead of projected out."""
         natural = self.param.natural(z)
-        return self._residual(self.bases(natural), self.ratios(natural), coef, offset)
+        return self.mixed_residual(self.bases(natural), self.ratios(natural), coef, offset)
 
     def predictions(self, z) -> tuple:
         """``a * out + b`` for every pair, full images of the target's shape."""

@@ -129,7 +129,7 @@ def linearise(objective, z, coef, offset) -> dict:
     bases, ratios = objective.bases(natural), objective.ratios(natural)
 
     def residual_linear(t):
-        return objective._residual(bases, ratios, t[:n_coef].reshape(coef.shape), t[n_coef:].reshape(offset.shape))
+        return objective.mixed_residual(bases, ratios, t[:n_coef].reshape(coef.shape), t[n_coef:].reshape(offset.shape))
 
     jacobian = jnp.concatenate(
         [jax.jacfwd(residual_z)(z), jax.jacfwd(residual_linear)(theta[n_z:])], axis=1
