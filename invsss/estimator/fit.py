@@ -43,7 +43,7 @@ from .diagnostics import MISALIGNMENT_PX, masked_psnr, masked_ssim, misalignment
 from ..registration import Warp, align_source, align_target, align_vectors, estimate_warp, match_photometry
 from .inputs import prepare_pairs
 from .options import FitOptions
-from .parametrisation import LIGHT_UNKNOWNS
+from .parametrisation import LIGHT_UNKNOWNS, by_unknown
 from .problem import _evaluate, build_problem
 from .result import FitResult, masked_list
 from .robust import robust_scale, robust_weights
@@ -477,8 +477,7 @@ def _estimate(result) -> dict:
     if result.vignetting is not None:
         out["vignetting"] = np.asarray(result.vignetting["coefficients"])
     if result.light_terms is not None:
-        out.update({LIGHT_UNKNOWNS[term]: value for term, value in result.light_terms.items()
-                    if term in LIGHT_UNKNOWNS})
+        out.update(by_unknown(result.light_terms))
     return out
 
 

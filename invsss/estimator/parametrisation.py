@@ -67,6 +67,7 @@ __all__ = [
     "PARAM_NAMES",
     "GAUGES",
     "LIGHT_UNKNOWNS",
+    "by_unknown",
     "resolve_profile",
     "softplus_inverse",
     "check_fix",
@@ -79,6 +80,20 @@ GAUGES = ("variances", "sss_level")
 #: The estimator's unknown for each light-aware term (docs/model.md, section 8);
 #: ``shift`` is ``light_shift`` here so that it is not read as a warp's shift.
 LIGHT_UNKNOWNS = {"shift": "light_shift", "grazing": "grazing", "incidence": "incidence"}
+
+
+
+def by_unknown(entries: dict) -> dict:
+    """``{term: x}`` of the light terms (a fit's ``light_terms`` record, or its
+    ``stderr``) keyed by the names of their unknowns; other keys are dropped.
+
+    Examples
+    --------
+    >>> by_unknown({"shift": 1.2, "grazing": 0.3, "stderr": {}, "fixed": []})
+    {'light_shift': 1.2, 'grazing': 0.3}
+    """
+    return {LIGHT_UNKNOWNS[term]: value for term, value in entries.items() if term in LIGHT_UNKNOWNS}
+
 
 #: Blocks that are ``ref * z`` with 0 a value like any other (no fall-off, no
 #: shift, no gain): the vignetting coefficients and the light terms.

@@ -15,6 +15,7 @@ per worker.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import socket
@@ -43,8 +44,6 @@ def _one_line(err: BaseException) -> str:
 
 
 def _load(trial: Trial) -> list:
-    import dataclasses
-
     from ..io import load_pair, read_image
 
     pairs = []

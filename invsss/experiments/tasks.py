@@ -116,15 +116,14 @@ def _fit_output(result, names: list[str]) -> TaskOutput:
     for name, image in zip(names, result.fitted):
         files[name] = _image_writer(image)
     metrics = {k: content[k] for k in (*METRICS, "sigma", "converged", "iterations")}
-    from ..estimator.parametrisation import LIGHT_UNKNOWNS
+    from ..estimator.parametrisation import by_unknown
 
     params, stderr = {k: content[k] for k in PARAM_NAMES}, dict(content["stderr"] or {})
     # The light terms' values sit beside the five parameters, under the names the
     # estimator gives their unknowns (a held term is reported at its value).
-    for term, value in (content.get("light_terms") or {}).items():
-        if term in LIGHT_UNKNOWNS:
-            params[LIGHT_UNKNOWNS[term]] = value
-            stderr[LIGHT_UNKNOWNS[term]] = content["light_terms"]["stderr"].get(term)
+    if content.get("light_terms"):
+        params.update(by_unknown(content["light_terms"]))
+        stderr.update(by_unknown(content["light_terms"]["stderr"]))
     return TaskOutput(
         params=params,
         stderr=stderr,
