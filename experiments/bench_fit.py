@@ -34,6 +34,12 @@ The profile has three Gaussians, the distinct variances of the thesis profile
 would make their weight split undetermined and measure that degeneracy instead of
 the solvers.
 
+``--stopping PAIR_DIR [PAIR_DIR ...]`` fits each pair folder with the command
+line's defaults twice, without and with the stall test of
+:mod:`invsss.estimator.solve` (``STALL_TOL``, ``SCREEN_STALL_TOL``), and prints
+the steps, the time, ``sss_level`` and ``correction`` with their standard
+errors, and how much chi^2 the stall test left untaken.
+
 ``--breakdown PAIR_DIR`` instead profiles ``fit_pair`` with the command line's
 defaults on a pair folder (``source.exr``, ``target.exr``, ``depth.exr``,
 ``mask.png``, e.g. ``data_synthetic/fran_front``), stage by stage: import,
@@ -49,6 +55,7 @@ Usage::
 
     python experiments/bench_fit.py [--size 128] [--repeats 3] [--max-steps 200]
     python experiments/bench_fit.py --breakdown data_synthetic/fran_front
+    python experiments/bench_fit.py --stopping data_synthetic/pt_face_940 data_synthetic/fran_front
 """
 
 from __future__ import annotations
@@ -203,7 +210,12 @@ def main() -> None:
     parser.add_argument("--breakdown", metavar="PAIR_DIR", default=None,
                         help="profile fit_pair stage by stage on this pair folder, cold and warm")
     parser.add_argument("--breakdown-child", metavar="CACHE_DIR", default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--stopping", metavar="PAIR_DIR", nargs="+", default=None,
+                        help="fit these pair folders with and without the stall test; steps, time, estimates")
     args = parser.parse_args()
+    if args.stopping is not None:
+        stopping(args.stopping)
+        return
     if args.breakdown_child is not None:
         breakdown_child(args.breakdown, args.breakdown_child)
         return
@@ -433,6 +445,45 @@ def breakdown(pair_dir: str) -> None:
     c, w, s2 = (columns[k][1]["fit"] for k in ("cold", "warm cache", "2nd fit"))
     print(f"ratios: warm cache / cold = {w / c:.2f}; 2nd fit in process / cold = {s2 / c:.2f}; "
           f"compile share of the cold fit = {totals[0] / c:.2f}")
+
+
+def stopping(pair_dirs) -> None:
+    """Each pair fitted with the CLI defaults, the stall test off and on, in one process.
+
+    The first fit of each image size compiles; a warm-up fit comes first so that
+    both columns time fits that do not.
+    """
+    import invsss.estimator.fit as fit_module
+    from invsss.io import load_pair
+
+    settings = {"off": (None, None), "on": (fit_module.STALL_TOL, fit_module.SCREEN_STALL_TOL)}
+    print("bench_fit --stopping: fit_pair with the CLI defaults, stall test off / on; "
+          f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}")
+    header = f"{'pair':24s} {'stall':5s} {'steps':>5s} {'seconds':>8s} {'sss_level':>16s} {'correction':>16s} {'chi2 - off':>10s}"
+    print(header)
+    print("-" * len(header))
+    totals = defaultdict(lambda: [0, 0.0])
+    for pair_dir in pair_dirs:
+        pair = load_pair(*(os.path.join(pair_dir, f) for f in ("source.exr", "target.exr", "depth.exr", "mask.png")))
+        fit_pair(pair.source, pair.target, pair.depth, pair.mask)  # compile
+        results = {}
+        for name, (stall, screen_stall) in settings.items():
+            fit_module.STALL_TOL, fit_module.SCREEN_STALL_TOL = stall, screen_stall
+            t0 = time.perf_counter()
+            results[name] = result = fit_pair(pair.source, pair.target, pair.depth, pair.mask)
+            seconds = time.perf_counter() - t0
+            totals[name][0] += result.iterations
+            totals[name][1] += seconds
+            # chi^2 difference: the loss over its noise variance, summed over the residual.
+            dof = float(np.sum(np.asarray(pair.mask) > 0))
+            chi2 = (result.loss - results["off"].loss) * dof / results["off"].loss
+            cells = [f"{result.values[k]:8.1f} +- {result.stderr[k]:5.1f}" for k in ("sss_level", "correction")]
+            print(f"{os.path.basename(pair_dir.rstrip('/')):24s} {name:5s} {result.iterations:5d} {seconds:8.2f} "
+                  f"{cells[0]:>16s} {cells[1]:>16s} {chi2:10.2f}")
+        fit_module.STALL_TOL, fit_module.SCREEN_STALL_TOL = settings["on"]
+    print(f"{'all':24s} " + "; ".join(f"{k}: {n} steps, {t:.1f} s" for k, (n, t) in totals.items())
+          + f"; steps on / off = {totals['on'][0] / totals['off'][0]:.2f}, "
+          f"time on / off = {totals['on'][1] / totals['off'][1]:.2f}")
 
 
 if __name__ == "__main__":

@@ -1,9 +1,10 @@
-"""When a solve stops: the noise-level test and the end of a start in a known basin.
+"""When a solve stops: the noise-level test, the stall test and the end of a start in a known basin.
 
 ``gauss_newton_distance`` is checked against the covariance computed by hand with
 NumPy; ``run_solver(noise_tolerance=...)`` on a noisy nonlinear fit stops earlier
 than a tight tolerance, within the asked fraction of a standard error of where
-the tight solve ends; and in a multi-start fit, starts that reach the first
+the tight solve ends; ``run_solver(stall_tolerance=...)`` ends a solve whose
+accepted steps have stopped buying chi^2, and only then; and in a multi-start fit, starts that reach the first
 start's basin end there, saving steps without moving the estimate by more than
 the loss's own roughness.
 """
@@ -64,6 +65,39 @@ def test_noise_tolerance_stops_within_that_many_standard_errors_of_the_tight_sol
     covariance = np.sum(r**2) / (t.size - 3) * np.linalg.inv(J.T @ J)
     move = np.asarray(noisy.z) - np.asarray(tight.z)
     assert float(np.sqrt(move @ np.linalg.solve(covariance, move))) < 0.05
+
+
+def _decay_problem(seed):
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 5.0, 400)
+    y = 2.0 * np.exp(-t / 1.3) + 0.3 + 0.05 * rng.standard_normal(t.size)
+    return _Decay(jnp.asarray(t), jnp.asarray(y))
+
+
+def test_stall_tolerance_ends_a_solve_once_accepted_steps_stop_buying_chi2():
+    with jax.enable_x64(True):
+        problem = _decay_problem(0)
+        z0 = jnp.array([0.5, 1.5, 0.0])
+        lm = optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12)
+        tight = run_solver(lm, problem, z0, 200)
+        stalled = run_solver(lm, problem, z0, 200, stall_tolerance=0.1)
+    assert stalled.converged and stalled.steps < tight.steps
+    # What it leaves untaken is below the tolerance, in chi^2 (397 degrees of freedom).
+    assert (stalled.final - tight.final) * 397 / tight.final < 0.1
+
+
+def test_rejected_steps_do_not_count_towards_a_stall():
+    # On this draw the tight solve's last eleven steps are all rejected but one
+    # (the loss repeats exactly while the trust region shrinks): counted as steps,
+    # they would look like a stall at step 8.
+    with jax.enable_x64(True):
+        problem = _decay_problem(1)
+        z0 = jnp.array([0.5, 1.5, 0.0])
+        lm = optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12)
+        tight = run_solver(lm, problem, z0, 200)
+        stalled = run_solver(lm, problem, z0, 200, stall_tolerance=0.1)
+    assert np.sum(np.diff(tight.history) == 0) >= 8
+    assert stalled.steps == tight.steps
 
 
 def test_arrived_ends_a_solve_as_converged():

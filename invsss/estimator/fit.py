@@ -47,7 +47,9 @@ from .parametrisation import LIGHT_UNKNOWNS, by_unknown
 from .problem import _evaluate, build_problem
 from .result import FitResult, masked_list
 from .robust import robust_scale, robust_weights
-from .solve import NOISE_TOL, RTOL, SCREEN_TOL, FitInterrupted, make_solver, run_solver
+from .solve import (
+    NOISE_TOL, RTOL, SCREEN_STALL_TOL, SCREEN_TOL, STALL_TOL, FitInterrupted, make_solver, run_solver,
+)
 from .uncertainty import gauss_newton_uncertainty, structural_reasons
 
 __all__ = ["fit_pair", "fit_pairs"]
@@ -617,8 +619,9 @@ def _solve(problem, options, steps) -> _Path:
 
     def run(label, z0, with_solver=solver, arrived=None):
         steps.begin(label)
+        stall = SCREEN_STALL_TOL if with_solver is screen else STALL_TOL
         return run_solver(with_solver, path.objective, z0, options.max_steps, steps, steps.stop_requested,
-                          arrived, NOISE_TOL)
+                          arrived, NOISE_TOL, stall)
 
     # Multi-start from the lowest local minima of the blur scan; keep the best. A
     # start that comes within SAME_BASIN of a minimum an earlier start reached
