@@ -38,7 +38,9 @@ the solvers.
 line's defaults twice, without and with the stall test of
 :mod:`invsss.estimator.solve` (``STALL_TOL``, ``SCREEN_STALL_TOL``), and prints
 the steps, the time, ``sss_level`` and ``correction`` with their standard
-errors, and how much chi^2 the stall test left untaken.
+errors, and how much chi^2 the stall test left untaken. ``--jacobian PAIR_DIR
+[PAIR_DIR ...]`` does the same for the solvers' Jacobian, forward mode against
+forward differences (:class:`invsss.estimator.solve.DenseJacobian`).
 
 ``--breakdown PAIR_DIR`` instead profiles ``fit_pair`` with the command line's
 defaults on a pair folder (``source.exr``, ``target.exr``, ``depth.exr``,
@@ -56,6 +58,7 @@ Usage::
     python experiments/bench_fit.py [--size 128] [--repeats 3] [--max-steps 200]
     python experiments/bench_fit.py --breakdown data_synthetic/fran_front
     python experiments/bench_fit.py --stopping data_synthetic/pt_face_940 data_synthetic/fran_front
+    python experiments/bench_fit.py --jacobian data_synthetic/fran_front data_synthetic/pt_face_940
 """
 
 from __future__ import annotations
@@ -212,9 +215,14 @@ def main() -> None:
     parser.add_argument("--breakdown-child", metavar="CACHE_DIR", default=None, help=argparse.SUPPRESS)
     parser.add_argument("--stopping", metavar="PAIR_DIR", nargs="+", default=None,
                         help="fit these pair folders with and without the stall test; steps, time, estimates")
+    parser.add_argument("--jacobian", metavar="PAIR_DIR", nargs="+", default=None,
+                        help="fit these pair folders with forward-mode and difference Jacobians")
     args = parser.parse_args()
     if args.stopping is not None:
         stopping(args.stopping)
+        return
+    if args.jacobian is not None:
+        jacobian(args.jacobian)
         return
     if args.breakdown_child is not None:
         breakdown_child(args.breakdown, args.breakdown_child)
@@ -447,44 +455,67 @@ def breakdown(pair_dir: str) -> None:
           f"compile share of the cold fit = {totals[0] / c:.2f}")
 
 
-def stopping(pair_dirs) -> None:
-    """Each pair fitted with the CLI defaults, the stall test off and on, in one process.
-
-    The first fit of each image size compiles; a warm-up fit comes first so that
-    both columns time fits that do not.
-    """
+def _compare(pair_dirs, title: str, settings: dict) -> None:
+    """Each pair fitted with the CLI defaults under each of ``settings`` (name ->
+    ``{fit.py constant: value}``), in one process; a short warm-up fit per pair
+    and setting comes first so that no column pays for compilation."""
     import invsss.estimator.fit as fit_module
     from invsss.io import load_pair
 
-    settings = {"off": (None, None), "on": (fit_module.STALL_TOL, fit_module.SCREEN_STALL_TOL)}
-    print("bench_fit --stopping: fit_pair with the CLI defaults, stall test off / on; "
+    defaults = {k: getattr(fit_module, k) for values in settings.values() for k in values}
+    print(f"bench_fit {title}: fit_pair with the CLI defaults; "
           f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}")
-    header = f"{'pair':24s} {'stall':5s} {'steps':>5s} {'seconds':>8s} {'sss_level':>16s} {'correction':>16s} {'chi2 - off':>10s}"
+    first = next(iter(settings))
+    header = (f"{'pair':22s} {'setting':12s} {'steps':>5s} {'seconds':>8s} {'sss_level':>16s} "
+              f"{'correction':>16s} {'chi2 - ' + first:>15s} {'moved (sd)':>10s}")
     print(header)
     print("-" * len(header))
     totals = defaultdict(lambda: [0, 0.0])
     for pair_dir in pair_dirs:
         pair = load_pair(*(os.path.join(pair_dir, f) for f in ("source.exr", "target.exr", "depth.exr", "mask.png")))
-        fit_pair(pair.source, pair.target, pair.depth, pair.mask)  # compile
         results = {}
-        for name, (stall, screen_stall) in settings.items():
-            fit_module.STALL_TOL, fit_module.SCREEN_STALL_TOL = stall, screen_stall
+        for name, values in settings.items():
+            for key, value in {**defaults, **values}.items():
+                setattr(fit_module, key, value)
+            fit_pair(pair.source, pair.target, pair.depth, pair.mask, max_steps=2)  # compile this setting
             t0 = time.perf_counter()
             results[name] = result = fit_pair(pair.source, pair.target, pair.depth, pair.mask)
             seconds = time.perf_counter() - t0
             totals[name][0] += result.iterations
             totals[name][1] += seconds
-            # chi^2 difference: the loss over its noise variance, summed over the residual.
+            # chi^2 difference: the loss over its noise variance, summed over the mask.
+            base = results[first]
             dof = float(np.sum(np.asarray(pair.mask) > 0))
-            chi2 = (result.loss - results["off"].loss) * dof / results["off"].loss
-            cells = [f"{result.values[k]:8.1f} +- {result.stderr[k]:5.1f}" for k in ("sss_level", "correction")]
-            print(f"{os.path.basename(pair_dir.rstrip('/')):24s} {name:5s} {result.iterations:5d} {seconds:8.2f} "
-                  f"{cells[0]:>16s} {cells[1]:>16s} {chi2:10.2f}")
-        fit_module.STALL_TOL, fit_module.SCREEN_STALL_TOL = settings["on"]
-    print(f"{'all':24s} " + "; ".join(f"{k}: {n} steps, {t:.1f} s" for k, (n, t) in totals.items())
-          + f"; steps on / off = {totals['on'][0] / totals['off'][0]:.2f}, "
-          f"time on / off = {totals['on'][1] / totals['off'][1]:.2f}")
+            chi2 = (result.loss - base.loss) * dof / base.loss
+            # Undetermined parameters (no standard error, e.g. correction on flat depth) are left out.
+            moved = max((abs(float(result.values[k]) - float(base.values[k])) / float(base.stderr[k])
+                         for k in ("sss_level", "correction") if base.stderr[k] is not None), default=np.nan)
+            cells = [f"{result.values[k]:8.1f} +- " + ("undet." if result.stderr[k] is None else f"{result.stderr[k]:5.1f}")
+                     for k in ("sss_level", "correction")]
+            print(f"{os.path.basename(pair_dir.rstrip('/')):22s} {name:12s} {result.iterations:5d} {seconds:8.2f} "
+                  f"{cells[0]:>16s} {cells[1]:>16s} {chi2:15.2f} {moved:10.2f}", flush=True)
+    for key, value in defaults.items():
+        setattr(fit_module, key, value)
+    print("all: " + "; ".join(f"{k}: {n} steps, {t:.1f} s" for k, (n, t) in totals.items()))
+    for name in list(settings)[1:]:
+        print(f"{name} / {first}: steps {totals[name][0] / totals[first][0]:.2f}, "
+              f"time {totals[name][1] / totals[first][1]:.2f}")
 
+
+def stopping(pair_dirs) -> None:
+    """The stall test of invsss.estimator.solve off and on."""
+    _compare(pair_dirs, "--stopping (stall test off / on)", {
+        "stall off": {"STALL_TOL": None, "SCREEN_STALL_TOL": None},
+        "stall on": {},
+    })
+
+
+def jacobian(pair_dirs) -> None:
+    """The solvers' Jacobian by forward mode and by forward differences."""
+    _compare(pair_dirs, "--jacobian (forward mode / forward differences)", {
+        "forward-mode": {"SOLVER_JACOBIAN": "forward-mode"},
+        "differences": {"SOLVER_JACOBIAN": "differences"},
+    })
 
 if __name__ == "__main__":
     main()

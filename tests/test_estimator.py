@@ -366,7 +366,7 @@ def test_projected_residual_jacobian_matches_finite_differences():
     problem = build_problem([(source, target, depth, mask)], FitOptions(profile=PROFILE3, n_starts=1))
     captured = {"objective": problem.objective, "z": np.asarray(problem.z0)}
     with jax.enable_x64(True):
-        fn = DenseJacobian(captured["objective"])
+        fn = DenseJacobian(captured["objective"], differences=False)
         z = jnp.asarray(captured["z"]) + jnp.asarray([0.05, -0.1, 0.07])  # L, correction, maxdd
 
         @eqx.filter_jit
@@ -386,6 +386,46 @@ def test_projected_residual_jacobian_matches_finite_differences():
             # min at maxdd), and a kink inside [z - h, z + h] spoils a single entry.
             assert np.linalg.norm(fd) > 0
             assert np.linalg.norm(jac[:, k] - fd) < 1e-4 * np.linalg.norm(fd)
+
+
+def test_solvers_difference_jacobian_matches_forward_mode():
+    """The solvers' default Jacobian, forward differences of the projected residual,
+    against forward mode through it, column by column, on an RGB source (five
+    unknowns: the blur's three and the grey mix's two)."""
+    from invsss.estimator import FitOptions, build_problem
+    from invsss.estimator.solve import DenseJacobian
+
+    truth = invsss.SSSParams(700.0, 300.0, 2.0, PROFILE3["weights"], PROFILE3["variances"])
+    source, target, depth, mask, _ = make_pair("face", truth, size=32, source_channels=3, target="grey", seed=4)
+    problem = build_problem([(source, target, depth, mask)], FitOptions(profile=PROFILE3, n_starts=1))
+    assert problem.param.free == ("sss_level", "correction", "maxdd", "mix")
+    with jax.enable_x64(True):
+        z = problem.z0 + jnp.asarray([0.05, -0.1, 0.07, 0.2, -0.1])
+
+        def jacobian(differences):
+            fn = DenseJacobian(problem.objective, differences=differences)
+            return np.asarray(jax.jit(jax.jacfwd(lambda u: fn(u)[0]))(z))
+
+        exact, approx = jacobian(False), jacobian(True)
+    assert approx.shape == exact.shape == (32 * 32, 5)
+    for k in range(5):
+        assert np.linalg.norm(exact[:, k]) > 0
+        assert np.linalg.norm(approx[:, k] - exact[:, k]) < 1e-3 * np.linalg.norm(exact[:, k])
+
+
+def test_solver_jacobian_choice_is_checked():
+    import optimistix as optx
+
+    from invsss.estimator.solve import run_solver
+
+    def line(z, args=None):
+        return z - 1.0, None
+
+    lm = optx.LevenbergMarquardt(1e-8, 1e-8)
+    with pytest.raises(InvalidInputError, match=r"^jacobian: expected one of forward-mode, differences, got 'fd'$"):
+        run_solver(lm, line, jnp.zeros(1), 5, jacobian="fd")
+    with pytest.raises(InvalidInputError, match=r"^jacobian: 'differences' needs an objective with a difference_jacobian"):
+        run_solver(lm, line, jnp.zeros(1), 5, jacobian="differences")
 
 
 @pytest.mark.slow

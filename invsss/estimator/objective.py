@@ -90,11 +90,17 @@ class Objective(eqx.Module):
     def weights(self) -> tuple:
         return tuple(p.residual_weight[..., None] * u for p, u in zip(self.pairs, self.robust))
 
-    def bases(self, natural: dict) -> tuple:
-        images = tuple(
+    def blurred_bases(self, natural: dict) -> tuple:
+        """The model's basis images of every pair (:func:`.basis.basis_images`): the blur."""
+        return tuple(
             basis_images(p, natural, self.model, self.tap_weights, self.linear_weights)
             for p in self.pairs
         )
+
+    def bases(self, natural: dict, blurred: tuple | None = None) -> tuple:
+        """The basis images the projection mixes: the blurred ones (made here unless
+        given), through the light-aware terms and the vignetting when fitted."""
+        images = self.blurred_bases(natural) if blurred is None else blurred
         if any(name in natural for name in LIGHT_UNKNOWNS.values()):
             images = tuple(_light_terms(x, p, natural) for x, p in zip(images, self.pairs))
         if "vignetting" not in natural:
@@ -104,10 +110,11 @@ class Objective(eqx.Module):
             x * vignetting_field(natural["vignetting"], x.shape[1:3])[None, :, :, None] for x in images
         )
 
-    def linear(self, z) -> tuple[dict, tuple, Array, Array, Array]:
-        """``(natural, bases, ratios, coef, offset)`` at ``z``."""
+    def linear(self, z, blurred: tuple | None = None) -> tuple[dict, tuple, Array, Array, Array]:
+        """``(natural, bases, ratios, coef, offset)`` at ``z`` (from the given
+        blurred basis images instead of blurring, if given)."""
         natural = self.param.natural(z)
-        bases = self.bases(natural)
+        bases = self.bases(natural, blurred)
         ratios = self.ratios(natural)
         coef, offset = solve_linear(
             bases, tuple(p.target for p in self.pairs), self.weights(), ratios, self.active
@@ -126,6 +133,38 @@ class Objective(eqx.Module):
     def __call__(self, z, args=None):
         _, bases, ratios, coef, offset = self.linear(z)
         return self.mixed_residual(bases, ratios, coef, offset), None
+
+    def difference_jacobian(self, z, step: float) -> tuple[Float[Array, " N"], Float[Array, "N n"]]:
+        """The residual at ``z`` and its Jacobian, the blur by forward differences.
+
+        The blurred basis images are differentiated by forward differences of
+        ``step`` in each unknown (one blur per unknown, where forward mode costs
+        about two: each tap gathers the tangent image and the image's slope); the
+        rest (light terms, vignetting, the projection) by forward mode through their
+        linearisation in those images. Differencing the whole residual instead
+        would difference the projection's solve too, whose rounding (its normal
+        matrix is ill-conditioned: neighbouring layers are alike) then enters the
+        columns at 1e-10 / step and makes the solver's path depend on how XLA
+        happened to compile it.
+        """
+        natural = self.param.natural(z)
+        blurred = self.blurred_bases(natural)
+        h = jnp.asarray(step, z.dtype)
+        taken = (z + h) - z  # divide by the step actually taken
+
+        def column(j):
+            moved = self.blurred_bases(self.param.natural(z.at[j].add(h)))
+            return tuple((a - b) / taken[j] for a, b in zip(moved, blurred))
+
+        slopes = jax.lax.map(column, jnp.arange(z.size))  # each (n, nb, H, W, C)
+
+        def linearised(u):
+            images = tuple(b + jnp.tensordot(u - z, d, axes=1) for b, d in zip(blurred, slopes))
+            _, bases, ratios, coef, offset = self.linear(u, images)
+            return self.mixed_residual(bases, ratios, coef, offset)
+
+        jacobian, residual = jax.jacfwd(lambda u: (linearised(u),) * 2, has_aux=True)(z)
+        return residual, jacobian
 
     def explicit_residual(self, z, coef, offset) -> Float[Array, " N"]:
         """The residual with the linear unknowns given instead of projected out."""

@@ -29,8 +29,8 @@ import optimistix as optx
 from ..validation import InvalidInputError
 
 __all__ = [
-    "SOLVERS", "SCREEN_TOL", "NOISE_TOL", "STALL_TOL", "SCREEN_STALL_TOL", "STALL_WINDOW",
-    "gauss_newton_distance", "make_solver", "SolveRecord", "run_solver", "FitInterrupted",
+    "SOLVERS", "JACOBIANS", "DIFFERENCE_STEP", "SCREEN_TOL", "NOISE_TOL",
+    "STALL_TOL", "SCREEN_STALL_TOL", "STALL_WINDOW", "gauss_newton_distance", "make_solver", "SolveRecord", "run_solver", "FitInterrupted",
 ]
 
 SOLVERS = ("lm", "gauss-newton", "bfgs")
@@ -105,35 +105,60 @@ def make_solver(name: str, tolerance: float | None = None):
     raise InvalidInputError(f"solver: expected one of {', '.join(SOLVERS)}, got {name!r}")
 
 
+#: The Jacobians the solvers can be given: ``"forward-mode"`` (``jax.jacfwd``,
+#: exact) or ``"differences"`` (the blur by forward differences; objectives with
+#: a ``difference_jacobian`` method, such as the estimator's
+#: :class:`~invsss.estimator.objective.Objective`).
+JACOBIANS = ("forward-mode", "differences")
+
+#: Step of the forward differences in the unknowns (logs, logits and scaled
+#: offsets of order one). On data_synthetic/fran_front the columns then agree
+#: with forward mode to 1e-3 for sss_level and 2e-5 or better for the others
+#: (relative norm): what is left is the passes' linear interpolation, whose
+#: slope jumps where a tap crosses a pixel centre.
+DIFFERENCE_STEP = 1e-5
+
+
 @eqx.filter_custom_jvp
-def _residual(z, objective):
+def _residual(z, objective, differences):
     return objective(z)[0]
 
 
 @_residual.def_jvp
 def _residual_jvp(primals, tangents):
-    z, objective = primals
-    tz, _ = tangents  # the data are never differentiated
-    jac, r = jax.jacfwd(lambda u: (objective(u)[0],) * 2, has_aux=True)(z)
+    z, objective, differences = primals
+    tz = tangents[0]  # the data are never differentiated
+    if differences:
+        r, jac = objective.difference_jacobian(z, DIFFERENCE_STEP)
+    else:
+        jac, r = jax.jacfwd(lambda u: (objective(u)[0],) * 2, has_aux=True)(z)
     return r, (jnp.zeros_like(r) if tz is None else jac @ tz)
 
 
 class DenseJacobian(eqx.Module):
     """The objective with a derivative rule that materialises the (N, n) Jacobian.
 
-    Forward mode over the n unknowns costs about n forward passes whichever way it
-    is done; materialising it once per point means the solver's linearisation
-    stores one small matrix instead of every intermediate of the blur passes, and
-    a transposed product (BFGS's gradient) is a matrix product instead of reverse
+    Materialising it once per point means the solver's linearisation stores one
+    small matrix instead of every intermediate of the blur passes, and a
+    transposed product (BFGS's gradient) is a matrix product instead of reverse
     mode through gathers (scatters, slow on CPU). Measured at 64 x 64 (K = 5, three
     unknowns, a busy 2-core machine): 110 ms per Levenberg-Marquardt step before,
     6 ms after.
+
+    ``differences`` (static): the objective's own ``difference_jacobian`` (the
+    blur by forward differences, the rest by forward mode) instead of
+    ``jax.jacfwd`` throughout. Measured per Jacobian: 78 against 101 ms on
+    data_synthetic/fran_front (224 x 224, five unknowns), 12 against 19 ms on
+    pt_face_940 (128 x 128, three). A solver needs no more accuracy than that
+    (experiments/bench_fit.py --jacobian); the standard errors a fit reports
+    come from forward mode (:mod:`.uncertainty`).
     """
 
     objective: eqx.Module
+    differences: bool = eqx.field(static=True, default=False)
 
     def __call__(self, z, args=None):
-        return _residual(z, self.objective), None
+        return _residual(z, self.objective, self.differences), None
 
 
 class _HalfSumOfSquares(eqx.Module):
@@ -146,8 +171,15 @@ class _HalfSumOfSquares(eqx.Module):
         return 0.5 * jnp.sum(r**2), None
 
 
-def _as_fn(solver, objective):
-    fn = DenseJacobian(objective)
+def _as_fn(solver, objective, jacobian="forward-mode"):
+    if jacobian not in JACOBIANS:
+        raise InvalidInputError(f"jacobian: expected one of {', '.join(JACOBIANS)}, got {jacobian!r}")
+    if jacobian == "differences" and not hasattr(objective, "difference_jacobian"):
+        raise InvalidInputError(
+            f"jacobian: 'differences' needs an objective with a difference_jacobian method "
+            f"(invsss.estimator.objective.Objective), got {type(objective).__name__}"
+        )
+    fn = DenseJacobian(objective, jacobian == "differences")
     return _HalfSumOfSquares(fn) if isinstance(solver, optx.AbstractMinimiser) else fn
 
 
@@ -267,6 +299,7 @@ def run_solver(
     arrived: Callable[[jax.Array], bool] | None = None,
     noise_tolerance: float | None = None,
     stall_tolerance: float | None = None,
+    jacobian: str = "forward-mode",
 ) -> SolveRecord:
     """Iterate ``solver`` from ``z0`` for at most ``max_steps`` steps.
 
@@ -300,6 +333,8 @@ def run_solver(
         than this over the last :data:`STALL_WINDOW` accepted steps
         (:func:`stalled`); the test for a rough loss, where the Gauss-Newton
         prediction of the first test does not hold.
+    jacobian : {"forward-mode", "differences"}
+        How the solver's Jacobian is computed (:class:`DenseJacobian`).
 
     Returns
     -------
@@ -319,7 +354,7 @@ def run_solver(
     >>> record.steps, record.interrupted, record.converged
     (1, True, False)
     """
-    fn = _as_fn(solver, objective)
+    fn = _as_fn(solver, objective, jacobian)
     if isinstance(solver, optx.AbstractMinimiser):
         noise_tolerance = None
     elif noise_tolerance is not None:
