@@ -63,8 +63,8 @@ NOISE_TOL = 0.05
 # target) has a rough one, where Levenberg-Marquardt creeps on with steps of a
 # fraction of a standard error that each buy a few thousandths of chi^2. On the
 # three path-traced pairs in data_synthetic/ this (with SCREEN_STALL_TOL for the
-# starts) cut 503 steps to 342 and the fit time by a third; the estimates moved
-# by at most 0.14 standard errors and every final loss came out equal or lower
+# starts) cut 561 steps to 330 and the fit time to 0.65; the estimates moved by
+# at most 0.14 standard errors and every final loss came out equal or lower
 # (experiments/bench_fit.py --stopping). Rejected steps do not count: a run of
 # them is the trust region shrinking, after which the solve often moves on.
 STALL_TOL = 0.1
