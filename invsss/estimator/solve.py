@@ -29,8 +29,9 @@ import optimistix as optx
 from ..validation import InvalidInputError
 
 __all__ = [
-    "SOLVERS", "JACOBIANS", "DIFFERENCE_STEP", "SCREEN_TOL", "NOISE_TOL",
-    "STALL_TOL", "SCREEN_STALL_TOL", "STALL_WINDOW", "gauss_newton_distance", "make_solver", "SolveRecord", "run_solver", "FitInterrupted",
+    "SOLVERS", "JACOBIANS", "DIFFERENCE_STEP", "SCREEN_TOL", "NOISE_TOL", "STALL_TOL",
+    "SCREEN_STALL_TOL", "STALL_WINDOW", "gauss_newton_distance", "stalled", "make_solver",
+    "SolveRecord", "run_solver", "FitInterrupted",
 ]
 
 SOLVERS = ("lm", "gauss-newton", "bfgs")
@@ -235,13 +236,12 @@ def gauss_newton_distance(residual, jacobian) -> jax.Array:
 def _step(solver, fn, z, state, noise_tolerance):
     z, state, _ = solver.step(fn, z, None, _OPTIONS, state, _TAGS)
     done, result = solver.terminate(fn, z, None, _OPTIONS, state, _TAGS)
+    # f_info is the last accepted point's (the first step always accepts the start).
+    info = state.f_info
     if noise_tolerance is not None:
-        info = state.f_info
         distance = gauss_newton_distance(info.residual, info.jac.as_matrix())
-        # f_info is the last accepted point's (the first step always accepts the start).
         done = done | (distance < noise_tolerance)
     # Degrees of freedom of the residual, for the stall test (as in gauss_newton_distance).
-    info = state.f_info
     dof = jnp.sum(info.residual != 0) - z.size if hasattr(info, "residual") else jnp.zeros((), int)
     return z, state, _current_loss(state), dof, done, result == optx.RESULTS.successful
 
