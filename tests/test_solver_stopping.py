@@ -67,20 +67,20 @@ def test_noise_tolerance_stops_within_that_many_standard_errors_of_the_tight_sol
     assert float(np.sqrt(move @ np.linalg.solve(covariance, move))) < 0.05
 
 
-def _decay_problem(seed):
+def _tight_and_stalled(seed):
+    """A noisy decay fit solved tightly, and again with the stall test at 0.1."""
     rng = np.random.default_rng(seed)
     t = np.linspace(0.0, 5.0, 400)
     y = 2.0 * np.exp(-t / 1.3) + 0.3 + 0.05 * rng.standard_normal(t.size)
-    return _Decay(jnp.asarray(t), jnp.asarray(y))
+    with jax.enable_x64(True):
+        problem = _Decay(jnp.asarray(t), jnp.asarray(y))
+        z0 = jnp.array([0.5, 1.5, 0.0])
+        lm = optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12)
+        return run_solver(lm, problem, z0, 200), run_solver(lm, problem, z0, 200, stall_tolerance=0.1)
 
 
 def test_stall_tolerance_ends_a_solve_once_accepted_steps_stop_buying_chi2():
-    with jax.enable_x64(True):
-        problem = _decay_problem(0)
-        z0 = jnp.array([0.5, 1.5, 0.0])
-        lm = optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12)
-        tight = run_solver(lm, problem, z0, 200)
-        stalled = run_solver(lm, problem, z0, 200, stall_tolerance=0.1)
+    tight, stalled = _tight_and_stalled(0)
     assert stalled.converged and stalled.steps < tight.steps
     # What it leaves untaken is below the tolerance, in chi^2 (397 degrees of freedom).
     assert (stalled.final - tight.final) * 397 / tight.final < 0.1
@@ -90,12 +90,7 @@ def test_rejected_steps_do_not_count_towards_a_stall():
     # On this draw the tight solve's last eleven steps are all rejected but one
     # (the loss repeats exactly while the trust region shrinks): counted as steps,
     # they would look like a stall at step 8.
-    with jax.enable_x64(True):
-        problem = _decay_problem(1)
-        z0 = jnp.array([0.5, 1.5, 0.0])
-        lm = optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12)
-        tight = run_solver(lm, problem, z0, 200)
-        stalled = run_solver(lm, problem, z0, 200, stall_tolerance=0.1)
+    tight, stalled = _tight_and_stalled(1)
     assert np.sum(np.diff(tight.history) == 0) >= 8
     assert stalled.steps == tight.steps
 
