@@ -242,7 +242,7 @@ def _step(solver, fn, z, state, noise_tolerance):
         distance = gauss_newton_distance(info.residual, info.jac.as_matrix())
         done = done | (distance < noise_tolerance)
     # Degrees of freedom of the residual, for the stall test (as in gauss_newton_distance).
-    dof = jnp.sum(info.residual != 0) - z.size if hasattr(info, "residual") else jnp.zeros((), int)
+    dof = jnp.maximum(jnp.sum(info.residual != 0) - z.size, 1) if hasattr(info, "residual") else jnp.ones((), int)
     return z, state, _current_loss(state), dof, done, result == optx.RESULTS.successful
 
 
