@@ -202,6 +202,11 @@ def _init(solver, fn, z):
     return solver.init(fn, z, None, _OPTIONS, f_struct, aux_struct, _TAGS)
 
 
+def _degrees_of_freedom(residual, n: int) -> jax.Array:
+    """Nonzero residual entries (those the weights keep) less the ``n`` unknowns, at least 1."""
+    return jnp.maximum(jnp.sum(residual != 0) - n, 1)
+
+
 def gauss_newton_distance(residual, jacobian) -> jax.Array:
     """How far the Gauss-Newton step from this point moves the unknowns, in
     standard errors: the step's length in the metric of the covariance
@@ -227,8 +232,7 @@ def gauss_newton_distance(residual, jacobian) -> jax.Array:
     # direction has no standard error to measure the step in anyway.
     ridge = 1e-12 * jnp.trace(normal) / normal.shape[0] + jnp.finfo(normal.dtype).tiny
     step = jnp.linalg.solve(normal + ridge * jnp.eye(normal.shape[0], dtype=normal.dtype), g)
-    dof = jnp.maximum(jnp.sum(residual != 0) - normal.shape[0], 1)
-    sigma2 = jnp.sum(residual**2) / dof
+    sigma2 = jnp.sum(residual**2) / _degrees_of_freedom(residual, normal.shape[0])
     return jnp.sqrt(jnp.maximum(g @ step, 0.0) / jnp.maximum(sigma2, jnp.finfo(sigma2.dtype).tiny))
 
 
@@ -241,8 +245,8 @@ def _step(solver, fn, z, state, noise_tolerance):
     if noise_tolerance is not None:
         distance = gauss_newton_distance(info.residual, info.jac.as_matrix())
         done = done | (distance < noise_tolerance)
-    # Degrees of freedom of the residual, for the stall test (as in gauss_newton_distance).
-    dof = jnp.maximum(jnp.sum(info.residual != 0) - z.size, 1) if hasattr(info, "residual") else jnp.ones((), int)
+    # For the stall test; a minimiser's state has no residual (and no stall test).
+    dof = _degrees_of_freedom(info.residual, z.size) if hasattr(info, "residual") else jnp.ones((), int)
     return z, state, _current_loss(state), dof, done, result == optx.RESULTS.successful
 
 
@@ -356,7 +360,7 @@ def run_solver(
     """
     fn = _as_fn(solver, objective, jacobian)
     if isinstance(solver, optx.AbstractMinimiser):
-        noise_tolerance = None
+        noise_tolerance = stall_tolerance = None
     elif noise_tolerance is not None:
         # Traced, so that every tolerance shares one compiled step.
         noise_tolerance = jnp.asarray(noise_tolerance, jnp.result_type(float))
@@ -372,7 +376,7 @@ def run_solver(
         # was accepted (the first step accepts the start).
         if not accepted or loss < accepted[-1]:
             accepted.append(loss)
-        if stall_tolerance is not None and not isinstance(solver, optx.AbstractMinimiser):
+        if stall_tolerance is not None:
             done = bool(done) or stalled(accepted, int(dof), stall_tolerance)
         if on_step is not None:
             on_step(loss)
