@@ -30,6 +30,7 @@ bundled one (``--check-camera`` prints the warp found for the source pass).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import tempfile
 import time
@@ -78,8 +79,86 @@ def render_pass(config, kind: str, spp: int, seed: int, medium: dict | None = No
     return image[..., :1]
 
 
+@dataclasses.dataclass(frozen=True)
+class Recipe:
+    """Which nuisances a photograph has, each on its own switch so it can be measured alone."""
+
+    move: bool = False
+    specular: bool = False
+    vignetting: bool = False
+    sensor: bool = False  # shot noise, then 8-bit sRGB
+
+
+# "rerender" has no nuisance: the same view path-traced again with another seed
+# (at --spp), so its row is the noise floor the other rows are read against.
+RECIPES = {
+    "rerender": Recipe(),
+    "move": Recipe(move=True),
+    "specular": Recipe(specular=True),
+    "vignetting": Recipe(vignetting=True),
+    "sensor": Recipe(sensor=True),
+    "mixture": Recipe(move=True, specular=True, vignetting=True, sensor=True),
+}
+
+
+class Photographer:
+    """Makes the photographs of :data:`RECIPES`, rendering each pass it needs once."""
+
+    def __init__(self, config, args):
+        self.args = args
+        self.views = {False: config, True: moved_config(config, args.shift, args.roll)}
+        # The first (for a grey medium, the only) channel's medium, as the scene renderer splits it.
+        self.grey = _grey_media(config.medium.coefficients())[0]
+        # The boundary a real face has: a rough dielectric of the medium's index.
+        update = {"boundary": "rough-dielectric"}
+        if args.roughness is not None:
+            update["roughness"] = args.roughness
+        self.dielectric = config.medium.model_copy(update=update)
+        self._passes: dict = {}
+
+    def _pass(self, moved: bool, kind: str) -> np.ndarray:
+        if (moved, kind) not in self._passes:
+            started = time.perf_counter()
+            view = self.views[moved]
+            if kind == "target":
+                image = render_pass(view, "target", self.args.spp, 11, self.grey)
+            else:
+                image = render_pass(view.model_copy(update={"medium": self.dielectric}), "specular",
+                                    max(self.args.spp // 4, 16), 12, _grey_media(self.dielectric.coefficients())[0])
+            print(f"  rendered the {'moved' if moved else 'same'} view's {kind} pass in "
+                  f"{time.perf_counter() - started:.0f} s (peak {image.max():.3g})", flush=True)
+            self._passes[moved, kind] = image
+        return self._passes[moved, kind]
+
+    def photograph(self, recipe: Recipe) -> np.ndarray:
+        """(H, W) float32: the view path-traced, then the optics, then the sensor, in a camera's order."""
+        image = self._pass(recipe.move, "target")
+        if recipe.specular:
+            image = image + self.args.specular * self._pass(recipe.move, "specular")
+        if recipe.vignetting:
+            image = vignette(image, self.args.vignetting)
+        if recipe.sensor:
+            image = eight_bit_srgb(shot_noise(image, 2000.0, 2.0, np.random.default_rng(13)))
+        return image.astype(np.float32)[..., 0]
+
+
 def _pm(value) -> str:
     return "" if value is None else f" +- {value:.0f}"
+
+
+def _found(fit, terms: tuple) -> str:
+    """What the fit found besides the scattering parameters: warp, vignetting, light terms, highlights."""
+    parts = []
+    if fit.alignment:
+        a = fit.alignment[0]
+        parts.append(f"({a['shift_px'][0]:+.2f}, {a['shift_px'][1]:+.2f}) px, {a['rotation_deg']:+.2f} deg")
+    if fit.vignetting:
+        parts.append(f"corner gain {fit.vignetting['corner_gain']:.3f}")
+    if terms:
+        parts.append(", ".join(f"{k} {fit.light_terms[k]:.3g}" for k in terms))
+    if fit.highlights:
+        parts.append(f"{fit.highlights['fraction'][0]:.1%} left out as highlights")
+    return "; ".join(parts)
 
 
 def main() -> None:
@@ -93,75 +172,69 @@ def main() -> None:
                         help="Beckmann roughness of the specular boundary (default: the medium's)")
     parser.add_argument("--vignetting", type=float, default=0.15)
     parser.add_argument("--starts", type=int, default=2)
+    parser.add_argument("--rows", default="mixture",
+                        help=f"comma-separated photographs to fit (default mixture; any of {', '.join(RECIPES)})")
+    parser.add_argument("--highlights", action="store_true", help="fit each photograph with --highlights too")
+    parser.add_argument("--light-terms", default="",
+                        help="comma-separated light-aware terms every fit includes (e.g. shift,grazing,incidence); "
+                             "the pair folder's normal.exr and light.exr are their buffers")
     parser.add_argument("--check-camera", action="store_true",
                         help="render the source pass from the moved camera and print the warp registration finds")
     args = parser.parse_args()
+    names = args.rows.split(",")
+    for name in names:
+        if name not in RECIPES:
+            parser.error(f"--rows: unknown row {name!r}; expected some of {', '.join(RECIPES)}")
     info = json.loads((args.pair / "scene.json").read_text())
     config = parse_config(info["config"])
     pair = invsss.load_pair(*(args.pair / f for f in ("source.exr", "target.exr", "depth.exr", "mask.png")))
-    moved = moved_config(config, args.shift, args.roll)
-    # The first (for a grey medium, the only) channel's medium, as the scene renderer splits it.
-    grey = _grey_media(config.medium.coefficients())[0]
+    photographer = Photographer(config, args)
 
     if args.check_camera:
         from invsss.registration import estimate_warp
 
         albedo = info["source_albedo"]["value"][0]
-        source = render_pass(moved, "source", 256, 0, grey, albedo)
+        source = render_pass(photographer.views[True], "source", 256, 0, photographer.grey, albedo)
         warp = estimate_warp(source, np.asarray(pair.source, np.float64), np.asarray(pair.mask), "similarity")
         print(json.dumps(warp.to_dict()))
         return
 
-    started = time.perf_counter()
-    target = render_pass(moved, "target", args.spp, 11, grey)
-    # The boundary a real face has: a rough dielectric of the medium's index.
-    update = {"boundary": "rough-dielectric"}
-    if args.roughness is not None:
-        update["roughness"] = args.roughness
-    dielectric = config.medium.model_copy(update=update)
-    specular_medium = _grey_media(dielectric.coefficients())[0]
-    specular = render_pass(moved.model_copy(update={"medium": dielectric}), "specular", max(args.spp // 4, 16), 12,
-                           specular_medium)
-    print(f"rendered the moved view in {time.perf_counter() - started:.0f} s; specular peak "
-          f"{specular.max():.3g} against a target peak {target.max():.3g}", flush=True)
-    rng = np.random.default_rng(13)
-    photo = vignette(target + args.specular * specular, args.vignetting)
-    photo = eight_bit_srgb(shot_noise(photo, 2000.0, 2.0, rng)).astype(np.float32)[..., 0]
+    terms = tuple(args.light_terms.split(",")) if args.light_terms else ()
+    light_options = {}
+    if terms:
+        light_options = {"light_terms": terms,
+                         "light_buffers": invsss.LightBuffers(normal=invsss.read_image(args.pair / "normal.exr"),
+                                                              light=invsss.read_image(args.pair / "light.exr"))}
+    photo_fit = {"align": "similarity", "vignetting": True}
+    runs = [("clean", "plain", {}), ("clean", "photo fit", photo_fit)]
+    for name in names:
+        runs += [(name, "plain", {}), (name, "photo fit", photo_fit)]
+        if args.highlights:
+            runs.append((name, "photo fit + highlights", dict(photo_fit, highlights=True)))
 
-    rows = []
-    fits = {}
-    for name, image, options in [
-        ("clean", pair.target, {}),
-        ("clean", pair.target, {"align": "similarity", "vignetting": True}),
-        ("photograph", photo, {}),
-        ("photograph", photo, {"align": "similarity", "vignetting": True}),
-        ("photograph", photo, {"align": "similarity", "vignetting": True, "highlights": True}),
-    ]:
-        t0 = time.perf_counter()
-        fit = invsss.fit_pair(pair.source, image, pair.depth, pair.mask, n_starts=args.starts, **options)
-        label = ("align similarity + vignetting" + (" + highlights" if options.get("highlights") else "")
-                 if options else "plain")
-        fits[(name, label)] = fit
-        ref = fits[("clean", "plain")]
-        change = lambda k: 100 * (float(fit.values[k]) / float(ref.values[k]) - 1)  # noqa: E731
-        extra = ""
-        if fit.alignment:
-            a = fit.alignment[0]
-            extra = f"({a['shift_px'][0]:+.2f}, {a['shift_px'][1]:+.2f}) px, {a['rotation_deg']:+.2f} deg"
-        if fit.vignetting:
-            extra += f"; corner gain {fit.vignetting['corner_gain']:.3f}"
-        if fit.highlights:
-            extra += f"; {fit.highlights['fraction'][0]:.1%} left out as highlights"
-        rows.append(f"| {name} | {label} | {float(fit.values['sss_level']):.0f}"
-                    f"{_pm(fit.stderr.get('sss_level'))} ({change('sss_level'):+.1f} %) | "
-                    f"{float(fit.values['correction']):.0f}{_pm(fit.stderr.get('correction'))} "
-                    f"({change('correction'):+.1f} %) | "
-                    f"{float(fit.values['maxdd']):.3g} | {fit.psnr:.1f} | {extra} |")
-        print(f"  {name}, {label}: {time.perf_counter() - t0:.0f} s", flush=True)
+    rows, clean = [], {}
+    for name, label, options in runs:
+        image = pair.target if name == "clean" else photographer.photograph(RECIPES[name])
+        started = time.perf_counter()
+        fit = invsss.fit_pair(pair.source, image, pair.depth, pair.mask, n_starts=args.starts, **options,
+                              **light_options)
+        # Each fit against the clean pair fitted the same way (a clean pair has no highlights to leave out).
+        if name == "clean":
+            clean[label] = fit
+        ref = clean["plain" if label == "plain" else "photo fit"]
+
+        def cell(key):
+            change = 100 * (float(fit.values[key]) / float(ref.values[key]) - 1)
+            return f"{float(fit.values[key]):.0f}{_pm(fit.stderr.get(key))} ({change:+.1f} %)"
+
+        rows.append(f"| {name} | {label} | {cell('sss_level')} | {cell('correction')} | "
+                    f"{float(fit.values['maxdd']):.3g} | {fit.psnr:.1f} | {_found(fit, terms)} |")
+        print(f"  {name}, {label}: {time.perf_counter() - started:.0f} s", flush=True)
     print(f"\n{args.pair}: camera moved ({args.shift[0]}, {args.shift[1]}) px and rolled {args.roll} deg, "
-          f"specular x{args.specular} (roughness {dielectric.roughness}), vignetting {args.vignetting:.0%}, shot noise, 8-bit sRGB; "
-          f"changes against the clean plain fit")
-    print("| pair | fit | sss_level | correction | maxdd | PSNR dB | found |\n|---|---|---|---|---|---|---|")
+          f"specular x{args.specular} (roughness {photographer.dielectric.roughness}), vignetting "
+          f"{args.vignetting:.0%}, shot noise and 8-bit sRGB; light terms: {args.light_terms or 'none'}; "
+          f"photo fit = align similarity + vignetting; changes against the clean pair fitted the same way")
+    print("| photograph | fit | sss_level | correction | maxdd | PSNR dB | found |\n|---|---|---|---|---|---|---|")
     print("\n".join(rows))
 
 

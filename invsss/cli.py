@@ -602,7 +602,28 @@ def _add_scene_parser(subparsers) -> None:
     parser.add_argument("--spp", type=int, default=None, metavar="N",
                         help="samples per pixel, even (default: the config's)")
     parser.add_argument("--seed", type=int, default=None, metavar="N", help="seed (default: the config's)")
+    parser.add_argument("--warp", default=None, metavar="PARAMS_JSON",
+                        help="a fit's params.json whose registration (fit --align translation or similarity) "
+                        "moves the camera: the render lands on the photograph's pixel grid, so it can be "
+                        "fitted again without --align and nothing is resampled (see docs/capture.md)")
+    parser.add_argument("--source-only", action="store_true",
+                        help="leave out the path-traced target: source, depth, mask and buffers only, for "
+                        "fitting a photograph (the target is most of the render time)")
     parser.set_defaults(func=_run_scene)
+
+
+def _warp_from_params(path: str):
+    """The one warp in a fit's params.json (``alignment``), for ``scene --warp``."""
+    from .io import read_params
+
+    _, extras = read_params(path)
+    warps = extras.get("alignment") or []
+    if len(warps) != 1:
+        found = ("no alignment (the fit ran without --align)" if not warps
+                 else f"{len(warps)} warps (a fit of several pairs)")
+        raise InvalidInputError(f"--warp {path}: expected the params.json of a fit of one pair with --align, "
+                                f"found {found}")
+    return warps[0]
 
 
 def _run_scene(args: argparse.Namespace, stop: StopSignals) -> int:
@@ -610,22 +631,27 @@ def _run_scene(args: argparse.Namespace, stop: StopSignals) -> int:
     from .scenes import load_config
     from .scenes.render import SCENE_FILES, render_scene, scene_writers
 
-    config = load_config(args.config).with_overrides(
+    config = load_config(args.config)
+    if args.warp is not None:
+        # Before any --width/--height: the warp is in the pixels of the render it was fitted to.
+        config = config.with_warp(_warp_from_params(args.warp))
+    config = config.with_overrides(
         width=args.width, height=args.height, spp=args.spp, seed=args.seed,
         name=f"{args.config} with --width/--height/--spp/--seed",
     )
     with ResultDir(args.out, overwrite=args.overwrite, names=SCENE_FILES) as out:
-        result = render_scene(config, progress=lambda text: print(text, file=sys.stderr, flush=True))
+        result = render_scene(config, progress=lambda text: print(text, file=sys.stderr, flush=True),
+                              target=not args.source_only)
         try:
             written = out.commit(scene_writers(result), {"command": "scene"})
         except ResultWriteError as err:
             print(f"invsss: error: {err}", file=sys.stderr)
             return 1
     noise = result.info["noise"]
+    ceiling = "no target" if noise is None else f"target noise ceiling {noise['noise_ceiling_db']:.1f} dB"
     print(
         f"scene: {config.camera.width}x{config.camera.height}, {config.spp} spp, "
-        f"{result.info['render_seconds']['total']:.1f} s; target noise ceiling "
-        f"{noise['noise_ceiling_db']:.1f} dB; wrote {', '.join(written)}"
+        f"{result.info['render_seconds']['total']:.1f} s; {ceiling}; wrote {', '.join(written)}"
     )
     return 0
 

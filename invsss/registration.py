@@ -89,6 +89,26 @@ class Warp:
         c = np.asarray(self.centre)
         return (points - c - np.asarray(self.params[:2])) @ np.linalg.inv(self.matrix()).T + c
 
+    def recentred(self, centre) -> "Warp":
+        """The same map written about another ``centre`` (row, col).
+
+        A camera rolls and zooms about its principal point, not about the skin
+        mask's centre, so a warp is recentred on the image centre before it is
+        turned into a camera move: ``t' = t + (I - A)(c - c')``.
+
+        Examples
+        --------
+        >>> warp = Warp("similarity", (1.0, -2.0, float(np.radians(1.0)), 0.01), (50.0, 60.0))
+        >>> moved = warp.recentred((63.5, 63.5))
+        >>> points = np.array([[0.0, 0.0], [100.0, 20.0]])
+        >>> bool(np.allclose(moved.map_points(points), warp.map_points(points)))
+        True
+        """
+        c, new = np.asarray(self.centre, np.float64), np.asarray(centre, np.float64)
+        shift = np.asarray(self.params[:2]) + (np.eye(2) - self.matrix()) @ (c - new)
+        return Warp(self.kind, tuple(float(v) for v in shift) + tuple(self.params[2:]),
+                    tuple(float(v) for v in new))
+
     def to_dict(self) -> dict:
         """JSON-ready: the kind, the shift (px), rotation (deg), scale and the 2x3 matrix."""
         a = self.matrix()

@@ -71,6 +71,21 @@ def test_warp_record_round_trips_through_json(warp):
     np.testing.assert_allclose(back.centre, warp.centre)
 
 
+@pytest.mark.parametrize("warp", [
+    Warp("translation", (1.0, -2.0), (10.0, 12.0)),
+    Warp("similarity", (0.5, 0.25, 0.02, -0.01), (40.0, 30.0)),
+    Warp("affine", (0.5, 0.25, 0.01, 0.02, -0.03, 0.04), (40.0, 30.0)),
+])
+def test_recentred_warp_is_the_same_map_about_a_new_centre(warp):
+    moved = warp.recentred((63.5, 31.5))
+    points = np.random.default_rng(0).uniform(-20.0, 100.0, (50, 2))
+    np.testing.assert_allclose(moved.map_points(points), warp.map_points(points), atol=1e-10)
+    np.testing.assert_allclose(moved.params[2:], warp.params[2:])
+    assert moved.centre == (63.5, 31.5)
+    # The new centre moves by the recentred shift alone.
+    np.testing.assert_allclose(moved.map_points(np.array([[63.5, 31.5]]))[0], np.add((63.5, 31.5), moved.params[:2]))
+
+
 def test_align_source_puts_the_source_on_the_target_grid():
     reference = _texture(64)
     warp = Warp("similarity", (1.5, -0.5, float(np.radians(2.0)), float(np.log(1.01))), (31.5, 31.5))

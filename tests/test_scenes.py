@@ -44,7 +44,8 @@ def _pixel_rays(config, n: int = 8):
 
     Built from the camera's definition, not Mitsuba: pixel (row i, column j)
     spans [j, j + 1] x [i, i + 1], image right is camera right, image down is
-    camera down, and a direction has unit component along the optical axis, so
+    camera down, the optical axis meets the image at the centre plus
+    ``principal_offset_px``, and a direction has unit component along the optical axis, so
     the ray parameter of a hit is its eye z.
     """
     camera = config.camera
@@ -58,8 +59,9 @@ def _pixel_rays(config, n: int = 8):
     sub = (np.arange(n) + 0.5) / n
     u = np.arange(camera.width)[None, :, None, None] + sub[None, None, None, :]
     v = np.arange(camera.height)[:, None, None, None] + sub[None, None, :, None]
-    x = (u - camera.width / 2) / f
-    y = -(v - camera.height / 2) / f
+    # The optical axis meets the image at the centre plus the principal offset.
+    x = (u - camera.width / 2 - camera.principal_offset_px[1]) / f
+    y = -(v - camera.height / 2 - camera.principal_offset_px[0]) / f
     x, y = np.broadcast_arrays(x, y)
     directions = forward + x[..., None] * right + y[..., None] * up
     return origin, directions, (right, up, forward)
@@ -87,11 +89,17 @@ def test_depth_of_tilted_plane_is_analytic_eye_z():
     np.testing.assert_allclose(result.normal, np.broadcast_to(camera_normal, result.normal.shape), atol=1e-3)
 
 
-def test_mask_and_coverage_match_the_silhouette_minus_occluder():
+@pytest.mark.parametrize("camera", [
+    {**CAMERA, "width": 32, "height": 32},
+    # Not square, rolled, and with the principal point moved (rows down, columns
+    # right): checks the sign and scale of Mitsuba's principal point offset.
+    {**CAMERA, "up": [0.2, 1.0, 0.0], "width": 40, "height": 28, "principal_offset_px": [3.0, -5.0]},
+])
+def test_mask_and_coverage_match_the_silhouette_minus_occluder(camera):
     radius = 40.0
     stripe = {"center": [0.0, 20.0, 100.0], "normal": [0.0, 0.0, 1.0], "along": [1.0, 0.0, 0.0],
               "width": 10.0, "length": 300.0, "count": 1, "duty": 0.5}
-    config = _config(occluders=[stripe])
+    config = _config(occluders=[stripe], camera=camera)
     result = render_scene(config)
     origin, directions, (right, up, forward) = _pixel_rays(config, n=16)
     # Sphere about the origin: a ray hits it where its distance to the centre is < radius.
@@ -109,10 +117,13 @@ def test_mask_and_coverage_match_the_silhouette_minus_occluder():
     clear = np.abs(coverage - 0.5) > 0.1
     np.testing.assert_array_equal(result.mask[clear], (coverage[clear] >= 0.5).astype(np.float32))
     # Depth and normals exist where skin is seen (behind the stripe too) and nowhere else.
-    # (A pixel the silhouette only grazes may be caught by one sampling grid and not the other.)
+    # (A pixel the silhouette only grazes may be caught by one sampling grid and not
+    # the other, so "nowhere else" means where every ray of the grid misses the
+    # sphere by more than 0.5 mm, a fifth of a pixel there.)
     sphere_share = on_sphere.mean(axis=(2, 3))
     assert np.all(result.depth[sphere_share > 0.05] > 0)
-    assert np.all(result.depth[sphere_share == 0] == 0)
+    miss = np.linalg.norm(closest, axis=-1).min(axis=(2, 3)) - radius
+    assert np.all(result.depth[miss > 0.5] == 0)
     inside = on_sphere.all(axis=(2, 3))
     # Normals of fully covered pixels: the pixel-average sphere normal, in camera space.
     t_hit = along - np.sqrt(np.maximum(radius**2 - np.sum(closest**2, axis=-1), 0.0))
@@ -259,6 +270,49 @@ def test_scene_command_writes_a_pair_folder(tmp_path, capsys):
     # A second run into the same folder is refused without --overwrite.
     assert main(["scene", str(_write_toml(tmp_path)), "--out", str(out)]) == 2
     assert "--overwrite" in capsys.readouterr().err
+
+
+def test_scene_with_a_fitted_warp_renders_onto_the_photographs_grid(tmp_path, capsys):
+    from invsss.registration import Warp
+
+    config = _write_toml(tmp_path)
+    plain, moved = tmp_path / "plain", tmp_path / "moved"
+    assert main(["scene", str(config), "--out", str(plain), "--source-only"]) == 0
+    # A fit's params.json whose registration moved the picture 2 rows down and 3
+    # columns left, and turned it by 90 degrees about pixel (13, 11) (the skin
+    # mask's centre in a fit): whole pixels, so the moved render is a re-indexed
+    # copy wherever a pixel is not on the silhouette.
+    warp = Warp("similarity", (2.0, -3.0, float(np.pi / 2), 0.0), (13.0, 11.0))
+    params = {"sss_level": 500.0, "correction": 0.0, "maxdd": 1.0, "weights": [1.0], "variances": [1.0],
+              "alignment": [warp.to_dict()]}
+    invsss.write_params(tmp_path / "params.json", params)
+    assert main(["scene", str(config), "--out", str(moved), "--source-only",
+                 "--warp", str(tmp_path / "params.json")]) == 0
+    assert "target.exr" not in os.listdir(moved) and "source.exr" in os.listdir(moved)
+    assert json.loads((moved / "scene.json").read_text())["noise"] is None
+    before, after = (invsss.read_mask(folder / "mask.png") for folder in (plain, moved))
+
+    def moved_by(mapping):
+        rows, cols = np.mgrid[0:24, 0:24]
+        to_rows, to_cols = np.rint(mapping(np.stack([rows, cols], -1).reshape(-1, 2))).astype(int).T
+        inside = (to_rows >= 0) & (to_rows < 24) & (to_cols >= 0) & (to_cols < 24)
+        out = np.zeros_like(before)
+        out[to_rows[inside], to_cols[inside]] = before.ravel()[inside]
+        return out
+
+    assert before.sum() > 100
+    assert (moved_by(warp.map_points) != after).sum() <= 4  # a few silhouette pixels sampled differently
+    # The warp taken the wrong way round does not match.
+    assert (moved_by(warp.inverse_map_points) != after).sum() > 50
+
+
+def test_scene_warp_needs_a_params_file_with_one_alignment(tmp_path, capsys):
+    invsss.write_params(tmp_path / "params.json", {"sss_level": 500.0, "correction": 0.0, "maxdd": 1.0,
+                                                   "weights": [1.0], "variances": [1.0]})
+    code = main(["scene", str(_write_toml(tmp_path)), "--out", str(tmp_path / "out"),
+                 "--warp", str(tmp_path / "params.json")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "no alignment" in err[0] and "params.json" in err[0]
 
 
 def test_misspelt_key_is_one_line_naming_it_and_the_nearest_key(tmp_path, capsys):

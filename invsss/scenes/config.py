@@ -65,6 +65,7 @@ __all__ = [
 VARIANTS = ("scalar_rgb", "llvm_ad_rgb", "cuda_ad_rgb")
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+Vec2 = Annotated[list[float], Field(min_length=2, max_length=2)]
 Positive = Annotated[float, Field(gt=0)]
 # A light's power: one number (grey) or one per RGB channel.
 Colour = Union[Annotated[float, Field(ge=0)], Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=3, max_length=3)]]
@@ -115,10 +116,15 @@ class SceneObject(_Strict):
 
 
 class Camera(_Strict):
-    """A pinhole camera, principal point at the image centre, square pixels.
+    """A pinhole camera with square pixels.
 
     Give the horizontal field of view ``fov`` in degrees or the focal length
     ``focal_px`` in pixels (``focal_px = width / 2 / tan(fov / 2)``).
+    ``principal_offset_px`` (rows down, columns right) is where the optical axis
+    meets the image, measured from the image centre: an offset moves the whole
+    picture by that much, as a shifted lens does. :meth:`SceneConfig.with_warp`
+    sets it, with the roll and focal length, to render the view a fit's
+    registration found.
     """
 
     position: Vec3
@@ -128,6 +134,18 @@ class Camera(_Strict):
     focal_px: Positive | None = None
     width: Annotated[int, Field(ge=2)]
     height: Annotated[int, Field(ge=2)]
+    principal_offset_px: Vec2 = [0.0, 0.0]
+
+    def frame(self):
+        """Origin and the right, up and forward unit vectors, as Mitsuba's ``look_at`` builds them."""
+        import numpy as np
+
+        origin = np.asarray(self.position, np.float64)
+        forward = np.asarray(self.look_at, np.float64) - origin
+        forward /= np.linalg.norm(forward)
+        right = np.cross(forward, np.asarray(self.up, np.float64))
+        right /= np.linalg.norm(right)
+        return origin, right, np.cross(right, forward), forward
 
     @model_validator(mode="after")
     def _one_focal(self):
@@ -325,6 +343,7 @@ class SceneConfig(_Strict):
             camera.update(width=width, height=height)
             if camera["focal_px"] is not None:
                 camera["focal_px"] = camera["focal_px"] * width / old_width
+            camera["principal_offset_px"] = [v * width / old_width for v in camera["principal_offset_px"]]
         content = self.model_dump()
         content["camera"] = camera
         if spp is not None:
@@ -332,6 +351,55 @@ class SceneConfig(_Strict):
         if seed is not None:
             content["seed"] = seed
         return parse_config(content, name)
+
+    def with_warp(self, warp) -> "SceneConfig":
+        """The scene seen by the camera that puts this config's render where ``warp`` maps it.
+
+        ``warp`` is a fit's registration (an :class:`invsss.registration.Warp`, or a
+        params.json ``alignment`` entry) from this scene's pixels to a
+        photograph's. The returned camera is rolled by its rotation, has its focal
+        length multiplied by its scale and its principal point moved by its shift
+        (taken about the principal point, where a camera rolls and zooms), so its
+        source, depth and mask land on the photograph's pixel grid without
+        resampling. Only ``translation`` and ``similarity`` warps are camera moves.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from invsss.registration import Warp
+        >>> config = parse_config({"object": {"primitive": "sphere", "radius": 10.0},
+        ...     "camera": {"position": [0.0, 0.0, 100.0], "look_at": [0.0, 0.0, 0.0],
+        ...                "focal_px": 100.0, "width": 64, "height": 32},
+        ...     "lights": [{"type": "point", "position": [0.0, 0.0, 100.0], "intensity": 1.0}],
+        ...     "medium": {"preset": "thesis-940"}})
+        >>> camera = config.with_warp(Warp("similarity", (1.5, -2.0, 0.0, float(np.log(1.01))),
+        ...                                (15.5, 31.5))).camera
+        >>> camera.principal_offset_px, round(camera.focal_px, 6)
+        ([1.5, -2.0], 101.0)
+        """
+        import numpy as np
+
+        from ..registration import Warp
+
+        warp = warp if isinstance(warp, Warp) else Warp.from_dict(warp)
+        if warp.kind not in ("translation", "similarity"):
+            raise InvalidInputError(f"warp: a {warp.kind} warp is not a camera move; expected a translation or "
+                                    "similarity (fit with --align similarity)")
+        camera = self.camera
+        principal = np.array([(camera.height - 1) / 2.0, (camera.width - 1) / 2.0]) + camera.principal_offset_px
+        about = warp.recentred(tuple(principal)).to_dict()
+        # The picture turns by +a (counter-clockwise as displayed) when the camera
+        # rolls the other way: its up vector turns towards its right.
+        angle = math.radians(about.get("rotation_deg", 0.0))
+        _, right, up, _ = camera.frame()
+        content = self.model_dump()
+        content["camera"].update(
+            up=(math.cos(angle) * up + math.sin(angle) * right).tolist(),
+            fov=None,
+            focal_px=camera.focal_length_px * about.get("scale", 1.0),
+            principal_offset_px=(np.asarray(camera.principal_offset_px) + about["shift_px"]).tolist(),
+        )
+        return parse_config(content, "the config moved by the warp")
 
 
 # ------------------------------------------------------------------ reading

@@ -279,6 +279,10 @@ def _sensor(mi, config: SceneConfig, sampler: dict, pixel_format: str) -> dict:
         "near_clip": 1e-2,
         "far_clip": 1e7,
         "to_world": mi.ScalarTransform4f().look_at(origin=camera.position, target=camera.look_at, up=camera.up),
+        # Mitsuba's offset is a fraction of the film, and moving the principal point
+        # that way moves the picture the other way.
+        "principal_point_offset_x": -camera.principal_offset_px[1] / camera.width,
+        "principal_point_offset_y": -camera.principal_offset_px[0] / camera.height,
         # A box filter: each pixel is the plain average over its own area, so coverage
         # and depth are per-pixel quantities and nothing bleeds into neighbours.
         "film": {"type": "hdrfilm", "width": camera.width, "height": camera.height,

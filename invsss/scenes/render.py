@@ -61,25 +61,14 @@ class SceneRender:
     """A rendered pair and its geometry (arrays as written) plus the ``scene.json`` content."""
 
     source: np.ndarray  # (H, W, C) float32
-    target: np.ndarray  # (H, W, C) float32
+    target: np.ndarray | None  # (H, W, C) float32; None when rendered without it
     depth: np.ndarray  # (H, W) float32, mm, 0 off the skin
     mask: np.ndarray  # (H, W) float32 in {0, 1}
     normal: np.ndarray  # (H, W, 3) float32
     coverage: np.ndarray  # (H, W) float32 in [0, 1]
     info: dict
-    target_halves: tuple[np.ndarray, np.ndarray]
+    target_halves: tuple[np.ndarray, np.ndarray] | None
     light: np.ndarray | None = None  # (H, W, 3) float32; None: computed from the depth when written
-
-
-def _camera_frame(config: SceneConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Camera origin and its right, up and forward unit vectors (as Mitsuba's look_at builds them)."""
-    origin = np.asarray(config.camera.position, np.float64)
-    forward = np.asarray(config.camera.look_at, np.float64) - origin
-    forward /= np.linalg.norm(forward)
-    right = np.cross(forward, np.asarray(config.camera.up, np.float64))
-    right /= np.linalg.norm(right)
-    up = np.cross(right, forward)
-    return origin, right, up, forward
 
 
 def _channels(image, count: int) -> np.ndarray:
@@ -132,7 +121,8 @@ def _grey_media(coefficients: dict) -> list[dict]:
     return [{**coefficients, "sigma_s_prime": [s[c]], "sigma_a": [a[c]]} for c in range(len(s))]
 
 
-def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = None) -> SceneRender:
+def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = None, *,
+                 target: bool = True) -> SceneRender:
     """Render every pass of ``config`` and return the pair, its geometry and ``scene.json``.
 
     Parameters
@@ -142,6 +132,10 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         or relative to the working directory).
     progress : callable, optional
         Called with a short line before each pass.
+    target : bool
+        False: leave out the path-traced target (``target`` and ``target_halves``
+        are None, ``scene.json`` has no noise estimate), for a source, depth and
+        mask to fit a photograph with; the target is most of the time.
 
     Raises
     ------
@@ -211,9 +205,9 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
                                                    channels))
         scenes = [(mi.load_dict(scene_dict(mi, config, "target", mesh_ply=mesh_ply, coefficients=medium)),
                    mi.load_dict(scene_dict(mi, config, "specular", mesh_ply=mesh_ply, coefficients=medium)))
-                  for medium in media]
+                  for medium in media] if target else []
         halves = []
-        for k in range(2):
+        for k in range(2 if target else 0):
             parts = []
             for c, (target_scene, specular_scene) in enumerate(scenes):
                 full = timed(f"target half {k + 1}, channel {c + 1}/{len(media)}", lambda: _channels(
@@ -226,8 +220,8 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
                 parts.append(full - mirror)
             # One grey medium: all channels at once; one per channel: channel c from render c.
             halves.append(parts[0] if len(parts) == 1 else np.stack([p[..., c] for c, p in enumerate(parts)], -1))
-    target = 0.5 * (halves[0] + halves[1])
-    noise = half_render_noise(halves[0], halves[1], mask)
+    image = 0.5 * (halves[0] + halves[1]) if target else None
+    noise = half_render_noise(halves[0], halves[1], mask) if target else None
     dipole = np.asarray(jensen_dipole_total(np.asarray(coefficients["sigma_s_prime"]),
                                             np.asarray(coefficients["sigma_a"]), coefficients["eta"]))
     info = {
@@ -254,8 +248,9 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
             "dipole_total": np.atleast_1d(dipole).tolist(),
             "renders": len(media),
         },
-        "spp": {"source": config.spp, "target": config.spp, "target_per_half": half_spp,
-                "specular_per_half": half_spp, "geometry": config.geometry_spp},
+        "spp": {"source": config.spp, "target": config.spp if target else 0,
+                "target_per_half": half_spp if target else 0, "specular_per_half": half_spp if target else 0,
+                "geometry": config.geometry_spp},
         "seeds": seeds,
         "max_depth": config.max_depth,
         "render_seconds": {**timings, "total": round(time.perf_counter() - started, 3)},
@@ -266,13 +261,13 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
     }
     return SceneRender(
         source=source.astype(np.float32),
-        target=target.astype(np.float32),
+        target=image.astype(np.float32) if target else None,
         depth=depth.astype(np.float32),
         mask=mask,
         normal=normal.astype(np.float32),
         coverage=coverage.astype(np.float32),
         info=info,
-        target_halves=(halves[0].astype(np.float32), halves[1].astype(np.float32)),
+        target_halves=(halves[0].astype(np.float32), halves[1].astype(np.float32)) if target else None,
         light=light_directions(config, depth).astype(np.float32),
     )
 
@@ -287,7 +282,7 @@ def _depth_and_normal(config: SceneConfig, aovs: dict) -> tuple[np.ndarray, np.n
     seen = coverage > 1e-6
     safe = np.where(seen, coverage, 1.0)[..., None]
     position = aovs["pos"] / safe
-    origin, right, up, forward = _camera_frame(config)
+    origin, right, up, forward = config.camera.frame()
     depth = np.where(seen, (position - origin) @ forward, 0.0)
     world_normal = aovs["nn"] / safe
     normal = np.stack([world_normal @ right, world_normal @ up, -(world_normal @ forward)], axis=-1)
@@ -318,12 +313,13 @@ def light_directions(config: SceneConfig, depth) -> np.ndarray:
     """
     depth = np.asarray(depth, np.float64)
     camera = config.camera
-    origin, right, up, forward = _camera_frame(config)
+    origin, right, up, forward = config.camera.frame()
     rotation = np.stack([right, up, -forward])  # world -> camera
     h, w = depth.shape
     f = camera.focal_length_px
-    x = (np.arange(w)[None, :] + 0.5 - w / 2) / f * depth
-    y = -(np.arange(h)[:, None] + 0.5 - h / 2) / f * depth
+    offset_rows, offset_cols = camera.principal_offset_px
+    x = (np.arange(w)[None, :] + 0.5 - w / 2 - offset_cols) / f * depth
+    y = -(np.arange(h)[:, None] + 0.5 - h / 2 - offset_rows) / f * depth
     points = np.stack(np.broadcast_arrays(x, y, -depth), axis=-1)
     key = config.lights[0]
     if key.type == "directional":
@@ -355,7 +351,7 @@ def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
     True
     """
     text = json.dumps(result.info, indent=2) + "\n"
-    return {
+    writers = {
         "source.exr": lambda path: write_image(path, result.source),
         "target.exr": lambda path: write_image(path, result.target),
         "depth.exr": lambda path: write_image(path, result.depth),
@@ -365,6 +361,9 @@ def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
         "light.exr": lambda path: write_image(path, _light_buffer(result)),
         "scene.json": lambda path: write_text_atomic(path, text),
     }
+    if result.target is None:
+        del writers["target.exr"]
+    return writers
 
 
 def write_scene(result: SceneRender, out, *, overwrite: bool = False) -> list[str]:
