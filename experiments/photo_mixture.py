@@ -2,26 +2,34 @@
 
 The bundled path-traced pair (``data_synthetic/pt_face_940`` by default) is the
 clean version: its source, depth and mask from the scene's camera, its target
-path-traced from the same camera. The "photograph" is made as a camera would
-make it, with every nuisance at once:
+path-traced from the same camera. A "photograph" is made as a camera would make
+it, from these nuisances (``--rows`` picks photographs with one of them, or all):
 
-1. the scene path-traced again (``--spp``) from a camera moved by ``--shift``
-   pixels (a pan and tilt of ``shift / focal_px`` radians) and rolled by
-   ``--roll`` degrees, so nothing is interpolated;
-2. the specular reflection of a rough dielectric boundary of the medium's
-   refractive index (the scene's ``specular`` pass: the boundary around a black
-   interior), added on top, scaled by ``--specular``;
-3. vignetting: a radial gain falling to ``1 - --vignetting`` at the corners;
-4. shot noise (2000 electrons at the 99th percentile) and 2 e- read noise;
-5. 8-bit sRGB encoding (exposed so the 99.5th percentile is 0.9) and the
-   decoding ``invsss.load_pair`` applies to an 8-bit file.
+1. ``move``: the scene path-traced again (``--spp``) from a camera moved by
+   ``--shift`` pixels (a pan and tilt of ``shift / focal_px`` radians) and rolled
+   by ``--roll`` degrees, so nothing is interpolated;
+2. ``specular``: the specular reflection of a rough dielectric boundary of the
+   medium's refractive index (the scene's ``specular`` pass: the boundary around a
+   black interior), added on top, scaled by ``--specular``;
+3. ``vignetting``: a radial gain falling to ``1 - --vignetting`` at the corners;
+4. ``sensor``: shot noise (2000 electrons at the 99th percentile) and 2 e- read
+   noise, then 8-bit sRGB encoding (exposed so the 99.5th percentile is 0.9) and
+   the decoding ``invsss.load_pair`` applies to an 8-bit file;
+5. ``mixture``: all four; ``rerender``: none, the view path-traced again with
+   another seed, which shows how far Monte Carlo noise alone moves a fit.
 
-It is fitted plainly, as a photograph should be (``--align similarity`` and
-``--vignetting``), and with ``--highlights`` as well, and compared with the plain
-fit of the clean pair::
+Each is fitted plainly and as a photograph should be (``--align similarity
+--vignetting``; ``--highlights`` adds a fit with that option,
+``--light-terms`` puts the light-aware terms in every fit), and compared with the
+clean pair fitted the same way. ``--rerender`` adds the final step a photograph
+gets: the scene rendered again from the camera the photo fit's registration
+found (``invsss scene --warp params.json --source-only``) and the photograph
+fitted against that render::
 
     python experiments/photo_mixture.py [--pair data_synthetic/pt_face_940] [--spp 1024]
+        [--rows mixture] [--rerender] [--light-terms shift,grazing,incidence]
         [--shift 1.2 1.6] [--roll 1.0] [--specular 1.0] [--vignetting 0.15] [--starts 2]
+        [--cache DIR]
 
 The moved camera's signs were checked by registering its render against the
 bundled one (``--check-camera`` prints the warp found for the source pass).
@@ -41,7 +49,7 @@ import numpy as np
 import invsss
 from invsss.scenes import parse_config
 from invsss.scenes.mitsuba_scene import import_mitsuba, load_mesh_ply, scene_dict
-from invsss.scenes.render import _grey_media
+from invsss.scenes.render import _grey_media, render_scene
 
 from photo_robustness import eight_bit_srgb, shot_noise, vignette
 
@@ -117,6 +125,22 @@ class Photographer:
         self._passes: dict = {}
 
     def _pass(self, moved: bool, kind: str) -> np.ndarray:
+        if (moved, kind) not in self._passes and self.args.cache is not None:
+            a = self.args
+            key = f"{a.pair.name}-{kind}-{a.spp}spp"
+            if moved:
+                key += f"-moved{a.shift[0]:g},{a.shift[1]:g},{a.roll:g}"
+            if kind == "specular" and a.roughness is not None:
+                key += f"-rough{a.roughness:g}"
+            path = a.cache / f"{key}.npy"
+            if path.is_file():
+                self._passes[moved, kind] = np.load(path)
+            else:
+                a.cache.mkdir(parents=True, exist_ok=True)
+                np.save(path, self._render(moved, kind))
+        return self._render(moved, kind)
+
+    def _render(self, moved: bool, kind: str) -> np.ndarray:
         if (moved, kind) not in self._passes:
             started = time.perf_counter()
             view = self.views[moved]
@@ -140,6 +164,16 @@ class Photographer:
         if recipe.sensor:
             image = eight_bit_srgb(shot_noise(image, 2000.0, 2.0, np.random.default_rng(13)))
         return image.astype(np.float32)[..., 0]
+
+
+def fit_rerendered(config, photo: np.ndarray, options: dict, terms: tuple, starts: int):
+    """Fit ``photo`` against ``config``'s source side, rendered without a target, with
+    the options of the photo fit: its registration now only has to find what is left
+    of the warp, a few hundredths of a pixel, so resampling costs next to nothing."""
+    view = render_scene(config, target=False)
+    buffers = {"light_buffers": invsss.LightBuffers(normal=view.normal, light=view.light)} if terms else {}
+    return invsss.fit_pair(view.source, photo, view.depth, view.mask, n_starts=starts, light_terms=terms,
+                           **buffers, **options)
 
 
 def _pm(value) -> str:
@@ -175,6 +209,11 @@ def main() -> None:
     parser.add_argument("--rows", default="mixture",
                         help=f"comma-separated photographs to fit (default mixture; any of {', '.join(RECIPES)})")
     parser.add_argument("--highlights", action="store_true", help="fit each photograph with --highlights too")
+    parser.add_argument("--cache", type=Path, default=None,
+                        help="a folder to keep the path-traced passes in between runs")
+    parser.add_argument("--rerender", action="store_true",
+                        help="after each photo fit, render the scene again from the camera its registration "
+                        "found and fit the photograph against that render")
     parser.add_argument("--light-terms", default="",
                         help="comma-separated light-aware terms every fit includes (e.g. shift,grazing,incidence); "
                              "the pair folder's normal.exr and light.exr are their buffers")
@@ -212,16 +251,25 @@ def main() -> None:
         if args.highlights:
             runs.append((name, "photo fit + highlights", dict(photo_fit, highlights=True)))
 
+    if args.rerender:
+        runs = [run for name, label, options in runs
+                for run in [(name, label, options)] + ([(name, "re-rendered", options)] if label == "photo fit" else [])]
+
     rows, clean = [], {}
     for name, label, options in runs:
         image = pair.target if name == "clean" else photographer.photograph(RECIPES[name])
         started = time.perf_counter()
-        fit = invsss.fit_pair(pair.source, image, pair.depth, pair.mask, n_starts=args.starts, **options,
-                              **light_options)
+        if label == "re-rendered":
+            # The scene rendered again from the camera the photo fit's registration found
+            # (what `invsss scene --warp params.json --source-only` does) and fitted again.
+            fit = fit_rerendered(config.with_warp(fit.alignment[0]), image, options, terms, args.starts)
+        else:
+            fit = invsss.fit_pair(pair.source, image, pair.depth, pair.mask, n_starts=args.starts, **options,
+                                  **light_options)
         # Each fit against the clean pair fitted the same way (a clean pair has no highlights to leave out).
         if name == "clean":
             clean[label] = fit
-        ref = clean["plain" if label == "plain" else "photo fit"]
+        ref = clean[label if label in ("plain", "re-rendered") else "photo fit"]
 
         def cell(key):
             change = 100 * (float(fit.values[key]) / float(ref.values[key]) - 1)

@@ -155,7 +155,7 @@ def test_fit_with_align_recovers_the_blur_of_a_shifted_target():
     assert json.loads(json.dumps(plain.to_dict()))["alignment"] is None
     # A fit on a resampled source says what that costs and what to do instead.
     said = [w for w in aligned.warnings if w.startswith("align: the source was resampled")]
-    assert len(said) == 1 and "render the source again with the fitted warp" in said[0]
+    assert len(said) == 1 and "render the source again from the camera the warp implies" in said[0]
 
 
 def test_align_rejects_an_unknown_kind():

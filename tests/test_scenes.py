@@ -381,3 +381,38 @@ def test_light_directions_point_from_the_surface_to_the_light():
     got = light_directions(config, depth)
     np.testing.assert_allclose(got[3:], expected[3:], atol=1e-12)
     assert np.all(got[:3] == 0.0)
+
+
+def test_light_directions_follow_the_principal_point():
+    # A principal point moved by whole pixels moves the picture by as many: the
+    # buffer of the moved camera at (row + 2, col - 3) is the original's at (row, col).
+    from invsss.scenes.render import light_directions
+
+    config = _config()
+    moved = parse_config({**config.model_dump(), "camera": {**config.camera.model_dump(),
+                                                            "principal_offset_px": [2.0, -3.0]}}, "test scene")
+    depth = 250.0 + np.random.default_rng(0).uniform(0.0, 20.0, (config.camera.height, config.camera.width))
+    shifted = np.zeros_like(depth)
+    shifted[2:, :-3] = depth[:-2, 3:]
+    before, after = light_directions(config, depth), light_directions(moved, shifted)
+    np.testing.assert_allclose(after[2:, :-3], before[:-2, 3:], atol=1e-12)
+    assert np.abs(light_directions(config, shifted)[2:, :-3] - before[:-2, 3:]).max() > 1e-3
+
+
+
+def test_with_warp_refuses_a_warp_no_camera_move_makes():
+    from invsss.registration import Warp
+
+    shear = Warp("affine", (0.5, 0.5, 0.0, 0.02, 0.0, 0.0), (16.0, 16.0))
+    with pytest.raises(invsss.InvalidInputError, match="affine warp is not a camera move"):
+        _config().with_warp(shear)
+
+
+def test_with_warp_keeps_the_camera_where_the_warp_is_the_identity():
+    from invsss.registration import Warp
+
+    config = _config()
+    same = config.with_warp(Warp("similarity", (0.0, 0.0, 0.0, 0.0), (10.0, 20.0))).camera
+    np.testing.assert_allclose(same.up, config.camera.frame()[2], atol=1e-12)
+    assert same.principal_offset_px == [0.0, 0.0]
+    assert same.focal_px == pytest.approx(config.camera.focal_length_px, rel=1e-12)

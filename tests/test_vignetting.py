@@ -16,7 +16,7 @@ import pytest
 import invsss
 from invsss import InvalidInputError
 from invsss.estimator import FitOptions, build_problem
-from invsss.estimator.vignetting import radius_squared, vignetting_field
+from invsss.estimator.vignetting import radius_squared, vignetting_at, vignetting_field
 from _estimator_scenes import make_pair
 from _pair_files import pair_args, write_pair
 
@@ -44,6 +44,12 @@ def test_field_matches_its_definition():
     np.testing.assert_allclose(rho2, expected, rtol=1e-12)
     field = np.asarray(vignetting_field(jnp.array([-0.3, 0.1], jnp.float64), (4, 6)))
     np.testing.assert_allclose(field, 1.0 - 0.3 * expected + 0.1 * expected**2, rtol=1e-12)
+    # Read at the pixel centres, the field at any points is the same field.
+    points = np.stack([y.ravel(), x.ravel()], axis=1).astype(float)
+    np.testing.assert_allclose(vignetting_at([-0.3, 0.1], points, (4, 6)), field.ravel(), rtol=1e-12)
+    between = vignetting_at([-0.3, 0.1], np.array([[0.5, 1.0]]), (4, 6))[0]
+    rho2_between = (1.0**2 + 1.5**2) / (1.5**2 + 2.5**2)
+    assert between == pytest.approx(1.0 - 0.3 * rho2_between + 0.1 * rho2_between**2, rel=1e-12)
 
 
 @pytest.mark.slow

@@ -26,7 +26,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-__all__ = ["ORDER", "radius_squared", "vignetting_field"]
+__all__ = ["ORDER", "radius_squared", "vignetting_field", "vignetting_at"]
 
 #: Number of coefficients: the rho^2 and rho^4 terms.
 ORDER = 2
@@ -71,3 +71,29 @@ def vignetting_field(coefficients: Float[Array, " 2"], shape: tuple[int, int]) -
     """
     rho2 = radius_squared(shape, jnp.result_type(coefficients))
     return 1.0 + coefficients[0] * rho2 + coefficients[1] * rho2**2
+
+
+def vignetting_at(coefficients, points, shape: tuple[int, int]):
+    """``V`` at any positions of a frame of ``shape``: (N, 2) (row, col) points -> (N,).
+
+    The field as :func:`vignetting_field` defines it, in NumPy, read where a
+    registration maps the source's pixels into the photograph: a registration
+    compares the photograph with a prediction on the source's grid, and an
+    unshaded prediction leaves the fall-off for the warp's scale to take.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> at = vignetting_at([-0.2, 0.0], np.array([[2.0, 2.0], [0.0, 0.0], [1.0, 2.0]]), (5, 5))
+    >>> [round(float(v), 6) for v in at]
+    [1.0, 0.8, 0.975]
+    """
+    import numpy as np
+
+    h, w = shape
+    a = np.asarray(coefficients, np.float64)
+    points = np.asarray(points, np.float64)
+    corner = max(((h - 1) / 2.0) ** 2 + ((w - 1) / 2.0) ** 2, 1.0)
+    rho2 = ((points[:, 0] - (h - 1) / 2.0) ** 2 + (points[:, 1] - (w - 1) / 2.0) ** 2) / corner
+    return 1.0 + a[0] * rho2 + a[1] * rho2**2
+
