@@ -132,3 +132,26 @@ def test_cli_fit_writes_the_field_into_params_json(tmp_path):
     assert len(written["vignetting"]["coefficients"]) == 2 and written["vignetting"]["corner_gain"] < 1.0
     params, _ = invsss.read_params(tmp_path / "out" / "params.json")  # still a valid params file
     assert float(params.sss_level) > 0
+
+
+@pytest.mark.slow
+def test_registration_does_not_take_the_fall_off_for_a_zoom():
+    # A photograph moved by whole pixels (nothing interpolated), then shaded about
+    # its own frame's centre: an aligned fit with vignetting must find the move and
+    # no zoom. Registering against an unshaded prediction read the fall-off as a
+    # scale of about 0.999, which moves correction by several per cent.
+    source, depth, mask, _, _ = _photographs()
+    _, _, _, _, clean = make_pair("face", TRUTH, size=SIZE, contrast=3.0, seed=4, noise=0.0)
+    moved = np.full_like(clean, OFFSET)
+    moved[2:, :-1] = clean[:-2, 1:]  # content 2 rows down and 1 column left
+    y, x = np.mgrid[0:SIZE, 0:SIZE]
+    c = (SIZE - 1) / 2.0
+    rho2 = ((y - c) ** 2 + (x - c) ** 2) / (2 * c**2)
+    noise = 0.01 * float(np.mean(clean[mask > 0])) * np.random.default_rng(5).standard_normal(clean.shape)
+    photo = (moved - OFFSET) * (1.0 - 0.2 * rho2)[..., None] + OFFSET + noise
+    fit = invsss.fit_pair(source, photo, depth, mask, profile=PROFILE3, n_starts=2, align="similarity",
+                          vignetting=True)
+    warp = fit.alignment[0]
+    assert warp["shift_px"] == pytest.approx([2.0, -1.0], abs=0.02)
+    assert abs(warp["scale"] - 1.0) < 2e-4 and abs(warp["rotation_deg"]) < 0.02
+    assert fit.vignetting["corner_gain"] == pytest.approx(0.8, abs=0.02)

@@ -16,6 +16,7 @@ angles degrees, scattering coefficients 1/mm. A minimal file::
     fov = 20.0                  # horizontal, degrees; or focal_px
     width = 64
     height = 64
+    # principal_offset_px = [0.0, 0.0]   # (rows, cols) from the image centre; set by `scene --warp`
 
     [[lights]]
     type = "point"              # point, spot, area or directional
