@@ -207,12 +207,14 @@ def main() -> None:
     parser.add_argument("--optics", default="camera", choices=("camera", "resample"),
                         help="misregister by rendering from a moved camera (default) or by "
                         "resampling the rendered target (cubic)")
+    parser.add_argument("--seed", type=int, default=13,
+                        help="seed of the noise draws (each row draws its own, in row order)")
     parser.add_argument("--rerender", action="store_true",
                         help="a third fit: the scene rendered again from the camera the aligned fit "
                         "found, fitted as a photograph again (model-made face pairs only)")
     args = parser.parse_args()
     pair = invsss.load_pair(*(args.pair / f for f in ("source.exr", "target.exr", "depth.exr", "mask.png")))
-    rng = np.random.default_rng(13)
+    rng = np.random.default_rng(args.seed)
     second = f"align {args.align}" + ("" if args.no_vignetting else " + vignetting")
     print(f"{args.pair}: fits with {args.starts} starts; plain | {second}; "
           f"misregistration by {args.optics}", flush=True)
