@@ -604,8 +604,8 @@ def _add_scene_parser(subparsers) -> None:
     parser.add_argument("--seed", type=int, default=None, metavar="N", help="seed (default: the config's)")
     parser.add_argument("--warp", default=None, metavar="PARAMS_JSON",
                         help="a fit's params.json whose registration (fit --align translation or similarity) "
-                        "moves the camera: the render lands on the photograph's pixel grid, so it can be "
-                        "fitted again without --align and nothing is resampled (see docs/capture.md)")
+                        "moves the camera: the render lands on the photograph's pixel grid, and a fit with "
+                        "--align again has only hundredths of a pixel left to resample (see docs/capture.md)")
     parser.add_argument("--source-only", action="store_true",
                         help="leave out the path-traced target: source, depth, mask and buffers only, for "
                         "fitting a photograph (the target is most of the render time)")

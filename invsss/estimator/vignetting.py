@@ -24,6 +24,7 @@ centre (true of an uncropped photograph).
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 __all__ = ["ORDER", "radius_squared", "vignetting_field", "vignetting_at"]
@@ -83,13 +84,10 @@ def vignetting_at(coefficients, points, shape: tuple[int, int]):
 
     Examples
     --------
-    >>> import numpy as np
     >>> at = vignetting_at([-0.2, 0.0], np.array([[2.0, 2.0], [0.0, 0.0], [1.0, 2.0]]), (5, 5))
     >>> [round(float(v), 6) for v in at]
     [1.0, 0.8, 0.975]
     """
-    import numpy as np
-
     h, w = shape
     a = np.asarray(coefficients, np.float64)
     points = np.asarray(points, np.float64)

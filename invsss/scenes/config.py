@@ -41,6 +41,7 @@ import os
 import tomllib
 from typing import Annotated, Literal, Union, get_args, get_origin
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from ..validation import InvalidInputError
@@ -137,10 +138,8 @@ class Camera(_Strict):
     height: Annotated[int, Field(ge=2)]
     principal_offset_px: Vec2 = [0.0, 0.0]
 
-    def frame(self):
+    def frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Origin and the right, up and forward unit vectors, as Mitsuba's ``look_at`` builds them."""
-        import numpy as np
-
         origin = np.asarray(self.position, np.float64)
         forward = np.asarray(self.look_at, np.float64) - origin
         forward /= np.linalg.norm(forward)
@@ -378,8 +377,6 @@ class SceneConfig(_Strict):
         >>> camera.principal_offset_px, round(camera.focal_px, 6)
         ([1.5, -2.0], 101.0)
         """
-        import numpy as np
-
         from ..registration import Warp
 
         warp = warp if isinstance(warp, Warp) else Warp.from_dict(warp)
