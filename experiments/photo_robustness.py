@@ -47,6 +47,7 @@ import numpy as np
 from scipy import ndimage
 
 import invsss
+from invsss.estimator.diagnostics import masked_psnr
 from invsss.io import PARAMS_KEYS, linear_to_srgb, srgb_to_linear
 from invsss.registration import Warp
 from make_synthetic import CameraMove, noise_free_target, render_moved_view
@@ -184,8 +185,18 @@ def camera_move_for(warp: dict, shape) -> CameraMove:
     return CameraMove(tuple(record["shift_px"]), record.get("rotation_deg", 0.0), record.get("scale", 1.0))
 
 
+def _channels(image) -> np.ndarray:
+    image = np.asarray(image, np.float64)
+    return image[..., None] if image.ndim == 2 else image
+
+
+def optics_only(clean: np.ndarray, row: Row) -> np.ndarray:
+    """The photograph before its sensor: the light a perfect fit would predict."""
+    return vignette(clean, row.shade) if row.shade else clean
+
+
 def photograph(clean: np.ndarray, sigma: float, row: Row, rng) -> np.ndarray:
-    image = vignette(clean, row.shade) if row.shade else clean
+    image = optics_only(clean, row)
     if row.sensor == "shot":
         return shot_noise(image, 2000.0, 2.0, rng)
     if row.sensor == "shot+8bit":
@@ -219,7 +230,7 @@ def main() -> None:
     print(f"{args.pair}: fits with {args.starts} starts; plain | {second}; "
           f"misregistration by {args.optics}", flush=True)
     rerender = args.rerender and _truth(args.pair) is not None
-    header = ("| nuisance | sss_level | correction | PSNR dB | sss_level aligned | correction aligned "
+    header = ("| nuisance | ceiling dB | sss_level | correction | PSNR dB | sss_level aligned | correction aligned "
               "| PSNR aligned | warp found |" + (" sss_level re-rendered | correction re-rendered "
                                                 "| PSNR re-rendered |" if rerender else ""))
     rows, clean = [], {}
@@ -228,7 +239,13 @@ def main() -> None:
         clean_image, sigma = clean_target(args.pair, pair, row.move, args.optics)
         photo = photograph(clean_image, sigma, row, rng).astype(np.float32)
         photo = photo[..., 0] if np.ndim(pair.target) == 2 else photo
-        cells = [name]
+        # The noise ceiling: the photograph against the light that made it, before the
+        # sensor's noise, 8 bits and JPEG. A fit's PSNR can at best reach it, so a noisy
+        # row is judged by its PSNR's distance below its own ceiling.
+        reference = optics_only(clean_image, row)
+        reference = reference[..., 0] if np.ndim(pair.target) == 2 else reference
+        ceiling = masked_psnr(_channels(reference), _channels(photo), np.asarray(pair.mask, np.float64))
+        cells = [name, f"{ceiling:.1f}"]
         fits = ["none", args.align] + (["re-rendered"] if rerender else [])
         for kind in fits:
             started = time.perf_counter()

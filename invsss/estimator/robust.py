@@ -26,7 +26,7 @@ import numpy as np
 
 from ..validation import InvalidInputError
 
-__all__ = ["ROBUST_LOSSES", "check_robust", "robust_scale", "robust_weights", "psi_and_slope"]
+__all__ = ["ROBUST_LOSSES", "check_robust", "robust_scale", "robust_weights", "robust_loss", "psi_and_slope"]
 
 ROBUST_LOSSES = ("pseudo-huber", "cauchy")
 _K = {"pseudo-huber": 3.0, "cauchy": 2.385}
@@ -60,6 +60,27 @@ def robust_weights(residuals, delta: float, kind: str) -> list[np.ndarray]:
         x2 = (np.asarray(r) / delta) ** 2
         out.append(1.0 / np.sqrt(1.0 + x2) if kind == "pseudo-huber" else 1.0 / (1.0 + x2))
     return out
+
+
+def robust_loss(residuals, masks, delta: float, kind: str) -> float:
+    """``sum m rho(r)`` over each pair's residual image (H, W, C) and its per-pixel
+    weight ``m`` (H, W, C) at the scale ``delta``: one objective on which fits
+    reweighted from different points can be compared.
+
+    Examples
+    --------
+    >>> r = np.array([[[0.0], [1.0]]]); m = np.ones_like(r)
+    >>> round(robust_loss([r], [m], 1.0, "pseudo-huber"), 6)  # sqrt(2) - 1
+    0.414214
+    """
+    total = 0.0
+    for r, m in zip(residuals, masks):
+        x2 = (np.asarray(r) / delta) ** 2 if delta > 0 else np.asarray(r) ** 2
+        scale = delta**2 if delta > 0 else 1.0
+        rho = x2 / 2.0 if delta <= 0 else (np.sqrt(1.0 + x2) - 1.0 if kind == "pseudo-huber"
+                                           else 0.5 * np.log1p(x2))
+        total += float(np.sum(np.asarray(m) * scale * rho))
+    return total
 
 
 def psi_and_slope(r, delta: float, kind: str) -> tuple[np.ndarray, np.ndarray]:
