@@ -4,7 +4,8 @@ The starts are ranked by plain least squares with the weights' sign free; the fi
 ends on the robust loss with the sign imposed. An 8-bit JPEG of the bundled
 fran_front target is a photograph on which the two disagree: plain least squares
 prefers a basin with sss_level about 43 % high and a negative weight, the robust
-loss the one at the truth. The fit must end at the truth.
+loss the one at the truth. The fit must end at the truth. Where two basins fit
+equally well within the noise, the fit must say so.
 """
 
 from __future__ import annotations
@@ -12,11 +13,18 @@ from __future__ import annotations
 import io
 from pathlib import Path
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from PIL import Image
+from scipy import ndimage
 
 import invsss
+from invsss.estimator.fit import _choose_basin, _Path
+from invsss.estimator.options import FitOptions
+from invsss.estimator.problem import _evaluate, build_problem
+from invsss.estimator.robust import robust_loss, robust_scale
 from invsss.io import linear_to_srgb, srgb_to_linear
 
 PAIR = Path(__file__).resolve().parents[1] / "data_synthetic" / "fran_front"
@@ -43,3 +51,50 @@ def test_a_jpeg_photograph_is_fitted_in_the_robust_losss_basin():
         assert float(photo.values[name]) == pytest.approx(float(clean.values[name]), rel=0.05), name
     # The basin least squares preferred was carried through the robust rounds too.
     assert any(label.startswith("start ") and "robust" in label for label in photo.history_by_stage())
+
+
+def test_robust_loss_weighs_each_pixel_by_its_own_mask_entry():
+    # A (H, W) mask against (H, W, 1) residuals of a frame that is not square: the
+    # mask must act per pixel, not broadcast against the channel axis.
+    rng = np.random.default_rng(3)
+    residual = rng.normal(size=(5, 7, 1))
+    mask = (rng.uniform(size=(5, 7)) > 0.4).astype(np.float64)
+    value = robust_loss([residual], [mask], 0.5, "pseudo-huber")
+    assert value == pytest.approx(robust_loss([residual], [mask[..., None]], 0.5, "pseudo-huber"))
+    rho = 0.25 * (np.sqrt(1.0 + (residual[..., 0] / 0.5) ** 2) - 1.0)
+    assert value == pytest.approx(float(np.sum(rho[mask > 0])))
+
+
+def _noisy_card_problem():
+    """A flat card blurred at sss_level 375, noisy enough that a blur 12 % wider
+    fits within chi^2 2 of it (1.5 here), and one 60 % wider does not."""
+    rng = np.random.default_rng(0)
+    shape = (40, 48)  # not square: see the test above
+    source = ndimage.gaussian_filter(rng.uniform(0.2, 1.0, shape), 1.0)
+    depth, mask = np.full(shape, 500.0), np.ones(shape)
+    truth = invsss.SSSParams(375.0, 0.0, 1.0, [0.3, 0.7], [1.0, 4.0])
+    target = np.asarray(invsss.render(source, depth, mask, truth)) + 0.01 * rng.standard_normal(shape)
+    options = FitOptions(profile={"weights": [0.5, 0.5], "variances": [1.0, 4.0]},
+                         fix={"correction": 0.0, "maxdd": 1.0})
+    return build_problem([(source, target, depth, mask)], options)
+
+
+def _candidate(problem, level):
+    path = _Path(problem.objective, problem.param.unknowns({"sss_level": level}))
+    preds = _evaluate(path.objective, path.z, jnp.asarray(False))["predictions"]
+    residuals = [np.asarray(p.target) - np.asarray(q) for p, q in zip(problem.data, preds)]
+    path.delta = robust_scale(residuals, [np.asarray(p.residual_weight) for p in problem.data], "pseudo-huber")
+    return path
+
+
+def test_a_second_basin_that_fits_as_well_within_the_noise_is_reported():
+    with jax.enable_x64(True):
+        problem = _noisy_card_problem()
+        tied = [_candidate(problem, 375.0), _candidate(problem, 420.0)]
+        chosen = _choose_basin(problem, tied, "pseudo-huber")
+        clear = [_candidate(problem, 375.0), _candidate(problem, 600.0)]
+        clear_choice = _choose_basin(problem, clear, "pseudo-huber")
+    assert chosen is tied[0]
+    assert any("another basin fits as well" in m and "420" in m for m in chosen.messages)
+    assert clear_choice is clear[0]
+    assert not any("another basin" in m for m in clear_choice.messages)

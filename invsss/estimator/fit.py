@@ -46,7 +46,7 @@ from .options import FitOptions
 from .parametrisation import LIGHT_UNKNOWNS, by_unknown
 from .problem import _evaluate, build_problem
 from .result import FitResult, masked_list
-from .robust import robust_loss, robust_scale, robust_weights
+from .robust import ROBUST_K, robust_loss, robust_scale, robust_weights
 from .solve import (
     NOISE_TOL, RTOL, SCREEN_STALL_TOL, SCREEN_TOL, STALL_TOL, FitInterrupted, make_solver, run_solver,
 )
@@ -66,6 +66,12 @@ _ROBUST_ROUNDS = 2
 #: 64 x 64 face 0.25 standard errors from where walking every start ends, with a
 #: loss the data cannot tell apart (chi^2 within 0.05).
 SAME_BASIN = 0.02
+#: Two fits are at different blur scales when their sss_level differ by more than
+#: this (log ratio).
+_DISTINCT_LEVEL = 0.1
+#: Two basins whose robust losses differ by less than this in chi^2 (2 sigma for
+#: one parameter) fit equally well: the fit says so.
+AMBIGUOUS_CHI2 = 4.0
 
 # The solvers' Jacobian (invsss.estimator.solve.DenseJacobian): the blur by forward
 # differences, 0.64-0.77 of forward mode's time per step; the covariance uses
@@ -694,16 +700,42 @@ def _solve(problem, options, steps) -> _Path:
         finished.append(path)
         if path.interrupted:
             break
-    if len(finished) > 1 and not finished[-1].interrupted:
-        delta = finished[0].delta
+    if finished[-1].interrupted:
+        # A stop asked for during a later candidate: report the first, as interrupted.
+        finished[0].interrupted = True
+        return finished[0]
+    return _choose_basin(problem, finished, options.robust) if len(finished) > 1 else finished[0]
 
-        def objective_value(candidate):
-            preds = _evaluate(candidate.objective, candidate.z, jnp.asarray(False))["predictions"]
-            residuals = [np.asarray(p.target) - np.asarray(q) for p, q in zip(problem.data, preds)]
-            return robust_loss(residuals, masks, delta, options.robust)
 
-        return min(finished, key=objective_value)
-    return finished[0]
+def _choose_basin(problem, finished, robust):
+    """The candidate with the lowest robust loss (one scale for all), with a warning
+    when another one, at a different blur scale, fits as well within the noise."""
+    masks = [np.asarray(p.residual_weight) for p in problem.data]
+    delta = finished[0].delta
+
+    def objective_value(candidate):
+        preds = _evaluate(candidate.objective, candidate.z, jnp.asarray(False))["predictions"]
+        residuals = [np.asarray(p.target) - np.asarray(q) for p, q in zip(problem.data, preds)]
+        return robust_loss(residuals, masks, delta, robust)
+
+    values = [objective_value(c) for c in finished]
+    chosen = finished[int(np.argmin(values))]
+    # rho ~ r^2 / 2 near zero and delta is k noise sigmas, so 2 rho / sigma^2 is chi^2.
+    sigma2 = (delta / ROBUST_K[robust]) ** 2
+    level = float(problem.param.natural(chosen.z)["sss_level"])
+    rivals = []
+    for candidate, value in zip(finished, values):
+        other = float(problem.param.natural(candidate.z)["sss_level"])
+        chi2 = 2.0 * (value - min(values)) / sigma2 if sigma2 > 0 else np.inf
+        if abs(np.log(other / level)) > _DISTINCT_LEVEL and chi2 < AMBIGUOUS_CHI2:
+            rivals.append(f"{other:.4g} (chi^2 +{chi2:.1f})")
+    if rivals:
+        chosen.messages.append(
+            f"sss_level: another basin fits as well within the noise, at sss_level {', '.join(rivals)} against "
+            f"{level:.4g}; with the weights free the blur scale trades against them, and its standard error "
+            "covers one basin only. Hold the weights at a measured profile (fix weights=...) to decide"
+        )
+    return chosen
 
 
 def _active_set(problem, path, run, prefix: str = "") -> None:

@@ -26,10 +26,11 @@ import numpy as np
 
 from ..validation import InvalidInputError
 
-__all__ = ["ROBUST_LOSSES", "check_robust", "robust_scale", "robust_weights", "robust_loss", "psi_and_slope"]
+__all__ = ["ROBUST_LOSSES", "ROBUST_K", "check_robust", "robust_scale", "robust_weights", "robust_loss", "psi_and_slope"]
 
 ROBUST_LOSSES = ("pseudo-huber", "cauchy")
-_K = {"pseudo-huber": 3.0, "cauchy": 2.385}
+#: ``delta`` in robust standard deviations of the residual, per loss.
+ROBUST_K = {"pseudo-huber": 3.0, "cauchy": 2.385}
 
 
 def check_robust(robust):
@@ -48,7 +49,7 @@ def robust_scale(residuals, masks, kind: str) -> float:
     (0 when the residual vanishes)."""
     pooled = np.concatenate([np.abs(r[m > 0]).ravel() for r, m in zip(residuals, masks)])
     sigma = 1.4826 * float(np.median(pooled))
-    return _K[kind] * sigma if np.isfinite(sigma) else 0.0
+    return ROBUST_K[kind] * sigma if np.isfinite(sigma) else 0.0
 
 
 def robust_weights(residuals, delta: float, kind: str) -> list[np.ndarray]:
@@ -64,8 +65,8 @@ def robust_weights(residuals, delta: float, kind: str) -> list[np.ndarray]:
 
 def robust_loss(residuals, masks, delta: float, kind: str) -> float:
     """``sum m rho(r)`` over each pair's residual image (H, W, C) and its per-pixel
-    weight ``m`` (H, W, C) at the scale ``delta``: one objective on which fits
-    reweighted from different points can be compared.
+    weight ``m`` ((H, W, C), or (H, W) for every channel) at the scale ``delta``:
+    one objective on which fits reweighted from different points can be compared.
 
     Examples
     --------
@@ -75,6 +76,9 @@ def robust_loss(residuals, masks, delta: float, kind: str) -> float:
     """
     total = 0.0
     for r, m in zip(residuals, masks):
+        r, m = np.asarray(r), np.asarray(m)
+        # A per-pixel weight would broadcast against the channel axis, not along it.
+        m = m[..., None] if m.ndim == r.ndim - 1 else m
         x2 = (np.asarray(r) / delta) ** 2 if delta > 0 else np.asarray(r) ** 2
         scale = delta**2 if delta > 0 else 1.0
         rho = x2 / 2.0 if delta <= 0 else (np.sqrt(1.0 + x2) - 1.0 if kind == "pseudo-huber"
