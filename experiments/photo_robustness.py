@@ -21,7 +21,10 @@ correction and PSNR of each
 fit and its change from the clean fit. ``--rerender`` adds the last step a
 photograph gets: the scene rendered again from the camera the aligned fit found
 (what ``invsss scene --warp`` does for a scene invsss renders), and the photograph
-fitted against that render the same way, against the clean row's own::
+fitted against that render the same way, against the clean row's own. Each row
+also prints its noise ceiling: the PSNR of the photograph against the light that
+made it (vignetting included, before noise, 8 bits and JPEG), the best PSNR a fit
+can reach, against which a noisy row's PSNR is to be read::
 
     python experiments/photo_robustness.py [--pair data_synthetic/fran_front] [--align similarity]
         [--rows clean,shift1,...] [--starts 2] [--optics camera|resample] [--rerender]
