@@ -42,8 +42,11 @@ def linearised():
 
 
 def _uncertainty(problem, lin, nuisance=None):
+    # The white-noise covariance, whose formula these tests check (the
+    # cluster-robust one is tested in test_correlated_noise.py).
     with jax.enable_x64(True):
-        return gauss_newton_uncertainty(problem.objective, lin, problem.scales.correction, None, nuisance)
+        return gauss_newton_uncertainty(problem.objective, lin, problem.scales.correction, None, nuisance,
+                                        blocks=False)
 
 
 @pytest.mark.slow

@@ -46,11 +46,12 @@ from .options import FitOptions
 from .parametrisation import LIGHT_UNKNOWNS, by_unknown
 from .problem import _evaluate, build_problem
 from .result import FitResult, masked_list
-from .robust import ROBUST_K, robust_loss, robust_scale, robust_weights
+from . import uncertainty
+from .robust import psi_and_slope, robust_rho, robust_scale, robust_weights
 from .solve import (
     NOISE_TOL, RTOL, SCREEN_STALL_TOL, SCREEN_TOL, STALL_TOL, FitInterrupted, make_solver, run_solver,
 )
-from .uncertainty import gauss_newton_uncertainty, structural_reasons
+from .uncertainty import block_index, gauss_newton_uncertainty, structural_reasons
 from .vignetting import vignetting_at
 
 __all__ = ["fit_pair", "fit_pairs"]
@@ -69,9 +70,10 @@ SAME_BASIN = 0.02
 #: Two fits are at different blur scales when their sss_level differ by more than
 #: this (log ratio).
 _DISTINCT_LEVEL = 0.1
-#: Two basins whose robust losses differ by less than this in chi^2 (2 sigma for
-#: one parameter) fit equally well: the fit says so.
-AMBIGUOUS_CHI2 = 4.0
+#: Two basins whose robust losses differ by less than this many standard
+#: deviations of the difference under the noise fit equally well: the fit says
+#: so (see _choose_basin).
+AMBIGUOUS_Z = 2.0
 
 # The solvers' Jacobian (invsss.estimator.solve.DenseJacobian): the blur by forward
 # differences, 0.64-0.77 of forward mode's time per step; the covariance uses
@@ -709,26 +711,44 @@ def _solve(problem, options, steps) -> _Path:
 
 def _choose_basin(problem, finished, robust):
     """The candidate with the lowest robust loss (one scale for all), with a warning
-    when another one, at a different blur scale, fits as well within the noise."""
+    when another one, at a different blur scale, fits as well within the noise.
+
+    "As well": the difference of the two losses is less than
+    :data:`AMBIGUOUS_Z` times its standard deviation under the noise. A change
+    ``e`` of the target changes it by ``sum_i (psi_other - psi_best)_i e_i``;
+    with ``e`` the kept fit's residual and the sum squared per block of
+    :data:`~.uncertainty.BLOCK_PX` pixels (noise correlated within a block, as
+    JPEG's is, counts as it should), that is the cluster-robust variance of
+    :mod:`.uncertainty` applied to the loss difference.
+    """
     masks = [np.asarray(p.residual_weight) for p in problem.data]
     delta = finished[0].delta
 
-    def objective_value(candidate):
+    def residual(candidate):
         preds = _evaluate(candidate.objective, candidate.z, jnp.asarray(False))["predictions"]
-        residuals = [np.asarray(p.target) - np.asarray(q) for p, q in zip(problem.data, preds)]
-        return robust_loss(residuals, masks, delta, robust)
+        return [np.asarray(p.target) - np.asarray(q) for p, q in zip(problem.data, preds)]
 
-    values = [objective_value(c) for c in finished]
-    chosen = finished[int(np.argmin(values))]
-    # rho ~ r^2 / 2 near zero and delta is k noise sigmas, so 2 rho / sigma^2 is chi^2.
-    sigma2 = (delta / ROBUST_K[robust]) ** 2
+    def flat(images):
+        return np.concatenate([np.asarray(x).ravel() for x in images])
+
+    residuals = [residual(c) for c in finished]
+    values = [float(np.sum(flat(robust_rho(r, masks, delta, robust)))) for r in residuals]
+    best = int(np.argmin(values))
+    chosen = finished[best]
+    weight = flat([np.broadcast_to(np.asarray(m)[..., None], np.shape(r)) for m, r in zip(masks, residuals[best])])
+    slopes = [weight * psi_and_slope(flat(r), delta, robust)[0] for r in residuals]
+    blocks = block_index([np.shape(r) for r in residuals[best]], uncertainty.BLOCK_PX)
     level = float(problem.param.natural(chosen.z)["sss_level"])
     rivals = []
-    for candidate, value in zip(finished, values):
+    for candidate, value, slope in zip(finished, values, slopes):
         other = float(problem.param.natural(candidate.z)["sss_level"])
-        chi2 = 2.0 * (value - min(values)) / sigma2 if sigma2 > 0 else np.inf
-        if abs(np.log(other / level)) > _DISTINCT_LEVEL and chi2 < AMBIGUOUS_CHI2:
-            rivals.append(f"{other:.4g} (chi^2 +{chi2:.1f})")
+        if abs(np.log(other / level)) <= _DISTINCT_LEVEL:
+            continue
+        by_block = np.bincount(blocks, weights=(slope - slopes[best]) * flat(residuals[best]))
+        spread = float(np.sqrt(np.sum(by_block**2)))
+        z = (value - values[best]) / spread if spread > 0 else np.inf
+        if z < AMBIGUOUS_Z:
+            rivals.append(f"{other:.4g} (loss higher by {z:.1f} standard deviations)")
     if rivals:
         chosen.messages.append(
             f"sss_level: another basin fits as well within the noise, at sss_level {', '.join(rivals)} against "

@@ -12,7 +12,11 @@ the data separate its Gaussian from the others) --
 robust fit the robust weights are taken out of ``J`` and ``sigma^2`` becomes
 Huber's ``sum(psi(r)^2) / (N - p) / mean(psi'(r))^2`` (Huber 1981, section 7.6):
 without it, down-weighting the noise's tails would shrink ``sigma`` and the
-errors would be underestimated. Reported
+errors would be underestimated. The noise is allowed to be correlated within
+blocks of :data:`BLOCK_PX` pixels: each variance is the larger of the one above
+and a cluster-robust sandwich ``(J^T J)^+ (sum_b g_b g_b^T) (J^T J)^+ N / (N - p)``,
+``g_b`` the sum of ``J_i psi_i`` over block ``b`` (over ``mean(psi')^2`` after a
+robust fit; ``psi = r`` for plain least squares). Reported
 quantities (natural parameters, and weights ``w_i = beta_i / sum beta``) get their
 covariance by the delta method, ``G cov G^T`` with ``G`` their Jacobian.
 
@@ -58,6 +62,8 @@ __all__ = [
     "Uncertainty",
     "linearise",
     "gauss_newton_uncertainty",
+    "block_index",
+    "BLOCK_PX",
     "structural_reasons",
 ]
 
@@ -69,6 +75,25 @@ COINCIDENT_PX = 0.25
 #: largest stretch on the mask cannot be told from no blur at all.
 UNRESOLVED_PX = 0.1
 FEW_SLOPES = 0.01
+
+
+#: Side (px) of the blocks within which the covariance allows the noise to be
+#: correlated (see :func:`gauss_newton_uncertainty`): JPEG's block size.
+BLOCK_PX = 8
+
+
+def block_index(shapes, size: int) -> np.ndarray:
+    """For each entry of the images of ``shapes`` ((H, W, C) each), flattened and
+    concatenated, the number of its ``size`` x ``size`` pixel block (blocks of
+    different images are different)."""
+    out, first = [], 0
+    for h, w, c in shapes:
+        rows, cols = np.mgrid[0:h, 0:w]
+        across = -(-w // size)
+        index = (rows // size) * across + cols // size
+        out.append(np.repeat(index.ravel(), c) + first)
+        first += -(-h // size) * across
+    return np.concatenate(out) if out else np.zeros(0, int)
 
 
 class Uncertainty(NamedTuple):
@@ -143,7 +168,7 @@ def linearise(objective, z, coef, offset) -> dict:
 
 
 def gauss_newton_uncertainty(
-    objective, lin: dict, correction_ref: float, robust=None, nuisance=None
+    objective, lin: dict, correction_ref: float, robust=None, nuisance=None, blocks: bool = True
 ) -> Uncertainty:
     """Standard errors and undetermined entries from :func:`linearise`'s output.
 
@@ -155,6 +180,8 @@ def gauss_newton_uncertainty(
     aligned fit's warp). They join ``J`` as columns, so every standard error is
     the marginal one, with those unknowns estimated too rather than taken as
     known; theirs are ``nuisance_stderr`` (NaN where undetermined).
+
+    ``blocks`` False takes the noise as white (no cluster-robust sandwich).
     """
     jac = np.asarray(lin["jacobian"])
     rho = np.asarray(lin["residual"])
@@ -168,11 +195,13 @@ def gauss_newton_uncertainty(
         jacs = {k: np.concatenate([np.asarray(g).reshape(-1, jac.shape[1] - q),
                                    np.zeros((int(np.size(values[k])), q))], axis=1)
                 for k, g in jacs.items()}
+    shapes = [np.shape(w) for w in objective.weights()]
     weighted = np.concatenate([np.asarray(w).ravel() > 0 for w in objective.weights()])
     n, p = int(weighted.sum()), jac.shape[1]
     dof = max(n - p, 1)
     if robust is None:
         sigma2 = float(np.sum(rho**2)) / dof
+        scores, slope = rho[weighted], 1.0
     else:
         # Undo the robust weights u (rho = sqrt(u) r): Huber's covariance of an
         # M-estimate uses the unweighted Jacobian and the scale
@@ -182,7 +211,9 @@ def gauss_newton_uncertainty(
         jac = jac / root[:, None]
         r = (rho / root)[weighted]
         psi, dpsi = psi_and_slope(r, robust[1] / float(objective.scale), robust[0])
-        sigma2 = float(np.sum(psi**2)) / dof / float(np.mean(dpsi)) ** 2
+        slope = float(np.mean(dpsi))
+        sigma2 = float(np.sum(psi**2)) / dof / slope**2
+        scores = psi
 
     # Scale to unit diagonal; a column with no effect keeps scale 1 and becomes a
     # zero eigenvalue, i.e. a null direction along its own axis.
@@ -195,13 +226,25 @@ def gauss_newton_uncertainty(
     null = lam <= NULL_TOL * max(lam.max(), 1e-300)
     inv = (u[:, ~null] / lam[~null]) @ u[:, ~null].T
     cov_theta = sigma2 * inv / np.outer(d, d)
+    # The same covariance with the noise correlated within blocks of BLOCK_PX
+    # pixels (a cluster-robust sandwich); each variance below is the larger of
+    # the two. Where the noise is white the two agree within the sandwich's own
+    # scatter; JPEG's 8 x 8 blocks, demosaicking and sharpening correlate it, and
+    # the white-noise errors are then too small.
+    cov_blocks = np.zeros_like(cov_theta)
+    if blocks:
+        index = block_index(shapes, BLOCK_PX)[weighted]
+        per_block = np.zeros((int(index.max()) + 1 if index.size else 0, p))
+        np.add.at(per_block, index, jac[weighted] * scores[:, None])
+        bread = inv / np.outer(d, d)
+        cov_blocks = bread @ (per_block.T @ per_block) @ bread * (n / dof) / slope**2
     null_dirs = u[:, null] / d[:, None]  # in theta units
 
     stderr, undetermined = {}, {}
     for name, value in values.items():
         g = np.asarray(jacs[name]).reshape(-1, p)
         val = np.asarray(value).ravel()
-        var = np.einsum("kp,pq,kq->k", g, cov_theta, g)
+        var = np.maximum(np.einsum("kp,pq,kq->k", g, cov_theta, g), np.einsum("kp,pq,kq->k", g, cov_blocks, g))
         std = np.sqrt(np.maximum(var, 0.0))
         # Sensitivity along null directions, relative to the output's own gradient.
         along = np.abs(g @ null_dirs) if null_dirs.size else np.zeros((g.shape[0], 0))
@@ -224,7 +267,7 @@ def gauss_newton_uncertainty(
     nuisance_stderr = None
     if q:
         last = np.arange(p - q, p)
-        var = np.diag(cov_theta)[last]
+        var = np.maximum(np.diag(cov_theta), np.diag(cov_blocks))[last]
         on_null = np.any(np.abs(null_dirs[last]) > 1e-6, axis=1) if null_dirs.size else np.zeros(q, bool)
         nuisance_stderr = np.where(on_null, np.nan, np.sqrt(np.maximum(var, 0.0)))
     return Uncertainty(stderr, undetermined, float(np.sqrt(sigma2)) * float(objective.scale), dof,
