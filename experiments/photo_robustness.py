@@ -21,7 +21,8 @@ correction and PSNR of each
 fit and its change from the clean fit. ``--rerender`` adds the last step a
 photograph gets: the scene rendered again from the camera the aligned fit found
 (what ``invsss scene --warp`` does for a scene invsss renders), and the photograph
-fitted against that render the same way, against the clean row's own. Each row
+fitted against that render the same way, against the clean row's own ("[2 basins]"
+marks a fit that warned of another basin fitting as well). Each row
 also prints its noise ceiling: the PSNR of the photograph against the light that
 made it (vignetting included, before noise, 8 bits and JPEG), the best PSNR a fit
 can reach, against which a noisy row's PSNR is to be read::
@@ -269,7 +270,9 @@ def main() -> None:
                 clean[kind] = (level, correction, fit.psnr)
             ref = clean.get(kind, (level, correction, fit.psnr))
             se = f" +- {float(level_se):.0f}" if level_se is not None else ""
-            cells += [f"{level:.0f}{se} ({100 * (level / ref[0] - 1):+.1f} %)",
+            # A fit that found a second basin fitting as well says so (docs/model.md, section 7).
+            ambiguous = " [2 basins]" if any("another basin" in w for w in fit.warnings) else ""
+            cells += [f"{level:.0f}{se} ({100 * (level / ref[0] - 1):+.1f} %){ambiguous}",
                       f"{correction:.0f} ({100 * (correction / ref[1] - 1):+.1f} %)" if ref[1] else f"{correction:.0f}",
                       f"{fit.psnr:.1f}"]
             if kind == "re-rendered":
