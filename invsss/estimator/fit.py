@@ -690,8 +690,7 @@ def _solve(problem, options, steps) -> _Path:
         path.extend(record)
         prefix = "" if number is None else f"start {number}, "
         for round_ in range(_ROBUST_ROUNDS):
-            preds = _evaluate(path.objective, path.z, jnp.asarray(False))["predictions"]
-            residuals = [np.asarray(p.target) - np.asarray(q) for p, q in zip(problem.data, preds)]
+            residuals = _residuals(problem, path)
             path.delta = robust_scale(residuals, masks, options.robust)
             u = tuple(jnp.asarray(x) for x in robust_weights(residuals, path.delta, options.robust))
             path.objective = eqx.tree_at(lambda o: o.robust, path.objective, u)
@@ -709,6 +708,12 @@ def _solve(problem, options, steps) -> _Path:
     return _choose_basin(problem, finished, options.robust) if len(finished) > 1 else finished[0]
 
 
+def _residuals(problem, path) -> list[np.ndarray]:
+    """Each pair's target minus the prediction at ``path``'s point, (H, W, C')."""
+    preds = _evaluate(path.objective, path.z, jnp.asarray(False))["predictions"]
+    return [np.asarray(p.target) - np.asarray(q) for p, q in zip(problem.data, preds)]
+
+
 def _choose_basin(problem, finished, robust):
     """The candidate with the lowest robust loss (one scale for all), with a warning
     when another one, at a different blur scale, fits as well within the noise.
@@ -724,14 +729,10 @@ def _choose_basin(problem, finished, robust):
     masks = [np.asarray(p.residual_weight) for p in problem.data]
     delta = finished[0].delta
 
-    def residual(candidate):
-        preds = _evaluate(candidate.objective, candidate.z, jnp.asarray(False))["predictions"]
-        return [np.asarray(p.target) - np.asarray(q) for p, q in zip(problem.data, preds)]
-
     def flat(images):
         return np.concatenate([np.asarray(x).ravel() for x in images])
 
-    residuals = [residual(c) for c in finished]
+    residuals = [_residuals(problem, c) for c in finished]
     values = [float(np.sum(flat(robust_rho(r, masks, delta, robust)))) for r in residuals]
     best = int(np.argmin(values))
     chosen = finished[best]

@@ -26,11 +26,12 @@ import numpy as np
 
 from ..validation import InvalidInputError
 
-__all__ = ["ROBUST_LOSSES", "ROBUST_K", "check_robust", "robust_scale", "robust_weights", "robust_loss", "robust_rho", "psi_and_slope"]
+__all__ = [
+    "ROBUST_LOSSES", "check_robust", "robust_scale", "robust_weights", "robust_loss", "robust_rho", "psi_and_slope",
+]
 
 ROBUST_LOSSES = ("pseudo-huber", "cauchy")
-#: ``delta`` in robust standard deviations of the residual, per loss.
-ROBUST_K = {"pseudo-huber": 3.0, "cauchy": 2.385}
+_K = {"pseudo-huber": 3.0, "cauchy": 2.385}
 
 
 def check_robust(robust):
@@ -49,7 +50,7 @@ def robust_scale(residuals, masks, kind: str) -> float:
     (0 when the residual vanishes)."""
     pooled = np.concatenate([np.abs(r[m > 0]).ravel() for r, m in zip(residuals, masks)])
     sigma = 1.4826 * float(np.median(pooled))
-    return ROBUST_K[kind] * sigma if np.isfinite(sigma) else 0.0
+    return _K[kind] * sigma if np.isfinite(sigma) else 0.0
 
 
 def robust_weights(residuals, delta: float, kind: str) -> list[np.ndarray]:
