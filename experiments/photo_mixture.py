@@ -162,7 +162,7 @@ class Photographer:
         if recipe.vignetting:
             image = vignette(image, self.args.vignetting)
         if recipe.sensor:
-            image = eight_bit_srgb(shot_noise(image, 2000.0, 2.0, np.random.default_rng(13)))
+            image, _ = eight_bit_srgb(shot_noise(image, 2000.0, 2.0, np.random.default_rng(13)))
         return image.astype(np.float32)[..., 0]
 
 

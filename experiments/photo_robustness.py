@@ -85,8 +85,9 @@ def _eight_bit(image: np.ndarray, encode) -> tuple[np.ndarray, float]:
     return np.round(255 * encode(np.clip(image * scale, 0, 1))), scale
 
 
-def jpeg(image: np.ndarray, quality: int) -> np.ndarray:
-    """8-bit sRGB JPEG at ``quality``, decoded back to linear (exposed as :func:`_eight_bit` does)."""
+def jpeg(image: np.ndarray, quality: int) -> tuple[np.ndarray, float]:
+    """8-bit sRGB JPEG at ``quality``, decoded back to linear (exposed as :func:`_eight_bit` does),
+    and the decoded value of code 255 (the clipping level)."""
     from PIL import Image
 
     codes, scale = _eight_bit(image, linear_to_srgb)
@@ -96,20 +97,21 @@ def jpeg(image: np.ndarray, quality: int) -> np.ndarray:
     mode_image.save(buffer, format="JPEG", quality=quality)
     decoded = np.asarray(Image.open(io.BytesIO(buffer.getvalue())), np.float64) / 255.0
     decoded = decoded[..., None] if decoded.ndim == 2 else decoded
-    return srgb_to_linear(decoded) / scale
+    return srgb_to_linear(decoded) / scale, 1.0 / scale
 
 
-def eight_bit_srgb(image: np.ndarray) -> np.ndarray:
-    """8-bit sRGB codes (exposed as :func:`_eight_bit` does) decoded back to linear."""
+def eight_bit_srgb(image: np.ndarray) -> tuple[np.ndarray, float]:
+    """8-bit sRGB codes (exposed as :func:`_eight_bit` does) decoded back to linear, and
+    the decoded value of code 255."""
     codes, scale = _eight_bit(image, linear_to_srgb)
-    return srgb_to_linear(codes / 255.0) / scale
+    return srgb_to_linear(codes / 255.0) / scale, 1.0 / scale
 
 
-def wrong_curve(image: np.ndarray) -> np.ndarray:
+def wrong_curve(image: np.ndarray) -> tuple[np.ndarray, float]:
     """8-bit codes of a pure 2.2 power law read back as if they were sRGB (a camera
-    whose tone curve the user took for sRGB)."""
+    whose tone curve the user took for sRGB), and the decoded value of code 255."""
     codes, scale = _eight_bit(image, lambda x: x ** (1 / 2.2))
-    return srgb_to_linear(codes / 255.0) / scale
+    return srgb_to_linear(codes / 255.0) / scale, 1.0 / scale
 
 
 def shot_noise(image: np.ndarray, electrons: float, read: float, rng) -> np.ndarray:
@@ -199,16 +201,18 @@ def optics_only(clean: np.ndarray, row: Row) -> np.ndarray:
     return vignette(clean, row.shade) if row.shade else clean
 
 
-def photograph(clean: np.ndarray, sigma: float, row: Row, rng) -> np.ndarray:
+def photograph(clean: np.ndarray, sigma: float, row: Row, rng) -> tuple[np.ndarray, float | None]:
+    """The photograph, and its clipping level (the decoded value of code 255 for
+    8-bit rows, else None): what a user passes as ``saturation``."""
     image = optics_only(clean, row)
     if row.sensor == "shot":
-        return shot_noise(image, 2000.0, 2.0, rng)
+        return shot_noise(image, 2000.0, 2.0, rng), None
     if row.sensor == "shot+8bit":
         return eight_bit_srgb(shot_noise(image, 2000.0, 2.0, rng))
     image = image + sigma * rng.standard_normal(image.shape)
     if row.sensor == "gamma":
         return wrong_curve(image)
-    return jpeg(image, 90) if row.sensor == "jpeg" else image
+    return jpeg(image, 90) if row.sensor == "jpeg" else (image, None)
 
 
 def main() -> None:
@@ -224,6 +228,9 @@ def main() -> None:
                         "resampling the rendered target (cubic)")
     parser.add_argument("--seed", type=int, default=13,
                         help="seed of the noise draws (each row draws its own, in row order)")
+    parser.add_argument("--no-saturation", dest="saturation", action="store_false",
+                        help="keep an 8-bit photograph's clipped pixels (code 255) in the fit (by default "
+                        "every fit passes their level as saturation=)")
     parser.add_argument("--rerender", action="store_true",
                         help="a third fit: the scene rendered again from the camera the aligned fit "
                         "found, fitted as a photograph again (model-made face pairs only)")
@@ -241,7 +248,8 @@ def main() -> None:
     for name in args.rows.split(","):
         row = ROWS[name]
         clean_image, sigma = clean_target(args.pair, pair, row.move, args.optics)
-        photo = photograph(clean_image, sigma, row, rng).astype(np.float32)
+        photo, level = photograph(clean_image, sigma, row, rng)
+        photo = photo.astype(np.float32)
         photo = photo[..., 0] if np.ndim(pair.target) == 2 else photo
         # The noise ceiling: the photograph against the light that made it, before the
         # sensor's noise, 8 bits and JPEG. A fit's PSNR can at best reach it, so a noisy
@@ -253,7 +261,8 @@ def main() -> None:
         fits = ["none", args.align] + (["re-rendered"] if rerender else [])
         for kind in fits:
             started = time.perf_counter()
-            options = {"n_starts": args.starts, "vignetting": kind != "none" and not args.no_vignetting}
+            options = {"n_starts": args.starts, "vignetting": kind != "none" and not args.no_vignetting,
+                       "saturation": level if args.saturation else None}
             if kind == "re-rendered":
                 # The scene seen from the camera the aligned fit found, fitted the same way
                 # again. Its registration is left a few hundredths of a pixel to find, which

@@ -51,9 +51,10 @@ def main() -> None:
         values, errors = {k: [] for k in NAMES}, {k: [] for k in NAMES}
         started = time.perf_counter()
         for draw in range(args.draws):
-            photo = photograph(clean, sigma, ROWS[name], rng).astype(np.float32)
+            photo, level = photograph(clean, sigma, ROWS[name], rng)
+            photo = photo.astype(np.float32)
             photo = photo[..., 0] if np.ndim(pair.target) == 2 else photo
-            fit = invsss.fit_pair(pair.source, photo, pair.depth, pair.mask, n_starts=args.starts)
+            fit = invsss.fit_pair(pair.source, photo, pair.depth, pair.mask, n_starts=args.starts, saturation=level)
             for k in NAMES:
                 values[k].append(float(fit.values[k]))
                 errors[k].append(float(fit.stderr[k]) if fit.stderr.get(k) is not None else np.nan)

@@ -274,6 +274,10 @@ def _add_fit_parser(subparsers) -> None:
     parser.add_argument("--highlights", action="store_true",
                         help="refit with the specular highlights of a first fit's residual left out "
                         "(for photographs without cross-polarisation; their count goes into params.json)")
+    parser.add_argument("--saturation", type=float, default=None, metavar="LEVEL",
+                        help="the target's clipping level in its decoded units (for an 8-bit photograph, the "
+                        "decoded value of code 255): masked pixels at or above it are left out of the fit, "
+                        "and their count is a warning in params.json")
     parser.add_argument("--light-terms", default="none", metavar="TERMS",
                         help="fit light-aware terms on top of the blur (docs/model.md, section 8): "
                         "'shift' (light exits displaced away from the light; needs --light), "
@@ -452,7 +456,8 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
         options = dict(
             model=args.model, profile=args.profile, fix=fix or None, gauge=args.gauge,
             solver=args.solver, n_starts=args.starts, max_steps=args.max_steps, align=args.align,
-            vignetting=args.vignetting, highlights=args.highlights, light_terms=args.light_terms,
+            vignetting=args.vignetting, highlights=args.highlights, saturation=args.saturation,
+            light_terms=args.light_terms,
         )
         compiled_before = _compile_seconds()
         progress = _ProgressLine(sys.stderr, lambda: _compile_seconds() - compiled_before)

@@ -58,6 +58,8 @@ class FitOptions:
         Fit the camera's radial fall-off as a gain field (:mod:`invsss.estimator.vignetting`).
     highlights : bool
         Refit with the first fit's specular highlights left out (see :func:`invsss.fit_pair`).
+    saturation : float > 0 or None
+        Target level at or above which a pixel is clipped and left out of the fit.
     light_terms : tuple of str
         Light-aware terms in the model (:data:`invsss.light_terms.LIGHT_TERM_NAMES`:
         ``"shift"``, ``"grazing"``, ``"incidence"``), stored as a tuple in that order. Given as
@@ -97,6 +99,7 @@ class FitOptions:
     align: str = "none"
     vignetting: bool = False
     highlights: bool = False
+    saturation: float | None = None
     light_terms: tuple = ()
     light_fixed: object = None
 
@@ -108,6 +111,11 @@ class FitOptions:
         for name in ("vignetting", "highlights"):
             if not isinstance(getattr(self, name), bool):
                 raise InvalidInputError(f"{name}: expected true or false, got {getattr(self, name)!r}")
+        if self.saturation is not None:
+            level = self.saturation
+            if isinstance(level, bool) or not isinstance(level, numbers.Real) or not np.isfinite(level) or level <= 0:
+                raise InvalidInputError(f"saturation: expected a number > 0 or None, got {level!r}")
+            object.__setattr__(self, "saturation", float(level))
         terms, held = check_light_terms(self.light_terms)
         if self.light_fixed:
             held = {**held, **check_light_terms(dict(self.light_fixed))[1]}
