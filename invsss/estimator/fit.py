@@ -182,7 +182,7 @@ def fit_pair(
         of an 8-bit file's code 255): masked pixels with any channel at or above it
         are left out of the comparison, and their count is in
         :attr:`FitResult.warnings`. A clipped pixel reads darker than the light that
-        reached it; a few hundred of them (0.4 % of a face) moved a photograph's
+        reached it; about a hundred of them (0.4 % of a face) moved a photograph's
         fit to a basin with sss_level 50 % high.
     light_terms : sequence of {"shift", "grazing", "incidence"}, or a mapping
         Add the light-aware terms of docs/model.md, section 8, to the blur: a
