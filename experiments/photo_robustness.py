@@ -248,7 +248,7 @@ def main() -> None:
     for name in args.rows.split(","):
         row = ROWS[name]
         clean_image, sigma = clean_target(args.pair, pair, row.move, args.optics)
-        photo, level = photograph(clean_image, sigma, row, rng)
+        photo, clip_level = photograph(clean_image, sigma, row, rng)
         photo = photo.astype(np.float32)
         photo = photo[..., 0] if np.ndim(pair.target) == 2 else photo
         # The noise ceiling: the photograph against the light that made it, before the
@@ -262,7 +262,7 @@ def main() -> None:
         for kind in fits:
             started = time.perf_counter()
             options = {"n_starts": args.starts, "vignetting": kind != "none" and not args.no_vignetting,
-                       "saturation": level if args.saturation else None}
+                       "saturation": clip_level if args.saturation else None}
             if kind == "re-rendered":
                 # The scene seen from the camera the aligned fit found, fitted the same way
                 # again. Its registration is left a few hundredths of a pixel to find, which
