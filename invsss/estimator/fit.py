@@ -47,7 +47,7 @@ from .parametrisation import LIGHT_UNKNOWNS, by_unknown
 from .problem import _evaluate, build_problem
 from .result import FitResult, masked_list
 from . import uncertainty
-from .robust import psi_and_slope, robust_rho, robust_scale, robust_weights
+from .robust import psi_and_slope, robust_loss, robust_scale, robust_weights
 from .solve import (
     NOISE_TOL, RTOL, SCREEN_STALL_TOL, SCREEN_TOL, STALL_TOL, FitInterrupted, make_solver, run_solver,
 )
@@ -769,7 +769,7 @@ def _choose_basin(problem, finished, robust):
         return np.concatenate([np.asarray(x).ravel() for x in images])
 
     residuals = [_residuals(problem, c) for c in finished]
-    values = [float(np.sum(flat(robust_rho(r, masks, delta, robust)))) for r in residuals]
+    values = [robust_loss(r, masks, delta, robust) for r in residuals]
     best = int(np.argmin(values))
     chosen = finished[best]
     weight = flat([np.broadcast_to(np.asarray(m)[..., None], np.shape(r)) for m, r in zip(masks, residuals[best])])

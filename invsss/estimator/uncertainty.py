@@ -195,8 +195,9 @@ def gauss_newton_uncertainty(
         jacs = {k: np.concatenate([np.asarray(g).reshape(-1, jac.shape[1] - q),
                                    np.zeros((int(np.size(values[k])), q))], axis=1)
                 for k, g in jacs.items()}
-    shapes = [np.shape(w) for w in objective.weights()]
-    weighted = np.concatenate([np.asarray(w).ravel() > 0 for w in objective.weights()])
+    weights = objective.weights()
+    shapes = [np.shape(w) for w in weights]
+    weighted = np.concatenate([np.asarray(w).ravel() > 0 for w in weights])
     n, p = int(weighted.sum()), jac.shape[1]
     dof = max(n - p, 1)
     if robust is None:
