@@ -26,9 +26,7 @@ import numpy as np
 
 from ..validation import InvalidInputError
 
-__all__ = [
-    "ROBUST_LOSSES", "check_robust", "robust_scale", "robust_weights", "robust_loss", "robust_rho", "psi_and_slope",
-]
+__all__ = ["ROBUST_LOSSES", "check_robust", "robust_scale", "robust_weights", "robust_loss", "psi_and_slope"]
 
 ROBUST_LOSSES = ("pseudo-huber", "cauchy")
 _K = {"pseudo-huber": 3.0, "cauchy": 2.385}
@@ -75,13 +73,7 @@ def robust_loss(residuals, masks, delta: float, kind: str) -> float:
     >>> round(robust_loss([r], [m], 1.0, "pseudo-huber"), 6)  # sqrt(2) - 1
     0.414214
     """
-    return float(sum(np.sum(x) for x in robust_rho(residuals, masks, delta, kind)))
-
-
-def robust_rho(residuals, masks, delta: float, kind: str) -> list[np.ndarray]:
-    """``m rho(r)`` per entry of each residual image (H, W, C): the terms that
-    :func:`robust_loss` sums (``masks`` as there)."""
-    out = []
+    total = 0.0
     for r, m in zip(residuals, masks):
         r, m = np.asarray(r), np.asarray(m)
         # A per-pixel weight would broadcast against the channel axis, not along it.
@@ -90,8 +82,8 @@ def robust_rho(residuals, masks, delta: float, kind: str) -> list[np.ndarray]:
         scale = delta**2 if delta > 0 else 1.0
         rho = x2 / 2.0 if delta <= 0 else (np.sqrt(1.0 + x2) - 1.0 if kind == "pseudo-huber"
                                            else 0.5 * np.log1p(x2))
-        out.append(m * scale * rho)
-    return out
+        total += float(np.sum(m * scale * rho))
+    return total
 
 
 def psi_and_slope(r, delta: float, kind: str) -> tuple[np.ndarray, np.ndarray]:
