@@ -49,6 +49,7 @@ _LAZY = {
     **dict.fromkeys(
         (
             "ImagePair",
+            "clipping_level",
             "load_pair",
             "read_depth",
             "read_image",

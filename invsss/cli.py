@@ -38,6 +38,7 @@ from .estimator.parametrisation import GAUGES
 from .estimator.solve import SOLVERS
 from .export import EXPORT_FORMATS, export_params
 from .io import (
+    clipping_level,
     image_extension,
     load_pair,
     read_depth,
@@ -54,7 +55,7 @@ from .screen_space import MODELS, render
 from .params import check_plausible
 from .light_terms import LIGHT_TERM_NAMES, NEEDED_BUFFERS, LightBuffers, LightTerms
 from .pair import ImagePair, fill_background_depth
-from .validation import InvalidInputError, check_depth, check_same_frame
+from .validation import InputNotice, InvalidInputError, check_depth, check_same_frame
 
 __all__ = ["build_parser", "main"]
 
@@ -274,10 +275,11 @@ def _add_fit_parser(subparsers) -> None:
     parser.add_argument("--highlights", action="store_true",
                         help="refit with the specular highlights of a first fit's residual left out "
                         "(for photographs without cross-polarisation; their count goes into params.json)")
-    parser.add_argument("--saturation", type=float, default=None, metavar="LEVEL",
-                        help="the target's clipping level in its decoded units (for an 8-bit photograph, the "
-                        "decoded value of code 255): masked pixels at or above it are left out of the fit, "
-                        "and their count is a warning in params.json")
+    parser.add_argument("--saturation", default="auto", metavar="LEVEL",
+                        help="the targets' clipping level in their decoded units: masked pixels at or above "
+                        "it are left out of the fit, and their count is a warning in params.json. 'auto' "
+                        "(default): 1.0, the top code, when every target is an 8- or 16-bit file, and no "
+                        "level for float targets (EXR); 'none': keep every pixel")
     parser.add_argument("--light-terms", default="none", metavar="TERMS",
                         help="fit light-aware terms on top of the blur (docs/model.md, section 8): "
                         "'shift' (light exits displaced away from the light; needs --light), "
@@ -306,6 +308,30 @@ def _add_fit_parser(subparsers) -> None:
                         "files in DIR are kept)")
     _add_no_cache_argument(parser)
     parser.set_defaults(func=_run_fit)
+
+
+def _saturation_level(text: str, targets: list[str]) -> float | None:
+    """``--saturation``: a number, 'none', or 'auto' (the targets' own clipping level)."""
+    if text == "none":
+        return None
+    if text != "auto":
+        try:
+            return float(text)
+        except ValueError:
+            raise InvalidInputError(f"--saturation {text!r}: expected auto, none or a number > 0") from None
+    levels = {target: clipping_level(target) for target in targets}
+    if all(level is None for level in levels.values()):
+        return None
+    floats = [target for target, level in levels.items() if level is None]
+    if floats:
+        # One level serves every pair; a float target may hold valid values above 1.
+        warnings.warn(
+            f"--saturation auto: {', '.join(floats)} hold(s) float values, so no clipping level was "
+            "set for the integer-coded targets; give --saturation LEVEL to leave their clipped pixels out",
+            InputNotice,
+        )
+        return None
+    return min(levels.values())
 
 
 def _parse_fix(items: list[str]) -> dict:
@@ -456,8 +482,8 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
         options = dict(
             model=args.model, profile=args.profile, fix=fix or None, gauge=args.gauge,
             solver=args.solver, n_starts=args.starts, max_steps=args.max_steps, align=args.align,
-            vignetting=args.vignetting, highlights=args.highlights, saturation=args.saturation,
-            light_terms=args.light_terms,
+            vignetting=args.vignetting, highlights=args.highlights,
+            saturation=_saturation_level(args.saturation, args.target), light_terms=args.light_terms,
         )
         compiled_before = _compile_seconds()
         progress = _ProgressLine(sys.stderr, lambda: _compile_seconds() - compiled_before)

@@ -10,6 +10,7 @@ from .colour import linear_to_srgb, srgb_to_linear
 from .images import (
     IMAGE_EXTENSIONS,
     ImagePair,
+    clipping_level,
     image_extension,
     load_pair,
     read_depth,
@@ -22,6 +23,7 @@ from .params_file import PARAMS_KEYS, PARAMS_OPTIONAL_KEYS, read_params, write_p
 
 __all__ = [
     "IMAGE_EXTENSIONS",
+    "clipping_level",
     "image_extension",
     "PARAMS_KEYS",
     "PARAMS_OPTIONAL_KEYS",

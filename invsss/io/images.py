@@ -51,6 +51,7 @@ from .colour import linear_to_srgb, srgb_to_linear
 
 __all__ = [
     "IMAGE_EXTENSIONS",
+    "clipping_level",
     "image_extension",
     "ImagePair",
     "load_pair",
@@ -300,6 +301,51 @@ def read_image(path, *, linear: bool = False) -> np.ndarray:
         )
     check_image(image, name)
     return np.ascontiguousarray(image)
+
+
+def clipping_level(path) -> float | None:
+    """The value a clipped pixel of an image file reads as, or None if the file cannot clip.
+
+    An integer-coded file (8- or 16-bit) stores nothing brighter than its top code, so a
+    pixel there may have been brighter still: it is clipped. Every decoding of
+    :func:`read_image` maps the top code to 1.0, so that is the level; float files
+    (EXR, float TIFF or ``.npy``) hold any value and give None. Only the header is read.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        An image file, as for :func:`read_image`.
+
+    Returns
+    -------
+    float or None
+        1.0 for integer-coded files, None for float ones: what to pass as
+        ``saturation`` to :func:`~invsss.fit_pair` for a target read from ``path``.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os, invsss
+    >>> folder = tempfile.mkdtemp()
+    >>> invsss.write_image(os.path.join(folder, "photo.png"), np.full((4, 4), 0.5, np.float32))
+    >>> invsss.write_image(os.path.join(folder, "render.exr"), np.full((4, 4), 0.5, np.float32))
+    >>> invsss.clipping_level(os.path.join(folder, "photo.png")), invsss.clipping_level(os.path.join(folder, "render.exr"))
+    (1.0, None)
+    """
+    name, ext = _checked_path(path, "image")
+    if ext == ".npy":
+        # read_image accepts float arrays only: nothing to clip.
+        return None
+    oiio = _oiio()
+    image_input = oiio.ImageInput.open(name)
+    if image_input is None:
+        raise InvalidInputError(
+            f"{name}: cannot read image file ({_one_line(oiio.geterror()) or 'unknown error'})"
+        )
+    try:
+        basetype = image_input.spec().format.basetype
+    finally:
+        image_input.close()
+    return 1.0 if basetype in (oiio.UINT8, oiio.UINT16) else None
 
 
 def read_depth(path, scale: float = 1.0) -> np.ndarray:
