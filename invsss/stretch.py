@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 __all__ = ["depth_slopes", "stretch_along", "stretch_factors"]
@@ -12,10 +13,12 @@ def depth_slopes(depth: Float[Array, "H W"]) -> tuple[Float[Array, "H W"], Float
     """``(|dd/dx|, |dd/dy|)`` with ``numpy.gradient``'s stencil.
 
     Central differences inside, one-sided differences on the border: the
-    convention docs/model.md fixes so that every implementation agrees.
+    convention docs/model.md fixes so that every implementation agrees. A NumPy
+    ``depth`` gives NumPy slopes (no compilation of eager JAX operations on the host).
     """
-    ddy, ddx = jnp.gradient(depth)
-    return jnp.abs(ddx), jnp.abs(ddy)
+    xp = np if isinstance(depth, np.ndarray) else jnp
+    ddy, ddx = xp.gradient(depth)
+    return xp.abs(ddx), xp.abs(ddy)
 
 
 def stretch_factors(

@@ -775,10 +775,10 @@ def _choose_basin(problem, finished, robust):
     weight = flat([np.broadcast_to(np.asarray(m)[..., None], np.shape(r)) for m, r in zip(masks, residuals[best])])
     slopes = [weight * psi_and_slope(flat(r), delta, robust)[0] for r in residuals]
     blocks = block_index([np.shape(r) for r in residuals[best]], uncertainty.BLOCK_PX)
-    level = float(problem.param.natural(chosen.z)["sss_level"])
+    level = float(problem.param.natural(np.asarray(chosen.z))["sss_level"])
     rivals = []
     for candidate, value, slope in zip(finished, values, slopes):
-        other = float(problem.param.natural(candidate.z)["sss_level"])
+        other = float(problem.param.natural(np.asarray(candidate.z))["sss_level"])
         if abs(np.log(other / level)) <= _DISTINCT_LEVEL:
             continue
         by_block = np.bincount(blocks, weights=(slope - slopes[best]) * flat(residuals[best]))
@@ -827,7 +827,7 @@ def _report(problem, path, single, steps, nuisance=None) -> FitResult:
     messages = list(path.messages)
     final = _evaluate(path.objective, jnp.asarray(path.z), jnp.asarray(True))
     ratios, coef, offset = (np.asarray(final[k]) for k in ("ratios", "coef", "offset"))
-    natural = {k: np.asarray(v) for k, v in param.natural(jnp.asarray(path.z)).items()}
+    natural = {k: np.asarray(v) for k, v in param.natural(np.asarray(path.z, np.float64)).items()}
     if problem.linear_weights:
         gain0 = coef.sum(axis=0)
         weights = coef / gain0

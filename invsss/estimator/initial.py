@@ -15,7 +15,6 @@ to a quarter of the image.
 from __future__ import annotations
 
 import equinox as eqx
-import jax.numpy as jnp
 import numpy as np
 
 from ..stretch import depth_slopes, stretch_along
@@ -78,7 +77,7 @@ def data_scales(pairs) -> DataScales:
     for p in pairs:
         keep = np.asarray(p.mask) > 0
         depths.append(np.asarray(p.depth)[keep])
-        sx, sy = depth_slopes(p.depth)
+        sx, sy = depth_slopes(np.asarray(p.depth, np.float64))
         slopes_x.append(np.asarray(sx)[keep])
         slopes_y.append(np.asarray(sy)[keep])
     size = min(min(p.depth.shape) for p in pairs)
@@ -94,7 +93,7 @@ def blur_reference(scales: DataScales, variances) -> float:
 
 def _with(param, z_base, **blocks):
     """``z_base`` with the named scalar (or uniformly filled) blocks replaced."""
-    parts = param.split(jnp.asarray(z_base))
+    parts = param.split(np.asarray(z_base, np.float64))
     out = []
     for name, shape in param.blocks:
         u = np.array(parts[name], dtype=np.float64)

@@ -173,8 +173,8 @@ def assign_roles(model: str, gauge: str, fixed: dict) -> dict[str, str]:
     return roles
 
 
-def _softplus(z):
-    return jnp.logaddexp(z, 0.0)
+def _softplus(z, xp=jnp):
+    return xp.logaddexp(z, 0.0)
 
 
 def softplus_inverse(x):
@@ -183,11 +183,14 @@ def softplus_inverse(x):
     return x + np.log(-np.expm1(-x))
 
 
-def _simplex(z, axis=0):
+def _simplex(z, axis=0, xp=jnp):
     """``softmax`` of ``[0, z]`` along ``axis``: a point of the simplex, no redundancy."""
     pad = [(0, 0)] * z.ndim
     pad[axis] = (1, 0)
-    return jax.nn.softmax(jnp.pad(z, pad), axis=axis)
+    if xp is jnp:
+        return jax.nn.softmax(jnp.pad(z, pad), axis=axis)
+    e = np.exp(np.pad(z, pad) - np.max(z, axis=axis, keepdims=True).clip(0.0, None))
+    return e / e.sum(axis=axis, keepdims=True)
 
 
 class Parametrisation(eqx.Module):
@@ -225,18 +228,23 @@ class Parametrisation(eqx.Module):
         return out
 
     def natural(self, z: Float[Array, " n"]) -> dict[str, Array]:
-        """Every parameter's natural value (free ones from ``z``, the rest as given)."""
+        """Every parameter's natural value (free ones from ``z``, the rest as given).
+
+        A NumPy ``z`` (the host's reading of a result) is mapped with NumPy, so that
+        it costs no compilation of JAX's eager operations; anything else with JAX.
+        """
+        xp = np if isinstance(z, np.ndarray) else jnp
         out = dict(self.values)
         for name, u in self.split(z).items():
-            ref = self.reference[name]
+            ref = self.reference[name] if xp is jnp else np.asarray(self.reference[name])
             if name in ("sss_level", "maxdd", "variances"):
-                out[name] = ref * jnp.exp(u)
+                out[name] = ref * xp.exp(u)
             elif name == "correction":
-                out[name] = ref * _softplus(u)
+                out[name] = ref * _softplus(u, xp)
             elif name in ("weights", "mix"):
-                out[name] = _simplex(u, axis=0)
+                out[name] = _simplex(u, 0, xp)
             elif name == "gain_ratio":
-                out[name] = jnp.exp(u)
+                out[name] = xp.exp(u)
             elif name in SCALED_BLOCKS:
                 out[name] = ref * u
             else:  # pragma: no cover - blocks are built by this module

@@ -232,7 +232,7 @@ class FitProblem:
         if self.param.size and start is not None:
             # A known neighbourhood (an earlier fit of nearly the same pair): start
             # there, without the scan.
-            natural = {k: np.asarray(v) for k, v in self.param.natural(jnp.asarray(self.z_base)).items()}
+            natural = {k: np.asarray(v) for k, v in self.param.natural(np.asarray(self.z_base, np.float64)).items()}
             natural.update({k: np.asarray(v, np.float64) for k, v in start.items() if k in self.param.free})
             self.starts = (jnp.asarray(self.param.unknowns(natural)),)
         elif self.param.size:
