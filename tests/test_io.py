@@ -619,3 +619,14 @@ def test_an_image_read_back_can_be_written_again(tmp_path, rgb):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         np.testing.assert_allclose(invsss.read_image(tmp_path / "b.png"), rgb[:, ::-1], atol=0.01)
+
+
+def test_a_jpeg_target_is_noted_by_load_pair(tmp_path):
+    paths = _scene_files(tmp_path)
+    notes = _mask_notices(lambda: invsss.load_pair(*(paths[k] for k in ("source", "target", "depth", "mask"))))
+    assert not any("JPEG" in n for n in notes)
+    paths["target"] = tmp_path / "target.jpg"
+    invsss.write_image(paths["target"], np.full((H, W), 0.5, np.float32))
+    notes = _mask_notices(lambda: invsss.load_pair(*(paths[k] for k in ("source", "target", "depth", "mask"))))
+    jpeg = [n for n in notes if "JPEG" in n]
+    assert len(jpeg) == 1 and jpeg[0].startswith(f"{paths['target']}: a JPEG target: ")
