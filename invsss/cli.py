@@ -326,8 +326,8 @@ def _saturation_level(text: str, targets: list[str]) -> float | None:
     if floats:
         # One level serves every pair; a float target may hold valid values above 1.
         warnings.warn(
-            f"--saturation auto: {', '.join(floats)} hold(s) float values, so no clipping level was "
-            "set for the integer-coded targets; give --saturation LEVEL to leave their clipped pixels out",
+            f"--saturation auto: no clipping level set, as a float target ({', '.join(floats)}) may hold "
+            "values above 1; give --saturation LEVEL to leave the integer-coded targets' clipped pixels out",
             InputNotice,
         )
         return None

@@ -126,7 +126,7 @@ def test_a_float_target_is_not_clipped_by_default(tmp_path):
 def test_saturation_auto_sets_no_level_when_a_target_holds_floats(tmp_path):
     paths, _ = _card_on_disk(tmp_path, ".png")
     exr = tmp_path / "card_target.exr"
-    with pytest.warns(invsss.InputNotice, match=f"--saturation auto: {exr} hold"):
+    with pytest.warns(invsss.InputNotice, match=rf"--saturation auto: no clipping level set, as a float target \({exr}\)"):
         assert _saturation_level("auto", [str(paths["target"]), str(exr)]) is None
     assert _saturation_level("auto", [str(paths["target"])] * 2) == 1.0
     assert _saturation_level("0.5", [str(exr)]) == 0.5
