@@ -166,11 +166,20 @@ def enable_compile_cache(
         )
     if cache_disabled():
         return None
+    import warnings
+
+    try:
+        # JAX's size bound, and with it the lock that makes a shared directory safe
+        # (module docstring), needs filelock; without it every cache read would
+        # fail with a warning and cost a compilation anyway.
+        import filelock  # noqa: F401
+    except ImportError:
+        warnings.warn("compilation cache: needs the filelock package to share its directory safely "
+                      "(pip install filelock); not caching")
+        return None
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as err:
-        import warnings
-
         warnings.warn(f"compilation cache {path}: cannot create it ({err.strerror}); not caching")
         return None
 

@@ -119,6 +119,20 @@ def test_a_second_process_loads_instead_of_compiling(tmp_path):
     assert second["total"] == first["total"]
 
 
+def test_without_filelock_the_cache_stays_off_with_one_warning(tmp_path):
+    # A child where importing filelock fails, as in an install that lacks it: JAX's
+    # size-bounded cache would fail every read; the cache is left off instead.
+    process = subprocess.Popen([sys.executable, "-c", "import sys; sys.modules['filelock'] = None\n" + _CHILD,
+                                str(tmp_path / "c")], env={k: v for k, v in os.environ.items()
+                                                           if k != "INVSSS_NO_CACHE"},
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    result, err = _finish(process)
+    assert result["used"] == "None" and result["hits"] == 0
+    assert err.count("UserWarning: compilation cache: needs the filelock package") == 1
+    assert "Error reading persistent compilation cache" not in err
+    assert not _entries(tmp_path / "c")
+
+
 def test_no_cache_in_a_child_process(tmp_path):
     result, _ = _finish(_child(tmp_path / "c", {"INVSSS_NO_CACHE": "1"}))
     assert result["used"] == "None" and result["hits"] == 0
