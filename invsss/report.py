@@ -186,8 +186,10 @@ def _plot_convergence(ax, result) -> None:
         else:
             ax.axvline(first + 0.5, color="0.4", ls="--", lw=0.8)
             ax.semilogy(steps[shown], losses[shown], color="k", lw=1.5, marker=".", ms=3)
+            # On a light backing: the round's first points sit right under its label.
             ax.annotate(label, (first + 1, losses[shown][0]), fontsize=7, rotation=90,
-                        va="bottom", ha="right", color="0.3")
+                        va="bottom", ha="right", color="0.3",
+                        bbox={"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.75})
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_xlabel(f"iteration (all {history.size} steps of the fit)")
     ax.set_ylabel("loss")
