@@ -143,6 +143,17 @@ class _Raster(NamedTuple):
     file_format: str  # OpenImageIO's format name ("png", "openexr", ...) or "npy"
 
 
+def _open_input(name: str, kind: str):
+    """An OpenImageIO ImageInput on ``name`` (close it), or a one-line error."""
+    oiio = _oiio()
+    image_input = oiio.ImageInput.open(name)
+    if image_input is None:
+        raise InvalidInputError(
+            f"{name}: cannot read {kind} file ({_one_line(oiio.geterror()) or 'unknown error'})"
+        )
+    return image_input
+
+
 def _read_raster(path, kind: str) -> tuple[str, _Raster]:
     name, ext = _checked_path(path, kind)
     if ext == ".npy":
@@ -160,11 +171,7 @@ def _read_raster(path, kind: str) -> tuple[str, _Raster]:
         return name, _Raster(array, None, "npy")
 
     oiio = _oiio()
-    image_input = oiio.ImageInput.open(name)
-    if image_input is None:
-        raise InvalidInputError(
-            f"{name}: cannot read {kind} file ({_one_line(oiio.geterror()) or 'unknown error'})"
-        )
+    image_input = _open_input(name, kind)
     try:
         spec = image_input.spec()
         basetype = spec.format.basetype
@@ -336,11 +343,7 @@ def clipping_level(path) -> float | None:
         # read_image accepts float arrays only: nothing to clip.
         return None
     oiio = _oiio()
-    image_input = oiio.ImageInput.open(name)
-    if image_input is None:
-        raise InvalidInputError(
-            f"{name}: cannot read image file ({_one_line(oiio.geterror()) or 'unknown error'})"
-        )
+    image_input = _open_input(name, "image")
     try:
         basetype = image_input.spec().format.basetype
     finally:
