@@ -38,13 +38,13 @@ from .estimator.parametrisation import GAUGES
 from .estimator.solve import SOLVERS
 from .export import EXPORT_FORMATS, export_params
 from .io import (
-    clipping_level,
     image_extension,
     load_pair,
     read_depth,
     read_image,
     read_mask,
     read_params,
+    shared_clipping_level,
     write_image,
     write_params,
 )
@@ -55,7 +55,7 @@ from .screen_space import MODELS, render
 from .params import check_plausible
 from .light_terms import LIGHT_TERM_NAMES, NEEDED_BUFFERS, LightBuffers, LightTerms
 from .pair import ImagePair, fill_background_depth
-from .validation import InputNotice, InvalidInputError, check_depth, check_same_frame
+from .validation import InvalidInputError, check_depth, check_same_frame
 
 __all__ = ["build_parser", "main"]
 
@@ -312,26 +312,14 @@ def _add_fit_parser(subparsers) -> None:
 
 def _saturation_level(text: str, targets: list[str]) -> float | None:
     """``--saturation``: a number, 'none', or 'auto' (the targets' own clipping level)."""
+    if text == "auto":
+        return shared_clipping_level(targets)
     if text == "none":
         return None
-    if text != "auto":
-        try:
-            return float(text)
-        except ValueError:
-            raise InvalidInputError(f"--saturation {text!r}: expected auto, none or a number > 0") from None
-    levels = {target: clipping_level(target) for target in targets}
-    if all(level is None for level in levels.values()):
-        return None
-    floats = [target for target, level in levels.items() if level is None]
-    if floats:
-        # One level serves every pair; a float target may hold valid values above 1.
-        warnings.warn(
-            f"--saturation auto: no clipping level set, as a float target ({', '.join(floats)}) may hold "
-            "values above 1; give --saturation LEVEL to leave the integer-coded targets' clipped pixels out",
-            InputNotice,
-        )
-        return None
-    return min(levels.values())
+    try:
+        return float(text)
+    except ValueError:
+        raise InvalidInputError(f"--saturation {text!r}: expected auto, none or a number > 0") from None
 
 
 def _parse_fix(items: list[str]) -> dict:

@@ -126,7 +126,7 @@ def test_a_float_target_is_not_clipped_by_default(tmp_path):
 def test_saturation_auto_sets_no_level_when_a_target_holds_floats(tmp_path):
     paths, _ = _card_on_disk(tmp_path, ".png")
     exr = tmp_path / "card_target.exr"
-    with pytest.warns(invsss.InputNotice, match=rf"--saturation auto: no clipping level set, as a float target \({exr}\)"):
+    with pytest.warns(invsss.InputNotice, match=rf"saturation auto: no clipping level set, as a float target \({exr}\)"):
         assert _saturation_level("auto", [str(paths["target"]), str(exr)]) is None
     assert _saturation_level("auto", [str(paths["target"])] * 2) == 1.0
     assert _saturation_level("0.5", [str(exr)]) == 0.5
@@ -138,3 +138,35 @@ def test_a_bad_saturation_word_is_a_one_line_error(tmp_path):
     code, _, err = _cli_fit(paths, profile, tmp_path / "o", "--saturation", "clipped")
     assert code == 2
     assert err.strip().splitlines()[-1] == "invsss: error: --saturation 'clipped': expected auto, none or a number > 0"
+
+
+@pytest.mark.filterwarnings("ignore::invsss.InputNotice")
+def test_a_sweep_with_saturation_auto_leaves_the_top_code_out(tmp_path):
+    import invsss.experiments as ex
+
+    paths, _ = _card_on_disk(tmp_path, ".png")
+    files = "\n".join(f'{role} = "{paths[role].name}"' for role in ("source", "target", "depth", "mask"))
+    experiment = tmp_path / "card.toml"
+    experiment.write_text(f"""
+task = "fit"
+[data]
+[[data.files]]
+name = "card"
+{files}
+[base]
+profile = {{weights = {PROFILE['weights']}, variances = {PROFILE['variances']}}}
+fix = {{correction = 0.0, maxdd = 1.0}}
+n_starts = 1
+[grid]
+saturation = ["auto", 0.5]
+""")
+    summary = ex.run(experiment, tmp_path / "out", log=None)
+    assert (summary.done, summary.failed) == (2, 0)
+    rows = ex.results(tmp_path / "out", frame=False)
+    top = int(np.sum(invsss.read_image(paths["target"]) >= 1.0))
+    half = int(np.sum(invsss.read_image(paths["target"]) >= 0.5))
+    by_count = {count: [row for row in rows if any(f"{count} masked pixel(s) at or above the saturation level "
+                                                   f"{level} " in w for w in row["warnings"])]
+                for count, level in ((top, "1"), (half, "0.5"))}
+    assert len(by_count[top]) == 1 and len(by_count[half]) == 1
+    assert abs(by_count[top][0]["param.sss_level"] / 375.0 - 1.0) < 0.02

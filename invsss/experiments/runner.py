@@ -59,6 +59,16 @@ def _load(trial: Trial) -> list:
     return pairs
 
 
+def _resolved(trial: Trial) -> dict:
+    """The trial's options with ``saturation = "auto"`` replaced by its targets' clipping level."""
+    if trial.options.get("saturation") != "auto":
+        return trial.options
+    from ..io import shared_clipping_level
+
+    level = shared_clipping_level([os.path.join(trial.root, pair["target"]) for pair in trial.pairs])
+    return {**trial.options, "saturation": level}
+
+
 def execute(trial: dict, out: str, stop=None) -> dict:
     """Run one trial (a :meth:`Trial.to_dict`) and commit its files under ``out``.
 
@@ -93,9 +103,10 @@ def execute(trial: dict, out: str, stop=None) -> dict:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             pairs = _load(spec)
+            options = _resolved(spec)
             timings["load"] = time.perf_counter() - clock
             clock = time.perf_counter()
-            result = run_task(spec.task, spec.options, pairs, stop)
+            result = run_task(spec.task, options, pairs, stop)
             timings["compute"] = time.perf_counter() - clock
         notes = [" ".join(str(w.message).split()) for w in caught]
         outcome["warnings"] = list(dict.fromkeys(notes + result.warnings))

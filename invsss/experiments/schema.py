@@ -133,7 +133,9 @@ class FitTaskOptions(BaseModel):
     ``light_terms`` takes the names as one string (``"shift,grazing"``, or
     ``"shift=1.3,grazing"`` to hold the shift) or a list of names; it needs
     ``normal.exr`` and ``light.exr`` in each pair folder (or ``normal`` and
-    ``light`` in a file set).
+    ``light`` in a file set). ``saturation`` is a clipping level (a number > 0)
+    or ``"auto"``: the level of integer-coded targets (1.0, their top code), as
+    ``invsss fit --saturation auto``; by default no pixel is left out.
     """
 
     model_config = _STRICT
@@ -150,6 +152,7 @@ class FitTaskOptions(BaseModel):
     vignetting: bool = False
     highlights: bool = False
     light_terms: str = ""
+    saturation: Union[Literal["auto"], float, None] = None
 
     @field_validator("light_terms", mode="before")
     @classmethod

@@ -48,6 +48,10 @@ def _fit_keywords(options: dict) -> dict:
     keywords = dict(options)
     keywords["fix"] = keywords["fix"] or None
     keywords["robust"] = None if keywords["robust"] == "none" else keywords["robust"]
+    if keywords.get("saturation") == "auto":
+        # The level comes from the trial's files (the runner resolves it before
+        # the fit); checking the other options needs no files.
+        keywords["saturation"] = None
     return keywords
 
 

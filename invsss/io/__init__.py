@@ -16,6 +16,7 @@ from .images import (
     read_depth,
     read_image,
     read_mask,
+    shared_clipping_level,
     write_image,
     write_text_atomic,
 )
@@ -33,6 +34,7 @@ __all__ = [
     "read_image",
     "read_mask",
     "read_params",
+    "shared_clipping_level",
     "write_image",
     "write_params",
     "write_text_atomic",

@@ -53,6 +53,7 @@ __all__ = [
     "IMAGE_EXTENSIONS",
     "clipping_level",
     "image_extension",
+    "shared_clipping_level",
     "ImagePair",
     "load_pair",
     "read_depth",
@@ -349,6 +350,38 @@ def clipping_level(path) -> float | None:
     finally:
         image_input.close()
     return 1.0 if basetype in (oiio.UINT8, oiio.UINT16) else None
+
+
+def shared_clipping_level(paths) -> float | None:
+    """One clipping level for the targets ``paths`` (``saturation="auto"``), or None.
+
+    The level of :func:`clipping_level` when every file is integer-coded. If any is
+    a float file, no level: one level serves every pair, and a float target may
+    hold values above 1 legitimately; a notice says so when some files are
+    integer-coded all the same.
+
+    Examples
+    --------
+    >>> import numpy as np, tempfile, os, invsss
+    >>> folder = tempfile.mkdtemp()
+    >>> paths = [os.path.join(folder, name) for name in ("a.png", "b.png")]
+    >>> for path in paths:
+    ...     invsss.write_image(path, np.full((4, 4), 0.5, np.float32))
+    >>> invsss.io.shared_clipping_level(paths)
+    1.0
+    """
+    levels = {os.fspath(path): clipping_level(path) for path in paths}
+    floats = [name for name, level in levels.items() if level is None]
+    if not floats:
+        return min(levels.values()) if levels else None
+    if len(floats) < len(levels):
+        warnings.warn(
+            f"saturation auto: no clipping level set, as a float target ({', '.join(floats)}) may hold values "
+            "above 1; give the level to leave the integer-coded targets' clipped pixels out",
+            InputNotice,
+            stacklevel=2,
+        )
+    return None
 
 
 def read_depth(path, scale: float = 1.0) -> np.ndarray:
