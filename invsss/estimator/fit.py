@@ -60,8 +60,8 @@ _ROBUST_ROUNDS = 2
 
 #: Steps every start takes before the starts are ranked and only the better half
 #: go on (successive halving). On the seven bundled pairs this gave the same
-#: estimates (within 0.07 standard errors) in 0.87 of the time: fran_front 27
-#: steps instead of 40, its four starts all reaching one basin.
+#: estimates (within 0.07 standard errors) in 0.86-0.92 of the time: fran_front
+#: 29 steps instead of 40, its four starts all reaching one basin.
 HALVING_STEPS = 3
 #: A start has entered a basin already solved when no unknown differs by more
 #: than this from an earlier start's end point. The unknowns are O(1) (logs of
