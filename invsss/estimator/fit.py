@@ -711,16 +711,19 @@ def _solve(problem, options, steps) -> _Path:
     halving = len(problem.starts) > 2
     first = []
     for i, z0 in enumerate(problem.starts):
-        record = run(f"start {i + 1}", z0, screen, None if halving else known_basin,
-                     min(HALVING_STEPS, options.max_steps) if halving else None)
-        first.append((i + 1, record))
+        if halving:
+            record = run(f"start {i + 1}", z0, screen, None, min(HALVING_STEPS, options.max_steps))
+            first.append((i + 1, record))
+        else:
+            record = run(f"start {i + 1}", z0, screen, known_basin)
+            finish(i + 1, record)
         if record.interrupted:
             interrupted = True
             break
-    if interrupted or not halving:
+    if halving and interrupted:
         for number, record in first:
             finish(number, record)
-    else:
+    elif halving:
         ranked = sorted(first, key=lambda item: item[1].final)[: (len(first) + 1) // 2]
         for number, record in ranked:
             if not record.converged:
