@@ -42,6 +42,7 @@ __all__ = [
     "cache_directory",
     "cache_disabled",
     "enable_compile_cache",
+    "enabled_directory",
 ]
 
 #: Bound on the cache directory's size; least recently used entries go first.
@@ -115,6 +116,26 @@ def cache_directory(directory: str | os.PathLike | None = None) -> Path:
 
 
 _enabled: Path | None = None
+
+
+def enabled_directory() -> Path | None:
+    """The directory :func:`enable_compile_cache` switched on, or None when the
+    cache is off (never enabled, ``$INVSSS_NO_CACHE`` set since, or JAX's
+    ``jax_compilation_cache_dir`` pointed elsewhere by hand).
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> os.environ["INVSSS_NO_CACHE"] = "1"
+    >>> print(enabled_directory())
+    None
+    >>> del os.environ["INVSSS_NO_CACHE"]
+    """
+    if _enabled is None or cache_disabled():
+        return None
+    import jax
+
+    return _enabled if jax.config.jax_compilation_cache_dir == str(_enabled) else None
 
 
 def enable_compile_cache(

@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..executable_cache import persistent_jit
 from ..light_terms import LightBuffers
 from ..params import PARAM_NAMES
 from ..validation import InvalidInputError
@@ -132,7 +133,7 @@ def _blur_at_zero(roles, scales, fixed, variances):
     return None
 
 
-@eqx.filter_jit
+@persistent_jit
 def _evaluate(objective, z, with_jacobian):
     """Everything needed after a solve, in one compiled function: the linear
     unknowns, predictions, loss and, if the traced flag ``with_jacobian`` is set,

@@ -26,6 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from ..executable_cache import StaleStatics, persistent_jit
 from ..validation import InvalidInputError
 
 __all__ = [
@@ -196,7 +197,7 @@ _OPTIONS: dict = {}
 _TAGS = frozenset()
 
 
-@eqx.filter_jit
+@persistent_jit
 def _init(solver, fn, z):
     f_struct, aux_struct = jax.eval_shape(lambda: fn(z, None))
     return solver.init(fn, z, None, _OPTIONS, f_struct, aux_struct, _TAGS)
@@ -236,7 +237,7 @@ def gauss_newton_distance(residual, jacobian) -> jax.Array:
     return jnp.sqrt(jnp.maximum(g @ step, 0.0) / jnp.maximum(sigma2, jnp.finfo(sigma2.dtype).tiny))
 
 
-@eqx.filter_jit
+@persistent_jit
 def _step(solver, fn, z, state, noise_tolerance):
     z, state, _ = solver.step(fn, z, None, _OPTIONS, state, _TAGS)
     done, result = solver.terminate(fn, z, None, _OPTIONS, state, _TAGS)
@@ -364,12 +365,24 @@ def run_solver(
     elif noise_tolerance is not None:
         # Traced, so that every tolerance shares one compiled step.
         noise_tolerance = jnp.asarray(noise_tolerance, jnp.result_type(float))
-    z = jnp.asarray(z0)
-    state = _init(solver, fn, z)
+    try:
+        return _iterate(solver, fn, jnp.asarray(z0), max_steps, on_step, stop, arrived, noise_tolerance,
+                        stall_tolerance, _init, _step)
+    except StaleStatics:
+        # The state came from a stored _init whose _step is not stored: solve
+        # again from the start with functions traced here. This happens before
+        # the first step is reported, so the caller sees one solve.
+        return _iterate(solver, fn, jnp.asarray(z0), max_steps, on_step, stop, arrived, noise_tolerance,
+                        stall_tolerance, _init.jitted, _step.jitted)
+
+
+def _iterate(solver, fn, z, max_steps, on_step, stop, arrived, noise_tolerance, stall_tolerance,
+             init, step) -> SolveRecord:
+    state = init(solver, fn, z)
     history, accepted = [], []
     converged, failure, interrupted = False, "", False
     for _ in range(max_steps):
-        z, state, loss, dof, done, ok = _step(solver, fn, z, state, noise_tolerance)
+        z, state, loss, dof, done, ok = step(solver, fn, z, state, noise_tolerance)
         loss = float(loss)
         history.append(loss)
         # The loss reported is the last accepted point's: a step that lowers it

@@ -1,0 +1,373 @@
+"""Compiled functions kept whole on disk, so a new process skips tracing as well.
+
+JAX's persistent compilation cache (:mod:`invsss.compile_cache`) saves XLA's
+work, but every new process still traces each jitted function to a jaxpr and
+lowers it to find the cache key. For the estimator's three big functions (the
+solver's ``init`` and ``step``, and ``_evaluate``) that is about 1.5 s of a
+2-core CPU per fit, more than the solve itself on data_synthetic/fran_front.
+
+:func:`persistent_jit` is :func:`equinox.filter_jit` plus a second cache:
+the compiled executable itself, keyed by everything that decides what tracing
+would produce, so a hit needs neither tracing nor lowering:
+
+- the function (module and qualified name) and a fingerprint of invsss's own
+  source files and the versions of JAX, jaxlib, equinox, optimistix, lineax
+  and jaxtyping, so an edit or an upgrade is a miss;
+- the non-array arguments and the tree structure (pickled), and every array
+  argument's shape, dtype and weak type;
+- the settings that change a trace or a compilation: float64 mode, the default
+  matmul precision, dtype promotion, ``XLA_FLAGS``, the backend and its device.
+
+It is on exactly when the compilation cache is (:func:`invsss.compile_cache.enable_compile_cache`
+was called and ``$INVSSS_NO_CACHE`` is unset); its files live in the
+``executables`` folder of that cache directory. Otherwise the decorated
+function is plain :func:`equinox.filter_jit`.
+
+Several processes may share the folder: an entry is written to a temporary
+file and renamed into place, so a reader sees a whole entry or none. An entry
+that cannot be read or loaded costs a compilation (and one warning), never a
+wrong result. The folder is kept under :data:`MAX_EXECUTABLE_BYTES`, the
+least recently used entries going first.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import io
+import os
+import pickle
+import tempfile
+import threading
+import warnings
+from importlib import metadata
+from pathlib import Path
+
+import equinox as eqx
+import jax
+from jax.extend.core import ClosedJaxpr, Jaxpr
+
+__all__ = ["MAX_EXECUTABLE_BYTES", "StaleStatics", "persistent_jit"]
+
+#: Bound on the ``executables`` folder's size. A 224 x 224 fit's three entries
+#: take 1.7 MB.
+MAX_EXECUTABLE_BYTES = 512 * 1024**2
+
+_LIBRARIES = ("jax", "jaxlib", "equinox", "optimistix", "lineax", "jaxtyping")
+_FORMAT = 1  # of the entry files; bump when their layout changes
+
+
+@functools.lru_cache(maxsize=1)
+def _code_fingerprint() -> str:
+    """sha256 of invsss's source files and the tracing libraries' versions."""
+    digest = hashlib.sha256(f"format {_FORMAT}".encode())
+    for name in _LIBRARIES:
+        try:
+            version = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            version = "absent"
+        digest.update(f"{name} {version}\n".encode())
+    package = Path(__file__).resolve().parent
+    for path in sorted(package.rglob("*.py")):
+        digest.update(str(path.relative_to(package)).encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def _settings() -> tuple:
+    device = jax.devices()[0]
+    return (
+        bool(jax.config.jax_enable_x64),
+        str(jax.config.jax_default_matmul_precision),
+        str(jax.config.jax_numpy_dtype_promotion),
+        os.environ.get("XLA_FLAGS", ""),
+        device.platform,
+        device.device_kind,
+    )
+
+
+class StaleStatics(Exception):
+    """A call whose static arguments came from a loaded entry (they hold
+    :class:`_JaxprText` in place of a jaxpr) missed the cache, so it cannot be
+    traced: start again from arguments of this process (see
+    :func:`invsss.estimator.solve.run_solver`)."""
+
+
+class _JaxprText:
+    """A jaxpr kept as its text.
+
+    optimistix keeps the solver's linearisation as a jaxpr in the static part
+    of its state; jaxprs do not pickle, so an entry stores their text. A state
+    loaded from disk then holds these stand-ins, which serve as keys (equal
+    when the text is) and are never traced.
+    """
+
+    __slots__ = ("text",)
+
+    def __init__(self, text: str):
+        self.text = text
+
+    def __eq__(self, other):
+        return isinstance(other, _JaxprText) and other.text == self.text
+
+    def __hash__(self):
+        return hash(self.text)
+
+    def __reduce__(self):  # as _Pickler writes a jaxpr, so both give one key
+        return _JaxprText, (self.text,)
+
+    def __repr__(self):
+        return f"_JaxprText({self.text[:40]!r}...)"
+
+
+class _Pickler(pickle.Pickler):
+    def reducer_override(self, obj):
+        if isinstance(obj, (Jaxpr, ClosedJaxpr)):
+            return _JaxprText, (str(obj),)
+        return NotImplemented
+
+
+def _dumps(value, shared: bool = True) -> bytes:
+    """``value`` pickled, jaxprs as their text. ``shared=False`` writes every
+    occurrence of an object in full (no memo), so that the bytes depend on the
+    values only, not on which of them happen to be one object: a key."""
+    with io.BytesIO() as file:
+        pickler = _Pickler(file, protocol=5)
+        pickler.fast = not shared
+        pickler.dump(value)
+        return file.getvalue()
+
+
+def _never_stored():
+    """A context in which JAX's persistent cache stores no compilation (this thread)."""
+    from jax._src import config
+
+    return config.persistent_cache_min_compile_time_secs(float("inf"))
+
+
+def _aval(x) -> tuple:
+    aval = jax.typeof(x)
+    return tuple(aval.shape), str(aval.dtype), bool(getattr(aval, "weak_type", False))
+
+
+@functools.lru_cache(maxsize=1)
+def _prepare_runtime() -> None:
+    """Set up what lowering would have: an executable loaded without lowering
+    finds jaxlib's LAPACK table empty (its first linear solve then crashes the
+    process), since jaxlib fills it only when a linear-algebra call is lowered."""
+    try:
+        from jax._src.lax.linalg import initialize_lapack
+    except ImportError:  # a JAX without the hook: lowering a tiny solve fills it too
+        import jax.numpy as jnp
+
+        jax.jit(jnp.linalg.solve).lower(jnp.eye(2), jnp.ones(2))
+    else:
+        initialize_lapack()
+
+
+def _folder() -> Path | None:
+    from .compile_cache import enabled_directory
+
+    directory = enabled_directory()
+    return None if directory is None else directory / "executables"
+
+
+class _Slot:
+    """Where an output array goes, in the stored outline of a function's result."""
+
+
+class _Compiled:
+    """One executable (a flat list of arrays in and out) with what turns its
+    outputs back into the function's result: the tree of the arrays and the
+    result's static part."""
+
+    def __init__(self, executable, out_tree, out_static, loaded_from: Path | None = None):
+        self.executable, self.out_tree, self.out_static = executable, out_tree, out_static
+        self.loaded_from = loaded_from  # the entry's file, until its first call has run
+
+    def __call__(self, leaves):
+        return eqx.combine(jax.tree_util.tree_unflatten(self.out_tree, self.executable(*leaves)),
+                           self.out_static)
+
+
+class persistent_jit:
+    """:func:`equinox.filter_jit` whose compiled executables also persist on disk.
+
+    Parameters
+    ----------
+    fun : callable
+        Called with positional arguments only; arrays (``eqx.is_array``) are
+        traced, everything else is static and must be hashable, as for
+        ``filter_jit``. Its non-array outputs must pickle to be kept on disk
+        (if they do not, the executable is kept for this process only).
+
+    Attributes
+    ----------
+    traces : int
+        How many times this process traced ``fun`` through the disk-backed path
+        (0 after a run that loaded everything from disk).
+
+    Examples
+    --------
+    >>> import jax.numpy as jnp
+    >>> @persistent_jit
+    ... def scaled(x, factor):
+    ...     return x * factor
+    >>> scaled(jnp.arange(3.0), 2.0)
+    Array([0., 2., 4.], dtype=float32)
+    """
+
+    def __init__(self, fun):
+        self.fun = fun
+        self.jitted = eqx.filter_jit(fun)
+        self.traces = 0
+        self._memory: dict = {}
+        self._lock = threading.Lock()
+        functools.update_wrapper(self, fun)
+
+    def __call__(self, *args):
+        folder = _folder()
+        if folder is None:
+            return self.jitted(*args)
+        dynamic, static = eqx.partition(args, eqx.is_array)
+        leaves, in_tree = jax.tree_util.tree_flatten(dynamic)
+        static_leaves, static_tree = jax.tree_util.tree_flatten(static)
+        avals = tuple(_aval(x) for x in leaves)
+        key = (in_tree, static_tree, tuple(static_leaves), avals, _settings())
+        try:
+            compiled = self._memory.get(key)
+        except TypeError:  # an unhashable static argument: filter_jit says so precisely
+            return self.jitted(*args)
+        if compiled is None:
+            with self._lock:
+                compiled = self._memory.get(key)
+                if compiled is None:
+                    compiled = self._load_or_compile(folder, key, leaves, in_tree, static)
+                    self._memory[key] = compiled
+        if compiled.loaded_from is None:
+            return compiled(leaves)
+        # A loaded entry's first call waits for its result: an executable that
+        # cannot run here fails now, and is compiled again, instead of failing
+        # wherever its result is next read.
+        try:
+            out = jax.block_until_ready(compiled(leaves))
+        except jax.errors.JaxRuntimeError as err:
+            warnings.warn(f"executable cache: {compiled.loaded_from.name} could not run "
+                          f"({str(err).splitlines()[0][:80]}); compiling it again")
+            with self._lock:
+                compiled = self._compile_and_store(compiled.loaded_from, leaves, in_tree, static)
+                self._memory[key] = compiled
+            return compiled(leaves)
+        compiled.loaded_from = None
+        return out
+
+    # ------------------------------------------------------------------ disk
+
+    def _file_key(self, key, static) -> str | None:
+        in_tree, static_tree, _, avals, settings = key
+        try:
+            described = _dumps((in_tree, static, avals, settings), shared=False)
+        except (pickle.PicklingError, TypeError, AttributeError):
+            return None
+        digest = hashlib.sha256(_code_fingerprint().encode())
+        digest.update(f"{self.fun.__module__}.{self.fun.__qualname__}".encode())
+        digest.update(described)
+        return digest.hexdigest()
+
+    def _load_or_compile(self, folder: Path, key, leaves, in_tree, static) -> _Compiled:
+        """The entry for ``key`` from disk, else compiled here and stored."""
+        from jax.experimental import serialize_executable
+
+        name = self._file_key(key, static)
+        path = None if name is None else folder / f"{name}.executable"
+        if path is not None and path.is_file():
+            try:
+                _prepare_runtime()
+                entry = pickle.loads(path.read_bytes())
+                executable = serialize_executable.deserialize_and_load(
+                    entry["executable"], entry["in_tree"], entry["out_tree"]
+                )
+                # The outline is pickled as a pytree of slots, not as a PyTreeDef:
+                # equinox's tree nodes do not survive pickling.
+                out_tree = jax.tree_util.tree_structure(entry["outline"])
+                os.utime(path)  # most recently used
+                return _Compiled(executable, out_tree, entry["out_static"], loaded_from=path)
+            except Exception as err:  # noqa: BLE001 - any unreadable entry means: compile again
+                warnings.warn(f"executable cache: {path.name} could not be loaded ({type(err).__name__}); "
+                              "compiling it again")
+        return self._compile_and_store(path, leaves, in_tree, static)
+
+    def _compile_and_store(self, path: Path | None, leaves, in_tree, static) -> _Compiled:
+        compiled, out_tree, out_static = self._compile(leaves, in_tree, static)
+        if path is not None:
+            self._store(path, compiled, out_tree, out_static)
+        return _Compiled(compiled, out_tree, out_static)
+
+    def _compile(self, leaves, in_tree, static):
+        if any(isinstance(leaf, _JaxprText) for leaf in jax.tree_util.tree_leaves(static)):
+            raise StaleStatics(f"{self.fun.__qualname__}: arguments from a loaded entry missed the cache")
+        captured = []
+
+        def flat(*flat_leaves):
+            self.traces += 1
+            dynamic = jax.tree_util.tree_unflatten(in_tree, flat_leaves)
+            out = self.fun(*eqx.combine(dynamic, static))
+            out_dynamic, out_static = eqx.partition(out, eqx.is_array)
+            out_leaves, out_tree = jax.tree_util.tree_flatten(out_dynamic)
+            captured.append((out_tree, out_static))
+            return out_leaves
+
+        lowered = jax.jit(flat).lower(*leaves)
+        # Compiled here, not taken from JAX's persistent cache: an executable JAX
+        # loaded from its cache serialises incompletely on a CPU (the next
+        # process finds functions missing). So JAX is kept from storing these
+        # compilations, and then never has one of them to hand back.
+        with _never_stored():
+            compiled = lowered.compile()
+        return (compiled, *captured[-1])
+
+    @staticmethod
+    def _store(path: Path, compiled, out_tree, out_static) -> None:
+        from jax.experimental import serialize_executable
+
+        # A host callback is a pointer into this process: such an executable
+        # cannot be used by another one (JAX's own cache refuses them too).
+        if getattr(getattr(compiled._executable, "_unloaded_executable", None), "host_callbacks", True):
+            return
+        try:
+            executable, in_tree, flat_tree = serialize_executable.serialize(compiled)
+            outline = jax.tree_util.tree_unflatten(out_tree, [_Slot() for _ in range(out_tree.num_leaves)])
+            data = _dumps({"executable": executable, "in_tree": in_tree, "out_tree": flat_tree,
+                           "outline": outline, "out_static": out_static})
+        except Exception:  # noqa: BLE001 - not serialisable: kept in memory only
+            return
+        folder = path.parent
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            handle, temporary = tempfile.mkstemp(dir=folder, prefix=".writing-")
+            with os.fdopen(handle, "wb") as file:
+                file.write(data)
+            os.replace(temporary, path)
+        except OSError:
+            return  # a full or read-only disk costs the next process a compilation
+        _prune(folder, MAX_EXECUTABLE_BYTES)
+
+
+def _prune(folder: Path, limit: int) -> None:
+    """Delete the least recently used entries until the folder holds at most ``limit`` bytes."""
+    entries = []
+    for path in folder.glob("*.executable"):
+        try:
+            stat = path.stat()
+        except OSError:
+            continue  # removed by another process meanwhile
+        entries.append((stat.st_mtime, stat.st_size, path))
+    total = sum(size for _, size, _ in entries)
+    for _, size, path in sorted(entries):
+        if total <= limit:
+            break
+        try:
+            path.unlink()
+        except OSError:
+            pass
+        total -= size

@@ -1,0 +1,124 @@
+"""invsss.executable_cache: a second process runs the estimator's compiled
+functions from disk without tracing them, with the very same numbers; a bad or
+missing entry costs a compilation, never a wrong result or a crash."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from invsss.executable_cache import _prune
+
+_TESTS = Path(__file__).resolve().parent
+
+# A child process: switch the cache on in argv[1], fit a small model-made pair
+# (argv[2]: how many starts) and print the fit and how often each of the
+# estimator's cached functions was traced.
+_FIT = r"""
+import json, sys, warnings
+sys.path.insert(0, sys.argv[3])
+from invsss.compile_cache import enable_compile_cache
+enable_compile_cache(sys.argv[1])
+import invsss
+from invsss.estimator import problem, solve
+from _estimator_scenes import make_pair
+
+truth = invsss.SSSParams(700.0, 300.0, 2.0, [0.5, 0.3, 0.2], [6.0, 1.5, 0.4])
+source, target, depth, mask, _ = make_pair("face", truth, size=40, noise=0.01, seed=3)
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    result = invsss.fit_pair(source, target, depth, mask, n_starts=int(sys.argv[2]))
+print(json.dumps({
+    "fit": result.to_dict(),
+    "iterations": result.iterations,
+    "traces": {f.__name__: f.traces for f in (solve._init, solve._step, problem._evaluate)},
+    "warnings": [str(w.message) for w in caught if "executable cache" in str(w.message)],
+}, default=str))
+"""
+
+
+def _fit(directory, starts=2, env_extra=None):
+    env = dict(os.environ)
+    env.pop("INVSSS_NO_CACHE", None)
+    env.update(env_extra or {})
+    out = subprocess.run([sys.executable, "-c", _FIT, str(directory), str(starts), str(_TESTS)], env=env,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _entries(directory: Path) -> list[Path]:
+    return sorted((directory / "executables").glob("*.executable"), key=lambda p: p.stat().st_mtime_ns)
+
+
+@pytest.fixture(scope="module")
+def reference():
+    """The fit without any cache."""
+    return _fit("/nonexistent-unused", env_extra={"INVSSS_NO_CACHE": "1"})
+
+
+def test_a_second_process_traces_nothing_and_fits_the_same(tmp_path, reference):
+    first = _fit(tmp_path)
+    assert len(_entries(tmp_path)) == 3  # _evaluate, the solver's init and its step
+    assert all(count >= 1 for count in first["traces"].values())
+    second = _fit(tmp_path)
+    assert second["traces"] == {"_init": 0, "_step": 0, "_evaluate": 0}
+    # Bit for bit: the stored executable is the one the first process compiled.
+    assert first["fit"] == reference["fit"]
+    assert second["fit"] == reference["fit"]
+    assert not first["warnings"] and not second["warnings"]
+
+
+def test_an_unreadable_entry_is_compiled_again_with_a_warning(tmp_path, reference):
+    _fit(tmp_path)
+    for entry in _entries(tmp_path):
+        entry.write_bytes(b"not an executable")
+    again = _fit(tmp_path)
+    assert again["fit"] == reference["fit"]
+    assert len(again["warnings"]) == 3
+    assert all(count >= 1 for count in again["traces"].values())
+    # ... and the entries were written again, whole.
+    assert _fit(tmp_path)["traces"] == {"_init": 0, "_step": 0, "_evaluate": 0}
+
+
+def test_a_stored_init_without_its_step_starts_the_solve_afresh(tmp_path, reference):
+    # The solver's state holds its linearisation as a jaxpr, which a loaded
+    # entry keeps as text: a step that must be traced cannot take that state.
+    _fit(tmp_path)
+    entries = _entries(tmp_path)
+    sizes = {entry: entry.stat().st_size for entry in entries}
+    init = min(sizes, key=sizes.get)  # the smallest: no blur inside
+    for entry in entries:
+        if entry != init and entry.stat().st_mtime_ns > init.stat().st_mtime_ns:
+            entry.unlink()  # the step, stored after the init
+    assert len(_entries(tmp_path)) == 2
+    again = _fit(tmp_path)
+    assert again["fit"] == reference["fit"]
+    assert again["traces"]["_init"] == 0
+
+
+def test_another_layout_is_another_entry(tmp_path):
+    _fit(tmp_path, starts=2)
+    # One start: no same-basin test, the same three functions and layouts.
+    one = _fit(tmp_path, starts=1)
+    assert one["traces"] == {"_init": 0, "_step": 0, "_evaluate": 0}
+    assert len(_entries(tmp_path)) == 3
+
+
+def test_prune_removes_the_least_recently_used(tmp_path):
+    now = time.time()
+    for age, name in enumerate(["new", "mid", "old"]):
+        path = tmp_path / f"{name}.executable"
+        path.write_bytes(b"x" * 100)
+        os.utime(path, (now - 100 * age, now - 100 * age))
+    (tmp_path / "other.txt").write_bytes(b"y" * 1000)  # not an entry: left alone
+    _prune(tmp_path, 250)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mid.executable", "new.executable", "other.txt"]
+    _prune(tmp_path, 100)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["new.executable", "other.txt"]
