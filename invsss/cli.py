@@ -21,11 +21,13 @@ Exit codes, all without a traceback:
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import signal
 import sys
 import tempfile
+import threading
 import time
 import warnings
 
@@ -459,6 +461,9 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
     fix = _parse_fix(args.fix)
     count = _check_pair_counts(args)
     names = _fit_file_names(count)
+    # The report needs matplotlib (0.3-0.4 s to import); import it beside the fit,
+    # whose solver steps leave the interpreter free while XLA computes.
+    threading.Thread(target=importlib.import_module, args=("invsss.report",), daemon=True).start()
     # Lock and check the output directory before reading anything, so a rerun
     # into a finished result or a busy directory is refused at once.
     with ResultDir(args.out, overwrite=args.overwrite, names=names) as out:

@@ -27,6 +27,10 @@ consistent; so :func:`enable_compile_cache` always sets one
 be had within JAX's 10 s, or an unreadable entry, costs a compilation and a
 warning, never a wrong result: JAX checks every cache read and compiles
 afresh on failure.
+
+The same switch turns on :mod:`invsss.executable_cache`, which keeps the
+estimator's largest functions whole (traced, lowered and compiled) in the
+directory's ``executables`` folder.
 """
 
 from __future__ import annotations

@@ -317,6 +317,7 @@ class persistent_jit:
             captured.append((out_tree, out_static))
             return out_leaves
 
+        flat.__name__ = flat.__qualname__ = self.fun.__name__  # what profiles and logs show
         lowered = jax.jit(flat).lower(*leaves)
         # Compiled here, not taken from JAX's persistent cache: an executable JAX
         # loaded from its cache serialises incompletely on a CPU (the next

@@ -9,7 +9,7 @@ the estimator is there for a pair read from disk too.
 from __future__ import annotations
 
 import equinox as eqx
-import jax.numpy as jnp
+import jax
 import numpy as np
 from jaxtyping import Array, Float
 
@@ -20,7 +20,8 @@ __all__ = ["ImagePair", "fill_background_depth"]
 
 def _as_hwc64(x) -> Array:
     x = np.asarray(x, dtype=np.float64)
-    return jnp.asarray(x[..., None] if x.ndim == 2 else x)
+    # device_put, not jnp.asarray: that compiles a small copy for every new shape.
+    return jax.device_put(x[..., None] if x.ndim == 2 else x)
 
 
 class ImagePair(eqx.Module):
@@ -87,8 +88,8 @@ class ImagePair(eqx.Module):
         return ImagePair(
             _as_hwc64(self.source),
             _as_hwc64(self.target),
-            jnp.asarray(np.asarray(self.depth, dtype=np.float64)),
-            jnp.asarray(np.asarray(self.mask, dtype=np.float64)),
+            jax.device_put(np.asarray(self.depth, dtype=np.float64)),
+            jax.device_put(np.asarray(self.mask, dtype=np.float64)),
             target_ndim,
             _float64_or_none(self.fit_weight),
             _float64_or_none(self.normal),
@@ -97,7 +98,7 @@ class ImagePair(eqx.Module):
 
 
 def _float64_or_none(x):
-    return None if x is None else jnp.asarray(np.asarray(x, dtype=np.float64))
+    return None if x is None else jax.device_put(np.asarray(x, dtype=np.float64))
 
 
 def fill_background_depth(depth):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import warnings
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -28,7 +29,9 @@ PARAM_NAMES = ("sss_level", "correction", "maxdd", "weights", "variances")
 
 def _as_float(x) -> Array:
     # jnp.asarray with the default float type: float32, or float64 under x64.
-    return jnp.asarray(x, dtype=jnp.result_type(float))
+    # Host values are converted by NumPy: a conversion on the device compiles.
+    dtype = jnp.result_type(float)
+    return jnp.asarray(x, dtype=dtype) if isinstance(x, jax.Array) else jax.device_put(np.asarray(x, dtype))
 
 
 class SSSParams(eqx.Module):

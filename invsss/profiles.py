@@ -46,9 +46,19 @@ __all__ = [
 ]
 
 
+def _namespace(*arrays):
+    # All NumPy in, NumPy out: host-side callers (the report's profile plot) then
+    # pay no JAX dispatch or compilation. Anything else goes through jax.numpy.
+    return np if all(isinstance(a, np.ndarray) for a in arrays) else jnp
+
+
 def gaussian(variance, r):
-    """Normalised 2D Gaussian ``G(v, r) = exp(-r^2 / (2 v)) / (2 pi v)`` (thesis eq. 4.1)."""
-    return jnp.exp(-(r**2) / (2.0 * variance)) / (2.0 * jnp.pi * variance)
+    """Normalised 2D Gaussian ``G(v, r) = exp(-r^2 / (2 v)) / (2 pi v)`` (thesis eq. 4.1).
+
+    NumPy arrays in give a NumPy array out; otherwise a JAX array.
+    """
+    xp = _namespace(variance, r)
+    return xp.exp(-(r**2) / (2.0 * variance)) / (2.0 * np.pi * variance)
 
 
 def sum_of_gaussians(
@@ -57,20 +67,23 @@ def sum_of_gaussians(
     """``R(r) = sum_i w_i G(v_i, r)`` (thesis eq. 4.2, d'Eon & Luebke 2007).
 
     With per-channel weights of shape (K, C) the result gains a trailing C axis.
+    Three NumPy arrays in give a NumPy array out (computed by NumPy); otherwise
+    the result is a JAX array.
 
     Examples
     --------
-    >>> import jax.numpy as jnp
+    >>> import jax.numpy as jnp, numpy as np
     >>> float(sum_of_gaussians(jnp.array(0.0), jnp.array([1.0]), jnp.array([1.0 / (2 * jnp.pi)])))
     1.0
+    >>> sum_of_gaussians(np.array([0.0, 1.0]), np.array([0.5, 0.5]), np.array([1.0, 2.0])).round(4)
+    array([0.1194, 0.0793])
     """
-    r = jnp.asarray(r)
-    weights = jnp.asarray(weights)
-    variances = jnp.asarray(variances)
+    xp = _namespace(r, weights, variances)
+    r, weights, variances = xp.asarray(r), xp.asarray(weights), xp.asarray(variances)
     g = gaussian(variances, r[..., None])  # (*N, K)
     if weights.ndim == 1:
-        return jnp.sum(g * weights, axis=-1)
-    return jnp.einsum("...k,kc->...c", g, weights)
+        return xp.sum(g * weights, axis=-1)
+    return xp.einsum("...k,kc->...c", g, weights)
 
 
 # --------------------------------------------------------------------------- dipole

@@ -149,10 +149,16 @@ def test_a_second_fit_into_a_busy_directory_is_refused_while_the_first_finishes(
     first = _start(["fit", *small_pair, "--out", str(out)])
     seen = []
     _wait_for(first, "searching starting points", seen)
-    second = subprocess.run(
-        [sys.executable, "-m", "invsss", "fit", *small_pair, "--out", str(out)],
-        capture_output=True, text=True, cwd=ROOT, timeout=300,
-    )
+    # Paused while it holds the directory: with a warm compilation cache the whole
+    # fit can end before a second interpreter has even started.
+    first.send_signal(signal.SIGSTOP)
+    try:
+        second = subprocess.run(
+            [sys.executable, "-m", "invsss", "fit", *small_pair, "--out", str(out)],
+            capture_output=True, text=True, cwd=ROOT, timeout=300,
+        )
+    finally:
+        first.send_signal(signal.SIGCONT)
     assert second.returncode == 2
     assert f"in use by another invsss run (pid {first.pid}" in second.stderr
     assert "Traceback" not in second.stderr

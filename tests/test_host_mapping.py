@@ -1,8 +1,9 @@
 """The host's NumPy paths agree with the traced JAX ones they stand in for.
 
-``Parametrisation.natural`` and ``depth_slopes`` take NumPy arrays on the host (reading
-a result, sizing the start scan) so that a fit compiles no eager JAX operations there;
-the two paths must give the same numbers.
+``Parametrisation.natural``, ``depth_slopes`` and ``sum_of_gaussians`` take NumPy
+arrays on the host (reading a result, sizing the start scan, drawing the report) so
+that a fit compiles no eager JAX operations there; the two paths must give the same
+numbers.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from invsss.estimator.parametrisation import SCALED_BLOCKS, Parametrisation
+from invsss.profiles import sum_of_gaussians
 from invsss.stretch import depth_slopes
 
 BLOCKS = (("sss_level", ()), ("correction", ()), ("maxdd", ()), ("weights", (2,)), ("mix", (2, 3)),
@@ -63,3 +65,16 @@ def test_depth_slopes_are_the_same_in_numpy_and_jax():
     for a, b in zip(host, traced):
         assert not isinstance(a, jax.Array)
         np.testing.assert_allclose(a, np.asarray(b), rtol=1e-13)
+
+
+def test_sum_of_gaussians_is_the_same_in_numpy_and_jax():
+    # The report draws the fitted profile through the NumPy path.
+    rng = np.random.default_rng(7)
+    r = np.linspace(0.0, 9.0, 50)
+    variances = rng.uniform(0.05, 9.0, 4)
+    for weights in (rng.uniform(0.0, 1.0, 4), rng.uniform(0.0, 1.0, (4, 3))):
+        host = sum_of_gaussians(r, weights, variances)
+        assert isinstance(host, np.ndarray) and host.shape == r.shape + weights.shape[1:]
+        with jax.enable_x64(True):
+            traced = jax.jit(sum_of_gaussians)(jnp.asarray(r), jnp.asarray(weights), jnp.asarray(variances))
+        np.testing.assert_allclose(host, np.asarray(traced), rtol=1e-13, atol=0.0)

@@ -360,7 +360,7 @@ def _fit(pairs, single, options, progress, stop, nuisance=None, start=None) -> F
         result = _report(problem, path, single, steps, nuisance)
     # Rebuild the parameters outside float64 mode: the caller gets arrays of their
     # own default precision, ready for render().
-    params = SSSParams(*(result.values[k] for k in PARAM_NAMES))
+    params = SSSParams(*(np.asarray(result.values[k]) for k in PARAM_NAMES))  # host arrays: no compile
     result = dataclasses.replace(
         result, params=params, solver=options.solver, profile=options.profile_label,
         tap_weights=options.tap_label,
@@ -759,7 +759,8 @@ def _solve(problem, options, steps) -> _Path:
         for round_ in range(_ROBUST_ROUNDS):
             residuals = _residuals(problem, path)
             path.delta = robust_scale(residuals, masks, options.robust)
-            u = tuple(jnp.asarray(x) for x in robust_weights(residuals, path.delta, options.robust))
+            # device_put: jnp.asarray would compile a small copy for the new shape.
+            u = tuple(jax.device_put(np.asarray(x)) for x in robust_weights(residuals, path.delta, options.robust))
             path.objective = eqx.tree_at(lambda o: o.robust, path.objective, u)
             path.extend(run(f"{prefix}robust {round_ + 1}", path.z))
             if path.interrupted:
@@ -777,7 +778,7 @@ def _solve(problem, options, steps) -> _Path:
 
 def _residuals(problem, path) -> list[np.ndarray]:
     """Each pair's target minus the prediction at ``path``'s point, (H, W, C')."""
-    preds = _evaluate(path.objective, path.z, jnp.asarray(False))["predictions"]
+    preds = _evaluate(path.objective, path.z, np.asarray(False))["predictions"]
     return [np.asarray(p.target) - np.asarray(q) for p, q in zip(problem.data, preds)]
 
 
@@ -835,7 +836,7 @@ def _active_set(problem, path, run, prefix: str = "") -> None:
     if not problem.linear_weights or nb < 2:
         return
     for round_ in range(nb):
-        coef = np.asarray(_evaluate(path.objective, path.z, jnp.asarray(False))["coef"])
+        coef = np.asarray(_evaluate(path.objective, path.z, np.asarray(False))["coef"])
         active = np.asarray(path.objective.active)
         negative = (coef * np.sign(coef.sum(axis=0)) < 0) & (active > 0)
         if not negative.any():
@@ -856,7 +857,7 @@ def _report(problem, path, single, steps, nuisance=None) -> FitResult:
     param, roles, data, c_tgt = problem.param, problem.roles, problem.data, problem.channels
     robust, max_steps = problem.options.robust, problem.options.max_steps
     messages = list(path.messages)
-    final = _evaluate(path.objective, jnp.asarray(path.z), jnp.asarray(True))
+    final = _evaluate(path.objective, jnp.asarray(path.z), np.asarray(True))
     ratios, coef, offset = (np.asarray(final[k]) for k in ("ratios", "coef", "offset"))
     natural = {k: np.asarray(v) for k, v in param.natural(np.asarray(path.z, np.float64)).items()}
     if problem.linear_weights:

@@ -269,4 +269,5 @@ class Parametrisation(eqx.Module):
             else:
                 u = np.log(x)
             parts.append(np.broadcast_to(u, shape).ravel())
-        return jnp.asarray(np.concatenate(parts) if parts else np.zeros(0))
+        # device_put, not jnp.asarray: that compiles a small copy for every new shape.
+        return jax.device_put(np.concatenate(parts) if parts else np.zeros(0))

@@ -63,9 +63,9 @@ def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, 
     for name in PARAM_NAMES:
         role = roles[name]
         if role == "fixed":
-            values[name] = jnp.asarray(fixed.get(name, variances if name == "variances" else None))
+            values[name] = _on_device(fixed.get(name, variances if name == "variances" else None))
         elif role in ("unused", "linear"):
-            values[name] = jnp.asarray(carried[name])
+            values[name] = _on_device(carried[name])
     if roles["sss_level"] == "free":
         reference["sss_level"] = blur_reference(scales, variances)
         blocks.append(("sss_level", ()))
@@ -105,7 +105,7 @@ def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, 
     # term whenever its name is among the natural values.
     for term, name in LIGHT_UNKNOWNS.items():
         if term in light_fixed:
-            values[name] = jnp.asarray(light_fixed[term], jnp.float64)
+            values[name] = _on_device(light_fixed[term])
     if "shift" in light_terms and "shift" not in light_fixed:
         # One unit of z shifts by about a pixel at the start: kappa is in scene
         # units, and a pixel covers depth / L of them.
@@ -119,10 +119,19 @@ def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, 
             start[gain] = 0.0
             reference[gain] = 1.0
     param = Parametrisation(
-        tuple(blocks), {k_: jnp.asarray(v) for k_, v in reference.items()}, values
+        tuple(blocks), {k_: _on_device(v) for k_, v in reference.items()}, values
     )
     natural0 = {name: start.get(name, reference[name]) for name, _ in blocks}
     return param, param.unknowns(natural0)
+
+
+def _on_device(x) -> jax.Array:
+    """A host value as a float64 device array. ``jnp.asarray`` would compile a
+    small conversion for every new shape, a few hundredths of a second each."""
+    return jax.device_put(np.asarray(x, np.float64))
+
+
+_NO_JACOBIAN = np.asarray(False)  # _evaluate's traced flag, for the cheap calls
 
 
 def _blur_at_zero(roles, scales, fixed, variances):
@@ -220,9 +229,9 @@ class FitProblem:
             self.param,
             self.data,
             options.taps(jnp.float64),
-            tuple(jnp.ones_like(p.target) for p in self.data),
-            jnp.ones((nb, self.channels)),
-            jnp.asarray(scale),
+            tuple(_on_device(np.ones(p.target.shape)) for p in self.data),
+            _on_device(np.ones((nb, self.channels))),
+            _on_device(scale),
             options.model,
             self.linear_weights,
         )
@@ -239,9 +248,9 @@ class FitProblem:
         elif self.param.size:
             blur0 = _blur_at_zero(self.roles, self.scales, self.fixed, self.variances)
             self.starts = tuple(
-                jnp.asarray(z)
+                _on_device(z)
                 for z in choose_starts(
-                    lambda u: float(_evaluate(self.objective, jnp.asarray(u), jnp.asarray(False))["loss"]),
+                    lambda u: float(_evaluate(self.objective, _on_device(u), _NO_JACOBIAN)["loss"]),
                     self.param, self.scales, blur0, self.z_base, options.n_starts,
                 )
             )
@@ -253,7 +262,7 @@ class FitProblem:
 
     def loss(self, z) -> float:
         """The reported loss at ``z`` (mask-weighted mean squared residual)."""
-        return float(_evaluate(self.objective, jnp.asarray(z), jnp.asarray(False))["loss"])
+        return float(_evaluate(self.objective, _on_device(z), _NO_JACOBIAN)["loss"])
 
 
 def build_problem(pairs, options: FitOptions | None = None, start: dict | None = None) -> FitProblem:

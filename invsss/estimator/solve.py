@@ -97,7 +97,7 @@ def make_solver(name: str, tolerance: float | None = None):
     >>> print(f"{float(make_solver('bfgs', tolerance=1e-3).atol):.1e}")
     1.0e-03
     """
-    rtol, atol = (RTOL, ATOL) if tolerance is None else (jnp.asarray(tolerance),) * 2
+    rtol, atol = (RTOL, ATOL) if tolerance is None else (jax.device_put(np.asarray(tolerance)),) * 2
     if name == "lm":
         return optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     if name == "gauss-newton":
@@ -364,7 +364,7 @@ def run_solver(
         noise_tolerance = stall_tolerance = None
     elif noise_tolerance is not None:
         # Traced, so that every tolerance shares one compiled step.
-        noise_tolerance = jnp.asarray(noise_tolerance, jnp.result_type(float))
+        noise_tolerance = jax.device_put(np.asarray(noise_tolerance, jnp.result_type(float)))
     try:
         return _iterate(solver, fn, jnp.asarray(z0), max_steps, on_step, stop, arrived, noise_tolerance,
                         stall_tolerance, _init, _step)

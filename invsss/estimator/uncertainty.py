@@ -195,7 +195,9 @@ def gauss_newton_uncertainty(
         jacs = {k: np.concatenate([np.asarray(g).reshape(-1, jac.shape[1] - q),
                                    np.zeros((int(np.size(values[k])), q))], axis=1)
                 for k, g in jacs.items()}
-    weights = objective.weights()
+    # objective.weights() in NumPy: this runs on the host, once per fit.
+    weights = [np.asarray(p.residual_weight)[..., None] * np.asarray(u)
+               for p, u in zip(objective.pairs, objective.robust)]
     shapes = [np.shape(w) for w in weights]
     weighted = np.concatenate([np.asarray(w).ravel() > 0 for w in weights])
     n, p = int(weighted.sum()), jac.shape[1]
