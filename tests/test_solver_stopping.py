@@ -123,13 +123,16 @@ def test_arrived_ends_a_solve_as_converged():
 
 
 @pytest.mark.slow
-def test_starts_that_reach_a_known_basin_end_there(monkeypatch):
+# Four starts go through successive halving, two do not (each start then ends
+# inside the start loop): both paths must keep the cut.
+@pytest.mark.parametrize("n_starts", [4, 2])
+def test_starts_that_reach_a_known_basin_end_there(monkeypatch, n_starts):
     profile = {"weights": [0.3, 0.45, 0.25], "variances": [0.25, 1.2, 5.0]}
     truth = invsss.SSSParams(700.0, 300.0, 2.0, profile["weights"], profile["variances"])
     source, target, depth, mask, _ = make_pair("face", truth, seed=0, contrast=3.0, size=64)
 
     def fit():
-        return invsss.fit_pair(source, target, depth, mask, profile=profile, robust=None)
+        return invsss.fit_pair(source, target, depth, mask, profile=profile, robust=None, n_starts=n_starts)
 
     ended = fit()
     monkeypatch.setattr(fit_module, "SAME_BASIN", 0.0)
