@@ -196,6 +196,20 @@ def test_a_camera_that_sees_no_skin_is_one_line():
         render_scene(_config(camera=away))
 
 
+def test_key_is_the_source_lit_by_the_first_light_alone():
+    fill = {**POINT_LIGHT, "position": [-200.0, -50.0, 250.0], "intensity": 6e4}
+    camera = {**CAMERA, "width": 12, "height": 12}
+    both = render_scene(_config(lights=[POINT_LIGHT, fill], camera=camera, spp=16), target=False)
+    alone = render_scene(_config(lights=[POINT_LIGHT], camera=camera, spp=16), target=False)
+    # The same spp and seed: the key pass is the one-light source, sample for sample.
+    np.testing.assert_array_equal(both.key, alone.source)
+    np.testing.assert_array_equal(alone.key, alone.source)
+    on = both.mask > 0
+    fill_part = (both.source - both.key)[on]
+    assert fill_part.mean() > 0.05 * both.source[on].mean()  # the second light adds light
+    assert both.info["spp"]["key_light"] == 16 and alone.info["spp"]["key_light"] == 0
+
+
 def test_coloured_light_gives_rgb_even_for_a_grey_medium():
     light = {**POINT_LIGHT, "intensity": [1e5, 5e4, 2e4]}
     result = render_scene(_config(lights=[light], camera={**CAMERA, "width": 8, "height": 8}))
@@ -258,7 +272,7 @@ def test_scene_command_writes_a_pair_folder(tmp_path, capsys):
     assert main(["scene", str(_write_toml(tmp_path)), "--out", str(out), "--width", "16"]) == 0
     files = sorted(os.listdir(out))
     assert files == sorted(["source.exr", "target.exr", "depth.exr", "mask.png", "normal.exr",
-                            "coverage.exr", "light.exr", "scene.json", "invsss-manifest.json"])
+                            "coverage.exr", "light.exr", "key.exr", "scene.json", "invsss-manifest.json"])
     info = json.loads((out / "scene.json").read_text())
     assert info["config"]["camera"]["width"] == 16 and info["config"]["camera"]["height"] == 16
     assert info["mitsuba_version"] == mitsuba.__version__ and info["spp"]["target_per_half"] == 2

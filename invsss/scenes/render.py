@@ -53,7 +53,7 @@ __all__ = ["SCENE_FILES", "SceneRender", "light_directions", "render_scene", "sc
 
 #: The files of a scene folder, in the order they are written.
 SCENE_FILES = ("source.exr", "target.exr", "depth.exr", "mask.png", "normal.exr", "coverage.exr", "light.exr",
-               "scene.json")
+               "key.exr", "scene.json")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,6 +69,7 @@ class SceneRender:
     info: dict
     target_halves: tuple[np.ndarray, np.ndarray] | None
     light: np.ndarray | None = None  # (H, W, 3) float32; None: computed from the depth when written
+    key: np.ndarray | None = None  # (H, W, C) float32: the source lit by the first light alone; None: not written
 
 
 def _channels(image, count: int) -> np.ndarray:
@@ -203,6 +204,17 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         source_scene = mi.load_dict(build("source", albedo=albedo_list if albedo.size > 1 else albedo_list[0]))
         source = timed("source", lambda: _channels(mi.render(source_scene, spp=config.spp, seed=seeds["source"]),
                                                    channels))
+        # The first (key) light's part of the source: a deferred renderer's lighting
+        # pass has it, and light-aware terms for one light need it (docs/model.md,
+        # section 8). Same seed as the source, so source - key is the other lights'.
+        if len(config.lights) > 1:
+            alone = config.model_copy(update={"lights": config.lights[:1]})
+            key_scene = mi.load_dict(scene_dict(mi, alone, "source", mesh_ply=mesh_ply, coefficients=coefficients,
+                                                albedo=albedo_list if albedo.size > 1 else albedo_list[0]))
+            key = timed("key light", lambda: _channels(mi.render(key_scene, spp=config.spp, seed=seeds["source"]),
+                                                       channels))
+        else:
+            key = source
         scenes = [(mi.load_dict(scene_dict(mi, config, "target", mesh_ply=mesh_ply, coefficients=medium)),
                    mi.load_dict(scene_dict(mi, config, "specular", mesh_ply=mesh_ply, coefficients=medium)))
                   for medium in media] if target else []
@@ -248,7 +260,8 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
             "dipole_total": np.atleast_1d(dipole).tolist(),
             "renders": len(media),
         },
-        "spp": {"source": config.spp, "target": config.spp if target else 0,
+        "spp": {"source": config.spp, "key_light": config.spp if len(config.lights) > 1 else 0,
+                "target": config.spp if target else 0,
                 "target_per_half": half_spp if target else 0, "specular_per_half": half_spp if target else 0,
                 "geometry": config.geometry_spp},
         "seeds": seeds,
@@ -269,6 +282,7 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         info=info,
         target_halves=(halves[0].astype(np.float32), halves[1].astype(np.float32)) if target else None,
         light=light_directions(config, depth).astype(np.float32),
+        key=key.astype(np.float32),
     )
 
 
@@ -346,7 +360,7 @@ def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
     --------
     >>> image, plane = np.ones((4, 4, 1), np.float32), np.ones((4, 4), np.float32)
     >>> flat = SceneRender(image, image, 500 * plane, plane, np.zeros((4, 4, 3), np.float32),
-    ...                    plane, {"spp": 2}, (image, image), light=np.zeros((4, 4, 3), np.float32))
+    ...                    plane, {"spp": 2}, (image, image), light=np.zeros((4, 4, 3), np.float32), key=image)
     >>> list(scene_writers(flat)) == list(SCENE_FILES)
     True
     """
@@ -359,10 +373,13 @@ def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
         "normal.exr": lambda path: write_image(path, result.normal),
         "coverage.exr": lambda path: write_image(path, result.coverage),
         "light.exr": lambda path: write_image(path, _light_buffer(result)),
+        "key.exr": lambda path: write_image(path, result.key),
         "scene.json": lambda path: write_text_atomic(path, text),
     }
     if result.target is None:
         del writers["target.exr"]
+    if result.key is None:
+        del writers["key.exr"]
     return writers
 
 

@@ -1,0 +1,125 @@
+"""Would a multiple-scattering reflectance law for the key light close the gap? (issue 10)
+
+The residual of the three-term fit (``--light-terms shift,grazing,incidence``) on the
+path-traced faces has a broad part: the side the key light reaches is brighter in
+the path tracer than in the fit, the side only the fill light reaches darker. A
+Lambertian source has the wrong angular law. A semi-infinite medium of
+single-scattering albedo ``w`` with isotropic scattering reflects light arriving at
+``mu0 = n . l`` towards ``mu = n . v`` in proportion to (Chandrasekhar 1960,
+"Radiative transfer", section 29; the H function in Hapke's 1981 approximation)::
+
+    f(mu, mu0) = H(mu) H(mu0) / (mu + mu0),    H(x) = (1 + 2 x) / (1 + 2 x sqrt(1 - w))
+
+times what a Lambertian surface of the same irradiance returns. The law belongs to
+light arriving from one direction, so it can be applied to the key light only: a
+renderer has that light's diffuse contribution on its own (its lighting pass adds
+one light at a time). This script measures, post hoc, what the law would buy:
+
+1. it renders the source with the key light alone (Mitsuba 3, the pair's
+   ``scene.json``, the recorded Lambertian albedo), ``K``; the fill light's part is
+   ``S - K``;
+2. it fits the pair (plain ``shift``, and all three terms), and renders ``K`` and
+   ``S - K`` through the fitted model;
+3. it fits the target as ``a K' f + b (S - K)' [H(mu)] + c`` by least squares for
+   each ``w`` and prints the PSNR on the mask eroded by 2 px.
+
+``mu`` is the normal's z (a distant camera) and ``mu0`` comes from the pair's
+``normal.exr`` and ``light.exr``::
+
+    python experiments/reflectance_probe.py [data_synthetic/pt_face_940 ...] [--spp 1024]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+import invsss
+from invsss.scenes.config import parse_config
+from invsss.scenes.mitsuba_scene import import_mitsuba, load_mesh_ply, scene_dict
+
+ALBEDOS = (0.9, 0.95, 0.965, 0.98, 0.99, 0.995)
+
+
+def key_light_source(folder: Path, spp: int) -> np.ndarray:
+    """The pair's Lambertian source rendered with its first (key) light only, (H, W, C)."""
+    recorded = json.loads((folder / "scene.json").read_text())
+    alone = dict(recorded["config"], lights=recorded["config"]["lights"][:1])
+    config = parse_config(alone)
+    albedo = recorded["source_albedo"]["value"]
+    mi = import_mitsuba(config.variant)
+    with tempfile.TemporaryDirectory() as scratch:
+        mesh = load_mesh_ply(config.object.mesh, scratch) if config.object.mesh else None
+        scene = mi.load_dict(scene_dict(mi, config, "source", mesh_ply=mesh, coefficients=config.medium.coefficients(),
+                                        albedo=albedo if len(albedo) > 1 else albedo[0]))
+    image = np.asarray(mi.render(scene, spp=spp, seed=7), np.float64)
+    return image[..., : recorded["channels"]] if recorded["channels"] > 1 else image[..., :1]
+
+
+def chandrasekhar(mu, w):
+    """Hapke's approximation to Chandrasekhar's H function for isotropic scattering."""
+    return (1.0 + 2.0 * mu) / (1.0 + 2.0 * mu * np.sqrt(1.0 - w))
+
+
+def probe(folder: Path, spp: int) -> None:
+    pair = invsss.load_pair(*(folder / f for f in ("source.exr", "target.exr", "depth.exr", "mask.png")))
+    normal = np.asarray(invsss.read_image(folder / "normal.exr"), np.float64)
+    light = np.asarray(invsss.read_image(folder / "light.exr"), np.float64)
+    buffers = invsss.LightBuffers(normal, light)
+    source, target = np.asarray(pair.source, np.float64), np.asarray(pair.target, np.float64)
+    key = key_light_source(folder, spp)
+    keep = ndimage.binary_erosion(np.asarray(pair.mask) > 0, iterations=2)
+    peak = float(target[keep].max())
+    mu = np.clip(normal[..., 2], 1e-3, 1.0)[..., None]
+    mu0 = np.clip(np.sum(normal * light, axis=-1), 0.0, 1.0)[..., None]
+
+    def psnr(columns) -> float:
+        wanted = target[keep].ravel()
+        design = np.stack([np.broadcast_to(c, target.shape)[keep].ravel() for c in columns]
+                          + [np.ones_like(wanted)], axis=1)
+        coef, *_ = np.linalg.lstsq(design, wanted, rcond=None)
+        return 10.0 * np.log10(peak**2 / np.mean((wanted - design @ coef) ** 2))
+
+    print(f"{folder.name}: the key light gives {key[keep].sum() / source[keep].sum():.0%} of the source on the mask")
+    for terms in ("shift", "shift,grazing,incidence"):
+        fit = invsss.fit_pair(pair.source, pair.target, pair.depth, pair.mask, light_terms=terms,
+                              light_buffers=buffers)
+        held = fit.to_dict()["light_terms"]
+        applied = invsss.LightTerms(*(held.get(k) or 0.0 for k in ("shift", "grazing", "incidence")))
+
+        def through_fit(image):
+            return np.asarray(invsss.render(image, pair.depth, pair.mask, fit.params, light_terms=applied,
+                                            light_buffers=buffers), np.float64).reshape(target.shape)
+
+        whole, keyed = through_fit(source), through_fit(key)
+        fill = whole - keyed
+        print(f"  fit with {terms}: {psnr([whole]):.2f} dB; key and fill with gains of their own "
+              f"{psnr([keyed, fill]):.2f} dB")
+        for w in ALBEDOS:
+            law = chandrasekhar(mu, w) * chandrasekhar(mu0, w) / (mu + mu0)
+            exit_law = chandrasekhar(mu, w)
+            print(f"    w {w:5.3f}: key x law, fill {psnr([keyed * law, fill]):.2f} dB | "
+                  f"key x law, fill x H(mu) {psnr([keyed * law, fill * exit_law]):.2f} dB | "
+                  f"everything x law {psnr([whole * law]):.2f} dB")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("pairs", nargs="*", type=Path,
+                        default=[Path("data_synthetic") / n for n in ("pt_face_940", "pt_face_940_turned",
+                                                                       "pt_face_skin1")])
+    parser.add_argument("--spp", type=int, default=1024, help="samples per pixel of the key-light render")
+    args = parser.parse_args()
+    for folder in args.pairs:
+        if not (folder / "scene.json").is_file():
+            parser.error(f"{folder}: no scene.json (a path-traced pair written by invsss scene is needed)")
+        probe(folder, args.spp)
+
+
+if __name__ == "__main__":
+    main()
