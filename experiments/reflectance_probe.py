@@ -13,52 +13,34 @@ single-scattering albedo ``w`` with isotropic scattering reflects light arriving
 times what a Lambertian surface of the same irradiance returns. The law belongs to
 light arriving from one direction, so it can be applied to the key light only: a
 renderer has that light's diffuse contribution on its own (its lighting pass adds
-one light at a time). This script measures, post hoc, what the law would buy:
+one light at a time), and so does every pair ``invsss scene`` writes (``key.exr``,
+the source lit by the key light alone; ``source - key`` is the fill light's part).
+This script measures, post hoc, what the law would buy:
 
-1. it renders the source with the key light alone (Mitsuba 3, the pair's
-   ``scene.json``, the recorded Lambertian albedo), ``K``; the fill light's part is
-   ``S - K``;
-2. it fits the pair (plain ``shift``, and all three terms), and renders ``K`` and
-   ``S - K`` through the fitted model;
-3. it fits the target as ``a K' f + b (S - K)' [H(mu)] + c`` by least squares for
-   each ``w`` and prints the PSNR on the mask eroded by 2 px.
+1. it fits the pair (``shift`` alone, and all three terms);
+2. it renders ``K`` (the key light's part) and ``S - K`` through the fitted model,
+   and also ``K f`` (the law applied before the blur, as a renderer's lighting
+   pass would);
+3. it fits the target as a linear mix of such images plus an offset, by least
+   squares, for each ``w``, and prints the PSNR on the mask eroded by 2 px.
 
 ``mu`` is the normal's z (a distant camera) and ``mu0`` comes from the pair's
 ``normal.exr`` and ``light.exr``::
 
-    python experiments/reflectance_probe.py [data_synthetic/pt_face_940 ...] [--spp 1024]
+    python experiments/reflectance_probe.py [data_synthetic/pt_face_940 ...]
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import tempfile
 from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
 
 import invsss
-from invsss.scenes.config import parse_config
-from invsss.scenes.mitsuba_scene import import_mitsuba, load_mesh_ply, scene_dict
 
 ALBEDOS = (0.9, 0.95, 0.965, 0.98, 0.99, 0.995)
-
-
-def key_light_source(folder: Path, spp: int) -> np.ndarray:
-    """The pair's Lambertian source rendered with its first (key) light only, (H, W, C)."""
-    recorded = json.loads((folder / "scene.json").read_text())
-    alone = dict(recorded["config"], lights=recorded["config"]["lights"][:1])
-    config = parse_config(alone)
-    albedo = recorded["source_albedo"]["value"]
-    mi = import_mitsuba(config.variant)
-    with tempfile.TemporaryDirectory() as scratch:
-        mesh = load_mesh_ply(config.object.mesh, scratch) if config.object.mesh else None
-        scene = mi.load_dict(scene_dict(mi, config, "source", mesh_ply=mesh, coefficients=config.medium.coefficients(),
-                                        albedo=albedo if len(albedo) > 1 else albedo[0]))
-    image = np.asarray(mi.render(scene, spp=spp, seed=7), np.float64)
-    return image[..., : recorded["channels"]] if recorded["channels"] > 1 else image[..., :1]
 
 
 def chandrasekhar(mu, w):
@@ -66,13 +48,13 @@ def chandrasekhar(mu, w):
     return (1.0 + 2.0 * mu) / (1.0 + 2.0 * mu * np.sqrt(1.0 - w))
 
 
-def probe(folder: Path, spp: int) -> None:
+def probe(folder: Path) -> None:
     pair = invsss.load_pair(*(folder / f for f in ("source.exr", "target.exr", "depth.exr", "mask.png")))
     normal = np.asarray(invsss.read_image(folder / "normal.exr"), np.float64)
     light = np.asarray(invsss.read_image(folder / "light.exr"), np.float64)
     buffers = invsss.LightBuffers(normal, light)
     source, target = np.asarray(pair.source, np.float64), np.asarray(pair.target, np.float64)
-    key = key_light_source(folder, spp)
+    key = np.asarray(invsss.read_image(folder / "key.exr"), np.float64)
     keep = ndimage.binary_erosion(np.asarray(pair.mask) > 0, iterations=2)
     peak = float(target[keep].max())
     mu = np.clip(normal[..., 2], 1e-3, 1.0)[..., None]
@@ -102,9 +84,9 @@ def probe(folder: Path, spp: int) -> None:
               f"{psnr([keyed, fill]):.2f} dB")
         for w in ALBEDOS:
             law = chandrasekhar(mu, w) * chandrasekhar(mu0, w) / (mu + mu0)
-            exit_law = chandrasekhar(mu, w)
             print(f"    w {w:5.3f}: key x law, fill {psnr([keyed * law, fill]):.2f} dB | "
-                  f"key x law, fill x H(mu) {psnr([keyed * law, fill * exit_law]):.2f} dB | "
+                  f"the same, the law before the blur {psnr([through_fit(key * law), fill]):.2f} dB | "
+                  f"key x law, fill x H(mu) {psnr([keyed * law, fill * chandrasekhar(mu, w)]):.2f} dB | "
                   f"everything x law {psnr([whole * law]):.2f} dB")
 
 
@@ -113,12 +95,11 @@ def main() -> None:
     parser.add_argument("pairs", nargs="*", type=Path,
                         default=[Path("data_synthetic") / n for n in ("pt_face_940", "pt_face_940_turned",
                                                                        "pt_face_skin1")])
-    parser.add_argument("--spp", type=int, default=1024, help="samples per pixel of the key-light render")
     args = parser.parse_args()
     for folder in args.pairs:
-        if not (folder / "scene.json").is_file():
-            parser.error(f"{folder}: no scene.json (a path-traced pair written by invsss scene is needed)")
-        probe(folder, args.spp)
+        if not (folder / "key.exr").is_file():
+            parser.error(f"{folder}: no key.exr (a path-traced pair written by invsss scene is needed)")
+        probe(folder)
 
 
 if __name__ == "__main__":
