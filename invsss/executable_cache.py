@@ -27,7 +27,9 @@ Several processes may share the folder: an entry is written to a temporary
 file and renamed into place, so a reader sees a whole entry or none. An entry
 that cannot be read or loaded costs a compilation (and one warning), never a
 wrong result. The folder is kept under :data:`MAX_EXECUTABLE_BYTES`, the
-least recently used entries going first.
+least recently used entries going first. Entries are pickles holding machine
+code, as JAX's own cache entries are: the directory must be writable by you
+alone.
 """
 
 from __future__ import annotations
