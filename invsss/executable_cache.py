@@ -3,8 +3,8 @@
 JAX's persistent compilation cache (:mod:`invsss.compile_cache`) saves XLA's
 work, but every new process still traces each jitted function to a jaxpr and
 lowers it to find the cache key. For the estimator's three big functions (the
-solver's ``init`` and ``step``, and ``_evaluate``) that is about 1.5 s of a
-2-core CPU per fit, more than the solve itself on data_synthetic/fran_front.
+solver's ``init`` and ``step``, and ``_evaluate``) that took 1.8 s of a fit of
+data_synthetic/fran_front on a 2-core CPU (the solve itself: 1.9 s).
 
 :func:`persistent_jit` is :func:`equinox.filter_jit` plus a second cache:
 the compiled executable itself, keyed by everything that decides what tracing
@@ -269,7 +269,7 @@ class persistent_jit:
         in_tree, static_tree, _, avals, settings = key
         try:
             described = _dumps((in_tree, static, avals, settings), shared=False)
-        except (pickle.PicklingError, TypeError, AttributeError):
+        except Exception:  # noqa: BLE001 - a static part that does not pickle: memory only
             return None
         digest = hashlib.sha256(_code_fingerprint().encode())
         digest.update(f"{self.fun.__module__}.{self.fun.__qualname__}".encode())
@@ -345,6 +345,7 @@ class persistent_jit:
         except Exception:  # noqa: BLE001 - not serialisable: kept in memory only
             return
         folder = path.parent
+        temporary = None
         try:
             folder.mkdir(parents=True, exist_ok=True)
             handle, temporary = tempfile.mkstemp(dir=folder, prefix=".writing-")
@@ -352,7 +353,10 @@ class persistent_jit:
                 file.write(data)
             os.replace(temporary, path)
         except OSError:
-            return  # a full or read-only disk costs the next process a compilation
+            # A full or read-only disk costs the next process a compilation.
+            if temporary is not None and os.path.exists(temporary):
+                os.unlink(temporary)
+            return
         _prune(folder, MAX_EXECUTABLE_BYTES)
 
 
