@@ -388,7 +388,8 @@ class _ProgressLine:
     times a second; otherwise (a pipe, a log file) a plain line every few seconds,
     so logs stay short. With ``compile_seconds`` (a callable: seconds spent
     compiling so far in this fit), the first solver step is preceded by one
-    permanent line saying how long compilation took.
+    permanent line saying how long compilation took (or that the compiled code
+    came from the cache).
     """
 
     def __init__(self, stream, compile_seconds=None):
@@ -413,7 +414,10 @@ class _ProgressLine:
         if self._compile_seconds is not None:
             # Everything the first step needs is compiled once it has run.
             self.close()
-            self._stream.write(f"fit: compiling ... {self._compile_seconds():.1f} s\n")
+            seconds = self._compile_seconds()
+            # A warm cache (invsss.executable_cache) leaves nothing to compile.
+            self._stream.write(f"fit: compiling ... {seconds:.1f} s\n" if seconds >= 0.05
+                               else "fit: compiled code loaded from the cache\n")
             self._compile_seconds = None
         now = time.monotonic()
         if now - self._last < self._interval:

@@ -189,6 +189,9 @@ def test_fit_progress_says_how_long_compiling_took_once():
     progress(2, 5e-4)
     lines = stream.getvalue().splitlines()
     assert lines == ["fit: compiling ... 3.1 s", "fit: iter 1  loss 1.000e-03"]
+    warm = io.StringIO()
+    _ProgressLine(warm, lambda: 0.01)(1, 1e-3)
+    assert warm.getvalue().splitlines() == ["fit: compiled code loaded from the cache", "fit: iter 1  loss 1.000e-03"]
 
 
 def test_compile_seconds_counts_a_new_compilation():
