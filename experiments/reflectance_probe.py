@@ -28,6 +28,12 @@ This script measures, post hoc, what the law would buy:
 ``normal.exr`` and ``light.exr``::
 
     python experiments/reflectance_probe.py [data_synthetic/pt_face_940 ...]
+
+``--joint`` fits instead (the estimator, with the ``shift`` term or ``--terms``) the source the
+term would give, ``K f(mu, mu0) / f(1, 1) + rho (S - K)``, on a grid of ``w`` and
+the fill's relative gain ``rho``, and scores it as ``experiments/fidelity.py``
+does; then it carries each view's best fit (``w``, ``rho`` and the fitted
+parameters) to the other view of the same medium, as fidelity.py's transfer rows do.
 """
 
 from __future__ import annotations
@@ -90,8 +96,69 @@ def probe(folder: Path) -> None:
                   f"everything x law {psnr([whole * law]):.2f} dB")
 
 
+JOINT_ALBEDOS = (0.9, 0.93, 0.95, 0.97)
+JOINT_FILL = (0.7, 0.85, 1.0)
+
+
+def law_source(source, key, normal, light, mask, w, rho):
+    """The source the term would give: the key light's part under the law, normalised
+    to 1 where light arrives and leaves along the normal, plus ``rho`` times the rest."""
+    mu = np.clip(normal[..., 2], 1e-3, 1.0)[..., None]
+    mu0 = np.clip(np.sum(normal * light, axis=-1), 0.0, 1.0)[..., None]
+    law = chandrasekhar(mu, w) * chandrasekhar(mu0, w) / (mu + mu0) / (chandrasekhar(1.0, w) ** 2 / 2.0)
+    changed = key * law + rho * (source - key)
+    return np.where(mask[..., None] > 0, changed, source)
+
+
+def joint(folders, albedos=JOINT_ALBEDOS, fills=JOINT_FILL, terms="shift") -> None:
+    from fidelity import eroded, load_scene_pair, score
+
+    best = {}
+    for folder in folders:
+        pair = load_scene_pair(folder)
+        key = invsss.read_image(folder / "key.exr").astype(np.float64)
+        normal, light = (np.asarray(b, np.float64) for b in (pair["buffers"].normal, pair["buffers"].light))
+        mask = eroded(pair["mask"], 2)
+        plain = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"], light_terms=terms,
+                                light_buffers=pair["buffers"])
+        print(f"{folder.name}: fit + {terms} {score(plain.fitted[0], pair, mask)['psnr']:.2f} dB")
+        for w in albedos:
+            row = []
+            for rho in fills:
+                changed = law_source(pair["source"], key, normal, light, pair["mask"], w, rho)
+                fit = invsss.fit_pair(changed, pair["target"], pair["depth"], pair["mask"], light_terms=terms,
+                                      light_buffers=pair["buffers"])
+                psnr = score(fit.fitted[0], pair, mask)["psnr"]
+                row.append(f"rho {rho}: {psnr:.2f}")
+                if psnr > best.get(folder, (-np.inf,))[0]:
+                    best[folder] = (psnr, w, rho, fit)
+            print(f"  w {w}: " + " | ".join(row) + " dB")
+        psnr, w, rho, fit = best[folder]
+        print(f"  best: {psnr:.2f} dB at w {w}, rho {rho}; kappa {fit.light_terms.get('shift'):.2f} mm, "
+              f"sss_level {float(fit.params.sss_level):.0f}")
+    # Carried to the other view of the same medium.
+    for a in folders:
+        for b in folders:
+            if a == b or load_scene_pair(a)["info"]["medium"] != load_scene_pair(b)["info"]["medium"]:
+                continue
+            _, w, rho, fit = best[a]
+            pair = load_scene_pair(b)
+            key = invsss.read_image(b / "key.exr").astype(np.float64)
+            normal, light = (np.asarray(x, np.float64) for x in (pair["buffers"].normal, pair["buffers"].light))
+            changed = law_source(pair["source"], key, normal, light, pair["mask"], w, rho)
+            prediction = invsss.render(changed, pair["depth"], pair["mask"], fit.params,
+                                       light_terms=fit.light_terms_params(), light_buffers=pair["buffers"])
+            carried = score(np.asarray(prediction), pair, eroded(pair["mask"], 2))["psnr"]
+            print(f"{a.name} -> {b.name}: {carried:.2f} dB against {best[b][0]:.2f} dB for its own fit "
+                  f"({carried - best[b][0]:+.2f})")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--joint", action="store_true", help="fit the law's source on a grid (see above)")
+    parser.add_argument("--albedos", type=float, nargs="+", default=JOINT_ALBEDOS, help="--joint: the grid of w")
+    parser.add_argument("--fill", type=float, nargs="+", default=JOINT_FILL, help="--joint: the grid of rho")
+    parser.add_argument("--terms", default="shift", help="--joint: the light terms fitted with the law (default shift)")
     parser.add_argument("pairs", nargs="*", type=Path,
                         default=[Path("data_synthetic") / n for n in ("pt_face_940", "pt_face_940_turned",
                                                                        "pt_face_skin1")])
@@ -99,6 +166,10 @@ def main() -> None:
     for folder in args.pairs:
         if not (folder / "key.exr").is_file():
             parser.error(f"{folder}: no key.exr (a path-traced pair written by invsss scene is needed)")
+    if args.joint:
+        joint(args.pairs, args.albedos, args.fill, args.terms)
+        return
+    for folder in args.pairs:
         probe(folder)
 
 
