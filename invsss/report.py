@@ -299,7 +299,7 @@ def plot_fit_report(result, pairs, path) -> None:
     # measured every text box twice and took a third of the page's 0.55 s.
     grid = fig.add_gridspec(
         rows + 2, 4, height_ratios=[_PANEL_INCHES] * rows + [3.0, 2.3],
-        left=0.8 / width, right=1.0 - 0.7 / width, top=1.0 - 0.3 / height, bottom=0.1 / height,
+        left=0.8 / width, right=1.0 - 1.0 / width, top=1.0 - 0.3 / height, bottom=0.1 / height,
         wspace=0.32, hspace=0.3,
     )
 
@@ -334,7 +334,9 @@ def plot_fit_report(result, pairs, path) -> None:
         ax.set_title(f"residual  target - fitted{channel_note}", fontsize=9)
         ax.set_xticks([])
         ax.set_yticks([])
-        fig.colorbar(image, ax=ax, shrink=0.85, format="%.2g")
+        # The colour bar sits in the gutter beside the panel, which keeps the
+        # size of the other image panels.
+        fig.colorbar(image, cax=ax.inset_axes([1.04, 0.08, 0.05, 0.84]), format="%.2g")
 
     _plot_convergence(fig.add_subplot(grid[rows, 0:2]), result)
     _plot_profile(fig.add_subplot(grid[rows, 2:4]), result)
