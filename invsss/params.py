@@ -27,10 +27,10 @@ __all__ = [
 PARAM_NAMES = ("sss_level", "correction", "maxdd", "weights", "variances")
 
 
-def _as_float(x) -> Array:
-    # jnp.asarray with the default float type: float32, or float64 under x64.
+def _as_float(x, dtype=None) -> Array:
+    # jnp.asarray with a float type, by default JAX's: float32, or float64 under x64.
     # Host values are converted by NumPy: a conversion on the device compiles.
-    dtype = jnp.result_type(float)
+    dtype = dtype or jnp.result_type(float)
     return jnp.asarray(x, dtype=dtype) if isinstance(x, jax.Array) else jax.device_put(np.asarray(x, dtype))
 
 

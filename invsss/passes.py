@@ -8,10 +8,10 @@ parameters flow through the slope of the interpolation.
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
+
+from .params import _as_float
 
 __all__ = [
     "TAP_OFFSETS",
@@ -43,9 +43,7 @@ def tap_weights(spec="jimenez", dtype=None) -> Float[Array, "7"]:
                 f"tap_weights: expected one of {sorted(TAP_WEIGHTS)} or 7 numbers, got {spec!r}"
             )
         spec = TAP_WEIGHTS[spec]
-    dtype = dtype or jnp.result_type(float)
-    # Host values go to the device without conversion there, which would compile.
-    w = jnp.asarray(spec, dtype) if isinstance(spec, jax.Array) else jax.device_put(np.asarray(spec, dtype))
+    w = _as_float(spec, dtype)
     if w.shape != (7,):
         raise ValueError(f"tap_weights: expected 7 numbers, got shape {w.shape}")
     return w
