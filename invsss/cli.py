@@ -209,7 +209,9 @@ _PAIR_FLAGS = ("source", "target", "depth", "mask")
 def _add_no_cache_argument(parser) -> None:
     """``--no-cache``, for the commands that compile (see :func:`_use_compile_cache`)."""
     parser.add_argument("--no-cache", action="store_true",
-                        help="do not use the persistent compilation cache (also INVSSS_NO_CACHE=1)")
+                        help="do not use the persistent compilation cache (also INVSSS_NO_CACHE=1); it "
+                        "lives in ~/.cache/invsss/jax or $XDG_CACHE_HOME/invsss/jax, and "
+                        "INVSSS_CACHE_DIR moves it")
 
 
 def _add_fit_parser(subparsers) -> None:
@@ -221,7 +223,9 @@ def _add_fit_parser(subparsers) -> None:
         "order) to fit one set of parameters to several pairs. Writes DIR/params.json "
         "(the estimate, its standard errors and the fit report; written first), "
         "DIR/fit.exr (the fitted prediction; fit_0.exr, fit_1.exr, ... for several "
-        "pairs) and DIR/report.png (images, residuals, convergence, parameters).",
+        "pairs), DIR/report.png (images, residuals, convergence, parameters) and "
+        "DIR/invsss-manifest.json (which files make the result, and whether it is "
+        "complete; docs/outputs.md).",
     )
     parser.add_argument("--source", action="append", required=True,
                         help="linear image without scattering (repeat for several pairs)")
