@@ -75,6 +75,7 @@ def test_a_second_process_traces_nothing_and_fits_the_same(tmp_path, reference):
     assert not first["warnings"] and not second["warnings"]
 
 
+@pytest.mark.slow  # three or four child processes, each fitting
 def test_an_unreadable_entry_is_compiled_again_with_a_warning(tmp_path, reference):
     _fit(tmp_path)
     for entry in _entries(tmp_path):
@@ -87,6 +88,7 @@ def test_an_unreadable_entry_is_compiled_again_with_a_warning(tmp_path, referenc
     assert _fit(tmp_path)["traces"] == {"_init": 0, "_step": 0, "_evaluate": 0}
 
 
+@pytest.mark.slow  # three or four child processes, each fitting
 def test_a_stored_init_without_its_step_starts_the_solve_afresh(tmp_path, reference):
     # The solver's state holds its linearisation as a jaxpr, which a loaded
     # entry keeps as text: a step that must be traced cannot take that state.
@@ -103,6 +105,7 @@ def test_a_stored_init_without_its_step_starts_the_solve_afresh(tmp_path, refere
     assert again["traces"]["_init"] == 0
 
 
+@pytest.mark.slow  # three or four child processes, each fitting
 def test_another_layout_is_another_entry(tmp_path):
     _fit(tmp_path, starts=2)
     # One start: no same-basin test, the same three functions and layouts.
