@@ -114,6 +114,25 @@ def test_another_layout_is_another_entry(tmp_path):
     assert len(_entries(tmp_path)) == 3
 
 
+@pytest.mark.slow  # four child processes, each fitting
+def test_concurrent_processes_share_one_folder(tmp_path, reference):
+    # What a sweep's workers do: two processes that find the folder empty compile
+    # and write the same entries at once; a rename puts each in place whole.
+    env = dict(os.environ)
+    env.pop("INVSSS_NO_CACHE", None)
+    children = [subprocess.Popen([sys.executable, "-c", _FIT, str(tmp_path), "2", str(_TESTS)], env=env,
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    for child in children:
+        out, err = child.communicate(timeout=300)
+        assert child.returncode == 0, err
+        assert json.loads(out.strip().splitlines()[-1])["fit"] == reference["fit"]
+    assert len(_entries(tmp_path)) == 3
+    assert not list((tmp_path / "executables").glob(".writing-*"))
+    after = _fit(tmp_path)
+    assert after["traces"] == {"_init": 0, "_step": 0, "_evaluate": 0}
+    assert after["fit"] == reference["fit"] and not after["warnings"]
+
+
 def test_prune_removes_the_least_recently_used(tmp_path):
     now = time.time()
     for age, name in enumerate(["new", "mid", "old"]):
