@@ -54,6 +54,13 @@ def chandrasekhar(mu, w):
     return (1.0 + 2.0 * mu) / (1.0 + 2.0 * mu * np.sqrt(1.0 - w))
 
 
+def cosines(normal, light):
+    """``(mu, mu0)``, each (H, W, 1): ``n_z`` (a distant camera) and ``clip(n . l, 0, 1)``."""
+    mu = np.clip(normal[..., 2], 1e-3, 1.0)[..., None]
+    mu0 = np.clip(np.sum(normal * light, axis=-1), 0.0, 1.0)[..., None]
+    return mu, mu0
+
+
 def probe(folder: Path) -> None:
     pair = invsss.load_pair(*(folder / f for f in ("source.exr", "target.exr", "depth.exr", "mask.png")))
     normal = np.asarray(invsss.read_image(folder / "normal.exr"), np.float64)
@@ -63,8 +70,7 @@ def probe(folder: Path) -> None:
     key = np.asarray(invsss.read_image(folder / "key.exr"), np.float64)
     keep = ndimage.binary_erosion(np.asarray(pair.mask) > 0, iterations=2)
     peak = float(target[keep].max())
-    mu = np.clip(normal[..., 2], 1e-3, 1.0)[..., None]
-    mu0 = np.clip(np.sum(normal * light, axis=-1), 0.0, 1.0)[..., None]
+    mu, mu0 = cosines(normal, light)
 
     def psnr(columns) -> float:
         wanted = target[keep].ravel()
@@ -77,8 +83,7 @@ def probe(folder: Path) -> None:
     for terms in ("shift", "shift,grazing,incidence"):
         fit = invsss.fit_pair(pair.source, pair.target, pair.depth, pair.mask, light_terms=terms,
                               light_buffers=buffers)
-        held = fit.to_dict()["light_terms"]
-        applied = invsss.LightTerms(*(held.get(k) or 0.0 for k in ("shift", "grazing", "incidence")))
+        applied = fit.light_terms_params()
 
         def through_fit(image):
             return np.asarray(invsss.render(image, pair.depth, pair.mask, fit.params, light_terms=applied,
@@ -103,8 +108,7 @@ JOINT_FILL = (0.7, 0.85, 1.0)
 def law_source(source, key, normal, light, mask, w, rho):
     """The source the term would give: the key light's part under the law, normalised
     to 1 where light arrives and leaves along the normal, plus ``rho`` times the rest."""
-    mu = np.clip(normal[..., 2], 1e-3, 1.0)[..., None]
-    mu0 = np.clip(np.sum(normal * light, axis=-1), 0.0, 1.0)[..., None]
+    mu, mu0 = cosines(normal, light)
     law = chandrasekhar(mu, w) * chandrasekhar(mu0, w) / (mu + mu0) / (chandrasekhar(1.0, w) ** 2 / 2.0)
     changed = key * law + rho * (source - key)
     return np.where(mask[..., None] > 0, changed, source)
@@ -113,12 +117,16 @@ def law_source(source, key, normal, light, mask, w, rho):
 def joint(folders, albedos=JOINT_ALBEDOS, fills=JOINT_FILL, terms="shift") -> None:
     from fidelity import eroded, load_scene_pair, score
 
-    best = {}
-    for folder in folders:
+    def read(folder):
         pair = load_scene_pair(folder)
         key = invsss.read_image(folder / "key.exr").astype(np.float64)
         normal, light = (np.asarray(b, np.float64) for b in (pair["buffers"].normal, pair["buffers"].light))
-        mask = eroded(pair["mask"], 2)
+        return pair, key, normal, light, eroded(pair["mask"], 2)
+
+    loaded = {folder: read(folder) for folder in folders}
+    best = {}
+    for folder in folders:
+        pair, key, normal, light, mask = loaded[folder]
         plain = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"], light_terms=terms,
                                 light_buffers=pair["buffers"])
         print(f"{folder.name}: fit + {terms} {score(plain.fitted[0], pair, mask)['psnr']:.2f} dB")
@@ -139,16 +147,14 @@ def joint(folders, albedos=JOINT_ALBEDOS, fills=JOINT_FILL, terms="shift") -> No
     # Carried to the other view of the same medium.
     for a in folders:
         for b in folders:
-            if a == b or load_scene_pair(a)["info"]["medium"] != load_scene_pair(b)["info"]["medium"]:
+            if a == b or loaded[a][0]["info"]["medium"] != loaded[b][0]["info"]["medium"]:
                 continue
             _, w, rho, fit = best[a]
-            pair = load_scene_pair(b)
-            key = invsss.read_image(b / "key.exr").astype(np.float64)
-            normal, light = (np.asarray(x, np.float64) for x in (pair["buffers"].normal, pair["buffers"].light))
+            pair, key, normal, light, mask = loaded[b]
             changed = law_source(pair["source"], key, normal, light, pair["mask"], w, rho)
             prediction = invsss.render(changed, pair["depth"], pair["mask"], fit.params,
                                        light_terms=fit.light_terms_params(), light_buffers=pair["buffers"])
-            carried = score(np.asarray(prediction), pair, eroded(pair["mask"], 2))["psnr"]
+            carried = score(np.asarray(prediction), pair, mask)["psnr"]
             print(f"{a.name} -> {b.name}: {carried:.2f} dB against {best[b][0]:.2f} dB for its own fit "
                   f"({carried - best[b][0]:+.2f})")
 

@@ -178,8 +178,8 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
     with tempfile.TemporaryDirectory(prefix="invsss-scene-") as folder:
         mesh_ply = load_mesh_ply(config.object.mesh, folder) if config.object.mesh else None
 
-        def build(kind: str, **extra):
-            return scene_dict(mi, config, kind, mesh_ply=mesh_ply, coefficients=coefficients, **extra)
+        def build(kind: str, scene_config: SceneConfig = config, **extra):
+            return scene_dict(mi, scene_config, kind, mesh_ply=mesh_ply, coefficients=coefficients, **extra)
 
         geometry = timed("geometry", lambda: _render_aovs(mi, build("geometry")))
         visible = timed("visibility", lambda: _render_aovs(mi, build("visible")))
@@ -201,7 +201,8 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         albedo = np.concatenate([value for value, _ in calibrated])
         albedo_error = np.concatenate([error for _, error in calibrated])
         albedo_list = albedo.tolist()
-        source_scene = mi.load_dict(build("source", albedo=albedo_list if albedo.size > 1 else albedo_list[0]))
+        source_albedo = albedo_list if albedo.size > 1 else albedo_list[0]
+        source_scene = mi.load_dict(build("source", albedo=source_albedo))
         source = timed("source", lambda: _channels(mi.render(source_scene, spp=config.spp, seed=seeds["source"]),
                                                    channels))
         # The first (key) light's part of the source: a deferred renderer's lighting
@@ -209,8 +210,7 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         # section 8). Same seed as the source, so source - key is the other lights'.
         if len(config.lights) > 1:
             alone = config.model_copy(update={"lights": config.lights[:1]})
-            key_scene = mi.load_dict(scene_dict(mi, alone, "source", mesh_ply=mesh_ply, coefficients=coefficients,
-                                                albedo=albedo_list if albedo.size > 1 else albedo_list[0]))
+            key_scene = mi.load_dict(build("source", alone, albedo=source_albedo))
             key = timed("key light", lambda: _channels(mi.render(key_scene, spp=config.spp, seed=seeds["source"]),
                                                        channels))
         else:
