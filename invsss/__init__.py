@@ -37,7 +37,7 @@ from .screen_space import (
     separable_kernel,
     sog_layers,
 )
-from .light_terms import LightBuffers, LightTerms, apply_light_terms
+from .light_terms import LightBuffers, LightTerms, apply_law, apply_light_terms
 from .models import MODEL_NAMES, ScreenSpaceModel, get_model
 from .stretch import depth_slopes, stretch_factors
 from .validation import InputNotice, InvalidInputError

@@ -123,11 +123,14 @@ def _add_render_parser(subparsers) -> None:
         help="the image's integer codes are linear values: do not decode 8-bit files as sRGB",
     )
     parser.add_argument("--light", metavar="FILE",
-                        help="camera-space unit vectors towards the light, float EXR or NPY (H, W, 3): "
-                        "needed when PARAMS holds a fitted 'shift' or 'incidence' light term")
+                        help="camera-space unit vectors towards the key light, float EXR or NPY (H, W, 3): "
+                        "needed when PARAMS holds a fitted 'shift', 'incidence' or 'law' light term")
     parser.add_argument("--normal", metavar="FILE",
                         help="camera-space unit normals, float EXR or NPY (H, W, 3): needed when PARAMS "
-                        "holds a fitted 'grazing' or 'incidence' light term")
+                        "holds a fitted 'grazing', 'incidence' or 'law' light term")
+    parser.add_argument("--key", metavar="FILE",
+                        help="the image lit by the key light alone, the image's size and channels: needed "
+                        "when PARAMS holds a fitted 'law' light term (with --normal and --light)")
     parser.add_argument("--no-light-terms", action="store_true",
                         help="render the blur alone, leaving out the light terms PARAMS may hold")
     _add_model_arguments(parser)
@@ -136,13 +139,14 @@ def _add_render_parser(subparsers) -> None:
     parser.set_defaults(func=_run_render)
 
 
-def _render_light_terms(args, extras, shape):
+def _render_light_terms(args, extras, image):
     """The light terms of PARAMS (None without them, or with --no-light-terms) and
     the buffers they need, read and checked."""
     record = None if args.no_light_terms else extras.get("light_terms")
     if not record:
         return None, None
-    terms = LightTerms(**{term: record.get(term, 0.0) for term in LIGHT_TERM_NAMES})
+    shape = image.shape[:2]
+    terms = LightTerms(**{term: record[term] for term in LIGHT_TERM_NAMES if term in record})
     terms.check(f"{args.params}: light_terms")
     buffers = {}
     for term in LIGHT_TERM_NAMES:
@@ -153,7 +157,9 @@ def _render_light_terms(args, extras, shape):
                     f"{args.params}: holds the {term!r} light term, which needs --{flag} "
                     f"(or --no-light-terms to render without the light terms)"
                 )
-            if flag not in buffers:
+            if flag == "key" and flag not in buffers:
+                buffers[flag] = _read_key_buffer(path, image, args.linear_codes)
+            elif flag not in buffers:
                 buffers[flag] = _read_light_buffer(path, flag, shape)
     return terms, LightBuffers(**buffers)
 
@@ -166,6 +172,20 @@ def _read_light_buffer(path, flag: str, shape):
             f"{path}: expected a 3-channel image of the source's size {shape} for --{flag}, got shape {buffer.shape}"
         )
     return buffer
+
+
+def _read_key_buffer(path, source, linear_codes: bool):
+    """A --key image (the source lit by the key light alone), read as the source is,
+    of the source's size and channels."""
+    key = read_image(path, linear=linear_codes)
+    source = np.asarray(source)
+    wanted = source.shape if source.ndim == 3 else (*source.shape, 1)
+    key = key if key.ndim == 3 else key[..., None]
+    if key.shape != wanted:
+        raise InvalidInputError(
+            f"{path}: expected an image of the source's size and channels {wanted} for --key, got shape {key.shape}"
+        )
+    return key
 
 
 def _run_render(args: argparse.Namespace, stop: StopSignals) -> int:
@@ -186,15 +206,20 @@ def _run_render(args: argparse.Namespace, stop: StopSignals) -> int:
             f"{args.params}: weights have {weights_shape[1]} columns (one per channel) "
             f"but {args.image} has {image.shape[2]} channel(s)"
         )
-    terms, buffers = _render_light_terms(args, extras, mask.shape)
+    terms, buffers = _render_light_terms(args, extras, image)
     out = render(image, depth, mask, params, model, tap_weights=tap_weights, light_terms=terms,
                  light_buffers=buffers)
     write_image(args.out, np.asarray(out, dtype=np.float32))
     height, width, channels = image.shape
     extra = "" if terms is None else ", light terms " + ", ".join(
-        f"{term}={float(getattr(terms, term)):g}" for term in LIGHT_TERM_NAMES if term in extras["light_terms"])
+        f"{term}={_term_value(terms, term)}" for term in LIGHT_TERM_NAMES if term in extras["light_terms"])
     print(f"wrote {args.out} ({width}x{height}, {channels} channel(s), model {model}{extra})")
     return 0
+
+
+def _term_value(terms, term: str) -> str:
+    """A light term's value as the CLI prints it ("0.93/0.8/0.7" for a law per channel)."""
+    return "/".join(f"{v:g}" for v in np.atleast_1d(np.asarray(getattr(terms, term), np.float64)))
 
 
 # -------------------------------------------------------------------- fit
@@ -291,15 +316,21 @@ def _add_fit_parser(subparsers) -> None:
                         "'shift' (light exits displaced away from the light; needs --light), "
                         "'grazing' (brighter or darker at grazing view; needs --normal), "
                         "'incidence' (brighter or darker where the key light grazes the skin or misses it; "
-                        "needs --normal and --light), or a list such as 'shift,grazing,incidence'; "
+                        "needs --normal and --light), 'law' (the key light reflected by a scattering "
+                        "medium's law instead of Lambert's, an albedo per source channel; needs --key, "
+                        "--normal and --light), or a list such as 'shift,law'; "
                         "'shift=1.3' holds kappa at a value measured on a registered pair "
-                        "(for --align) (default: none)")
+                        "(for --align), 'law=0.93/0.8/0.7' the albedos (default: none)")
     parser.add_argument("--light", action="append", default=[], metavar="FILE",
                         help="camera-space unit vectors towards the light, float EXR or NPY (H, W, 3), "
                         "on the source's grid (repeat per pair)")
     parser.add_argument("--normal", action="append", default=[], metavar="FILE",
                         help="camera-space unit normals (x right, y up, z to the camera), float EXR or "
                         "NPY (H, W, 3) (repeat per pair)")
+    parser.add_argument("--key", action="append", default=[], metavar="FILE",
+                        help="the source lit by the key light alone (the light --light points to), the "
+                        "source's size and channels, read as the source is (repeat per pair; "
+                        "'invsss scene' writes it as key.exr)")
     parser.add_argument(
         "--linear-codes",
         action="store_true",
@@ -372,8 +403,9 @@ def _check_pair_counts(args: argparse.Namespace) -> int:
 
 
 def _with_light_buffers(pairs, args):
-    """The pairs with the --normal and --light buffers attached (read as linear floats)."""
-    for flag in ("light", "normal"):
+    """The pairs with the --normal, --light and --key buffers attached (the vectors read
+    as linear floats, the key as the source is)."""
+    for flag in ("light", "normal", "key"):
         given = getattr(args, flag)
         if given and len(given) != len(pairs):
             raise InvalidInputError(f"--{flag}: expected one per pair ({len(pairs)}), got {len(given)}")
@@ -381,7 +413,8 @@ def _with_light_buffers(pairs, args):
     for k, pair in enumerate(pairs):
         normal = _read_light_buffer(args.normal[k], "normal", pair.mask.shape) if args.normal else None
         light = _read_light_buffer(args.light[k], "light", pair.mask.shape) if args.light else None
-        out.append(ImagePair(pair.source, pair.target, pair.depth, pair.mask, normal=normal, light=light))
+        key = _read_key_buffer(args.key[k], pair.source, args.linear_codes) if args.key else None
+        out.append(ImagePair(pair.source, pair.target, pair.depth, pair.mask, normal=normal, light=light, key=key))
     return out
 
 
@@ -507,7 +540,7 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
                     pair = pairs[0]
                     result = fit_pair(
                         pair.source, pair.target, pair.depth, pair.mask, progress=progress, stop=stop,
-                        light_buffers=LightBuffers(pair.normal, pair.light), **options,
+                        light_buffers=pair.light_buffers, **options,
                     )
                 else:
                     result = fit_pairs(pairs, progress=progress, stop=stop, **options)

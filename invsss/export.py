@@ -35,7 +35,7 @@ import jax
 import numpy as np
 
 from .io import read_params, write_text_atomic
-from .light_terms import LIGHT_TERM_NAMES, LightTerms
+from .light_terms import AFTER_BLUR, LightTerms
 from .models import get_model, resolve_tap_weights
 from .params import SSSParams
 from .passes import TAP_OFFSETS, tap_spread
@@ -114,7 +114,11 @@ def shader_constants(
         ``light_terms`` record works too): adds ``lightShift`` (kappa, scene
         units), ``grazingGain`` (gamma) and ``incidenceGain`` (beta), 0 for a
         term not in use, and :func:`to_hlsl` then adds the function that
-        applies them (:data:`LIGHT_TERMS_HLSL`).
+        applies them after the blur (:data:`LIGHT_TERMS_HLSL`). With the
+        ``law`` term it adds ``lawAlbedo`` (``w`` for red, green and blue; one
+        ``w`` is repeated), and :func:`to_hlsl` the key light's BRDF factor for
+        the lighting pass (:data:`LAW_HLSL`); the three constants after the blur
+        are then written only when one of those terms is in use.
 
     Returns
     -------
@@ -162,22 +166,35 @@ def shader_constants(
     options = {"tap_weights": tap_weights, "taps": taps, "strength": strength}
     constants.update(_RECIPES[entry.layout](entry, weights, variances, options))
     if light_terms is not None:
-        if not isinstance(light_terms, LightTerms):
-            if not hasattr(light_terms, "get"):
-                raise InvalidInputError(
-                    f"light_terms: expected an invsss.LightTerms or a mapping, got {type(light_terms).__name__}"
-                )
-            values = [light_terms.get(term, 0.0) for term in LIGHT_TERM_NAMES]
-        else:
-            values = [getattr(light_terms, term) for term in LIGHT_TERM_NAMES]
-        # Checked as LightTerms, written from the given numbers: LightTerms holds
-        # JAX's default float32 outside x64, which would round them.
-        shift, grazing, incidence = (float(np.asarray(v, np.float64)) for v in values)
-        LightTerms(shift, grazing, incidence).check()
-        constants["lightShift"] = shift
-        constants["grazingGain"] = grazing
-        constants["incidenceGain"] = incidence
+        constants.update(_light_constants(light_terms))
     return constants
+
+
+def _light_constants(light_terms) -> dict:
+    """``lightShift``, ``grazingGain``, ``incidenceGain`` and ``lawAlbedo`` of the terms in use."""
+    if isinstance(light_terms, LightTerms):
+        given = {term: getattr(light_terms, term) for term in light_terms.used}
+        after = [getattr(light_terms, term) for term in AFTER_BLUR]
+    elif hasattr(light_terms, "get"):
+        given = {term: light_terms[term] for term in (*AFTER_BLUR, "law") if term in light_terms}
+        after = [light_terms.get(term, 0.0) for term in AFTER_BLUR]
+    else:
+        raise InvalidInputError(
+            f"light_terms: expected an invsss.LightTerms or a mapping, got {type(light_terms).__name__}"
+        )
+    # Checked as LightTerms, written from the given numbers: LightTerms holds
+    # JAX's default float32 outside x64, which would round them.
+    shift, grazing, incidence = (float(np.asarray(v, np.float64)) for v in after)
+    law = None if given.get("law") is None else np.asarray(given["law"], np.float64)
+    LightTerms(shift, grazing, incidence, law).check()
+    out = {}
+    if law is None or any(term in given for term in AFTER_BLUR):
+        out.update(lightShift=shift, grazingGain=grazing, incidenceGain=incidence)
+    if law is not None:
+        if law.size not in (1, 3):
+            raise InvalidInputError(f"light_terms.law: expected one albedo or three (RGB), got {law.size}")
+        out["lawAlbedo"] = np.broadcast_to(law.ravel(), (3,)).tolist()
+    return out
 
 
 #: The HLSL function :func:`to_hlsl` appends when the constants hold the light-aware
@@ -196,6 +213,31 @@ float3 invsssLightTerms(Texture2D blurred, SamplerState linearClamp, float2 uv, 
     float3 shifted = blurred.SampleLevel(linearClamp, uv - delta * texel, 0).rgb;
     return shifted * (1.0 + {prefix}grazingGain * (1.0 - saturate(normal.z)))
                    * (1.0 + {prefix}incidenceGain * (1.0 - saturate(dot(normal, toLight))));
+}
+"""
+
+
+#: The HLSL functions :func:`to_hlsl` appends when the constants hold the ``law``
+#: term (docs/model.md, section 8): the key light's diffuse BRDF factor, for the
+#: lighting pass, before the blur.
+LAW_HLSL = """
+// The key light's reflectance law (invsss docs/model.md, section 8): in the
+// lighting pass, multiply the key light's Lambertian diffuse term
+// (albedo * irradiance * saturate(dot(normal, toLight))) by this factor; the
+// other lights stay Lambertian and the blur passes do not change. normal and
+// toLight are unit vectors in view space, z towards the camera.
+float3 invsssHapkeH(float x, float3 w)
+{
+    return (1.0 + 2.0 * x) / (1.0 + 2.0 * x * sqrt(max(1.0 - w, 1e-12)));
+}
+
+float3 invsssKeyLightLaw(float3 normal, float3 toLight)
+{
+    float3 w = float3({prefix}lawAlbedo[0], {prefix}lawAlbedo[1], {prefix}lawAlbedo[2]);
+    float mu = clamp(normal.z, 1e-3, 1.0);
+    float mu0 = saturate(dot(normal, toLight));
+    float3 headOn = invsssHapkeH(1.0, w) * invsssHapkeH(1.0, w) / 2.0;
+    return invsssHapkeH(mu, w) * invsssHapkeH(mu0, w) / (mu + mu0) / headOn;
 }
 """
 
@@ -331,6 +373,8 @@ def to_hlsl(constants: dict, prefix: str = "") -> str:
     text = "\n".join(lines) + "\n"
     if "lightShift" in constants:
         text += LIGHT_TERMS_HLSL.replace("{prefix}", prefix)
+    if "lawAlbedo" in constants:
+        text += LAW_HLSL.replace("{prefix}", prefix)
     return text
 
 

@@ -1,9 +1,30 @@
-"""Light-aware terms applied after the screen-space blur (docs/model.md, section 8).
+"""Light-aware terms around the screen-space blur (docs/model.md, section 8).
 
 The blur of sections 3-5 is radially symmetric: it spreads light equally in every
-direction, and it keeps the source's Lambertian shading. Three effects of real
-light transport do neither, and each is added here as a switch with one fitted
-parameter, using per-pixel buffers a deferred renderer already has:
+direction, and it keeps the source's Lambertian shading. Four effects of real
+light transport do neither, and each is added here as a switch with fitted
+parameters, using per-pixel buffers a deferred renderer already has. One acts on
+the source before the blur:
+
+``law`` (``w``, one per source channel in (0, 1), needs the key, normal and light buffers)
+    A scattering medium does not reflect light from one direction as a Lambertian
+    surface does. Chandrasekhar's law for a semi-infinite medium of
+    single-scattering albedo ``w`` (isotropic scattering, Hapke's ``H``) gives the
+    ratio to Lambert's
+
+        f_w(mu, mu0) = H(mu) H(mu0) / (mu + mu0),   H(x) = (1 + 2x) / (1 + 2x sqrt(1 - w))
+
+    with ``mu = n_z`` (the view cosine of a distant camera) and ``mu0 = n . l``.
+    It is applied to the key light's part ``K`` of the source (a renderer's
+    lighting pass has it; ``invsss scene`` writes it as ``key.exr``), normalised
+    to 1 for light arriving and leaving along the normal:
+
+        S' = S + m K (f_w(mu, mu0) / f_w(1, 1) - 1)
+
+    so the other lights keep their Lambertian shading. No ``w`` is the identity:
+    the term is off when it is not given (None), not at 0.
+
+The other three act on the blurred image:
 
 ``shift`` (``kappa``, scene units, needs the light buffer)
     Light that enters obliquely travels on along its direction before it
@@ -33,9 +54,9 @@ parameter, using per-pixel buffers a deferred renderer already has:
     only the other lights shine, whose balance with the key light the source's
     Lambertian shading also gets wrong).
 
-All terms are linear in the image, so a blurred image and its layers can be
-passed through them alike; off the mask the image is returned unchanged
-(``out = B + m (T(B) - B)``, as a pass blends).
+The three after the blur are linear in the image, so a blurred image and its
+layers can be passed through them alike; off the mask the image is returned
+unchanged (``out = B + m (T(B) - B)``, as a pass blends).
 
 Examples
 --------
@@ -65,22 +86,33 @@ __all__ = [
     "propagation_offsets",
     "grazing_field",
     "incidence_field",
+    "chandrasekhar_h",
+    "reflectance_law",
+    "law_source",
     "shift_image",
     "light_transport",
     "apply_light_terms",
+    "apply_law",
 ]
 
 #: The terms, in the order of docs/model.md, section 8, with the buffers each needs.
-LIGHT_TERM_NAMES = ("shift", "grazing", "incidence")
-NEEDED_BUFFERS = {"shift": ("light",), "grazing": ("normal",), "incidence": ("normal", "light")}
+LIGHT_TERM_NAMES = ("shift", "grazing", "incidence", "law")
+NEEDED_BUFFERS = {"shift": ("light",), "grazing": ("normal",), "incidence": ("normal", "light"),
+                  "law": ("key", "normal", "light")}
+#: The terms applied to the blurred image (``law`` changes the source instead).
+AFTER_BLUR = ("shift", "grazing", "incidence")
 
 #: How far from unit length a buffer's vectors may be before it is refused
 #: (8-bit normal maps are off by about 1 %; a wrongly decoded map by far more).
 UNIT_TOLERANCE = 0.05
 
 
+def _albedo_or_none(x):
+    return None if x is None else _as_float(x)
+
+
 class LightTerms(eqx.Module):
-    """The parameters of the light-aware terms (0 switches a term off).
+    """The parameters of the light-aware terms (0, or None for ``law``, switches a term off).
 
     Parameters
     ----------
@@ -93,21 +125,34 @@ class LightTerms(eqx.Module):
     incidence : float
         ``beta``: relative brightening where the key light arrives at grazing
         incidence or not at all (negative: darkening); must be > -1.
+    law : float or array of shape (C,), optional
+        ``w``: the single-scattering albedo of the key light's reflectance law,
+        in (0, 1), one for every channel or one per source channel; None (the
+        default) leaves the source Lambertian.
 
     Examples
     --------
     >>> from invsss.light_terms import LightTerms
     >>> LightTerms(shift=0.4).grazing.item()
     0.0
+    >>> LightTerms(law=[0.93, 0.8, 0.7]).to_dict()["law"]
+    [0.93, 0.8, 0.7]
     """
 
     shift: Float[Array, ""] = eqx.field(converter=_as_float, default=0.0)
     grazing: Float[Array, ""] = eqx.field(converter=_as_float, default=0.0)
     incidence: Float[Array, ""] = eqx.field(converter=_as_float, default=0.0)
+    law: Float[Array, "*C"] | None = eqx.field(converter=_albedo_or_none, default=None)
+
+    @property
+    def used(self) -> tuple[str, ...]:
+        """The terms that change the image (a traced value counts as used)."""
+        on = [t for t in AFTER_BLUR if not is_concrete(getattr(self, t)) or float(getattr(self, t)) != 0.0]
+        return tuple(on) + (("law",) if self.law is not None else ())
 
     def check(self, name: str = "light_terms") -> None:
         """Raise :class:`InvalidInputError` for values outside the model's domain."""
-        for field in LIGHT_TERM_NAMES:
+        for field in AFTER_BLUR:
             value = getattr(self, field)
             if not is_concrete(value):
                 continue
@@ -117,9 +162,19 @@ class LightTerms(eqx.Module):
             value = getattr(self, field)
             if is_concrete(value) and float(value) <= -1.0:
                 raise InvalidInputError(f"{name}.{field}: expected a value > -1, got {float(value):g}")
+        if self.law is not None and is_concrete(self.law):
+            w = np.asarray(self.law, np.float64)
+            if w.ndim > 1 or not np.all(np.isfinite(w)) or np.any(w <= 0.0) or np.any(w >= 1.0):
+                raise InvalidInputError(
+                    f"{name}.law: expected an albedo in (0, 1), or one per channel, got {w.tolist()!r}"
+                )
 
     def to_dict(self) -> dict:
-        return {field: float(getattr(self, field)) for field in LIGHT_TERM_NAMES}
+        out = {field: float(getattr(self, field)) for field in AFTER_BLUR}
+        if self.law is not None:
+            w = np.asarray(self.law, np.float64)
+            out["law"] = float(w) if w.ndim == 0 else w.tolist()
+        return out
 
 
 def _check_unit_vectors(array, shape, mask, name: str):
@@ -145,16 +200,39 @@ def _check_unit_vectors(array, shape, mask, name: str):
     return safe / np.linalg.norm(safe, axis=-1, keepdims=True)
 
 
+def _check_key(array, shape, channels, name: str):
+    try:
+        a = np.asarray(array, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"{name}: expected an array of numbers, got {type(array).__name__}") from None
+    if a.ndim == 2:
+        a = a[..., None]
+    wanted = (*shape, channels) if channels else None
+    if a.ndim != 3 or a.shape[:2] != tuple(shape) or (wanted and a.shape != wanted):
+        expected = wanted or (*shape, "C")
+        raise InvalidInputError(
+            f"{name}: expected shape {expected} (the key light's part of the source), got {np.shape(array)}"
+        )
+    if not np.all(np.isfinite(a)):
+        raise InvalidInputError(f"{name}: NaN or infinite values")
+    return a
+
+
 class LightBuffers(eqx.Module):
     """Per-pixel buffers of the light-aware terms, camera space (x right, y up, z to the camera).
 
     Parameters
     ----------
     normal : array, shape (H, W, 3), optional
-        Unit surface normals (the ``grazing`` term).
+        Unit surface normals (the ``grazing``, ``incidence`` and ``law`` terms).
     light : array, shape (H, W, 3), optional
-        Unit vectors from the surface point towards the light (the ``shift``
-        term); for a point light ``normalize(light_position - position)``.
+        Unit vectors from the surface point towards the key light (the
+        ``shift``, ``incidence`` and ``law`` terms); for a point light
+        ``normalize(light_position - position)``.
+    key : array, shape (H, W, C) or (H, W), optional
+        The key light's part of the source: the source lit by that light alone,
+        in the source's units (the ``law`` term). Linear radiance; a noisy
+        render may dip slightly below 0.
 
     Examples
     --------
@@ -167,15 +245,19 @@ class LightBuffers(eqx.Module):
 
     normal: Float[Array, "H W 3"] | None = None
     light: Float[Array, "H W 3"] | None = None
+    key: Float[Array, "H W C"] | None = None
 
-    def checked(self, shape, mask, prefix: str = "light_buffers.") -> "LightBuffers":
+    def checked(self, shape, mask, prefix: str = "light_buffers.", channels: int | None = None) -> "LightBuffers":
         """Validated, normalised float64 NumPy copies for an image of ``shape`` (H, W).
 
-        Errors name the buffer as ``prefix + "normal"`` (or ``"light"``).
+        ``channels`` is the source's channel count, which the key buffer must
+        have (any count when None); a (H, W) key gets a channel axis. Errors
+        name the buffer as ``prefix + "normal"`` (or ``"light"``, ``"key"``).
         """
         return LightBuffers(
             None if self.normal is None else _check_unit_vectors(self.normal, shape, mask, f"{prefix}normal"),
             None if self.light is None else _check_unit_vectors(self.light, shape, mask, f"{prefix}light"),
+            None if self.key is None else _check_key(self.key, shape, channels, f"{prefix}key"),
         )
 
     def require(self, terms, prefix: str = "light_buffers.") -> None:
@@ -183,10 +265,9 @@ class LightBuffers(eqx.Module):
         for term in terms:
             for buffer in NEEDED_BUFFERS[term]:
                 if getattr(self, buffer) is None:
-                    raise InvalidInputError(
-                        f"{prefix}{buffer}: the {term!r} term needs this buffer "
-                        f"(camera-space unit vectors, shape (H, W, 3))"
-                    )
+                    what = ("the source lit by the key light alone, shape (H, W, C)" if buffer == "key"
+                            else "camera-space unit vectors, shape (H, W, 3)")
+                    raise InvalidInputError(f"{prefix}{buffer}: the {term!r} term needs this buffer ({what})")
 
 
 def propagation_offsets(light: Float[Array, "H W 3"]) -> Float[Array, "H W 2"]:
@@ -203,6 +284,37 @@ def incidence_field(normal: Float[Array, "H W 3"], light: Float[Array, "H W 3"])
     """``1 - clip(n . l, 0, 1)``: 0 where the key light meets the surface head-on, 1 where
     it grazes the surface or does not reach it."""
     return 1.0 - jnp.clip(jnp.sum(normal * light, axis=-1), 0.0, 1.0)
+
+
+def chandrasekhar_h(x, albedo):
+    """Hapke's approximation to Chandrasekhar's H function for isotropic scattering,
+    ``(1 + 2x) / (1 + 2x sqrt(1 - w))`` (Hapke 1981; Chandrasekhar 1960, section 29)."""
+    # The floor keeps the derivative finite where w rounds to 1.
+    return (1.0 + 2.0 * x) / (1.0 + 2.0 * x * jnp.sqrt(jnp.maximum(1.0 - albedo, 1e-12)))
+
+
+def reflectance_law(
+    normal: Float[Array, "H W 3"], light: Float[Array, "H W 3"], albedo: Float[Array, "*C"]
+) -> Float[Array, "H W C"]:
+    """``f_w(mu, mu0) / f_w(1, 1)``: the law's gain over a Lambertian reflection.
+
+    ``mu = clip(n_z, 1e-3, 1)`` and ``mu0 = clip(n . l, 0, 1)``; ``albedo`` is one
+    ``w`` or one per channel (the last axis of the result; 1 for one ``w``).
+    """
+    w = jnp.atleast_1d(albedo)
+    mu = jnp.clip(normal[..., 2], 1e-3, 1.0)[..., None]
+    mu0 = jnp.clip(jnp.sum(normal * light, axis=-1), 0.0, 1.0)[..., None]
+    head_on = chandrasekhar_h(1.0, w) ** 2 / 2.0
+    return chandrasekhar_h(mu, w) * chandrasekhar_h(mu0, w) / (mu + mu0) / head_on
+
+
+def law_source(
+    source: Float[Array, "H W C"], key: Float[Array, "H W C"], mask: Float[Array, "H W"],
+    gain: Float[Array, "H W C"],
+) -> Float[Array, "H W C"]:
+    """``S + m K (gain - 1)``: the key light's part of the source under the law's
+    ``gain`` (:func:`reflectance_law`), the rest of the source as it is."""
+    return source + mask[..., None] * key * (gain - 1.0)
 
 
 def shift_image(image: Float[Array, "H W C"], offset: Float[Array, "H W 2"]) -> Float[Array, "H W C"]:
@@ -263,7 +375,7 @@ def light_transport(
 
 
 def apply_light_terms(blurred, depth, mask, params, terms: LightTerms, buffers: LightBuffers):
-    """Apply the light-aware terms to an image :func:`invsss.render` produced.
+    """Apply the light-aware terms after the blur to an image :func:`invsss.render` produced.
 
     Parameters
     ----------
@@ -288,3 +400,37 @@ def apply_light_terms(blurred, depth, mask, params, terms: LightTerms, buffers: 
     grazing = None if normal is None else grazing_field(normal)
     incidence = None if normal is None or light is None else incidence_field(normal, light)
     return light_transport(blurred, mask, stretch, terms, offsets, grazing, incidence)
+
+
+def apply_law(image, mask, albedo, buffers: LightBuffers):
+    """Apply the ``law`` term to a source image before :func:`invsss.render` blurs it.
+
+    Parameters
+    ----------
+    image : array, shape (H, W, C)
+        The source (all lights, Lambertian).
+    mask : array, shape (H, W)
+    albedo : float or array of shape (C,)
+        ``w`` in (0, 1), one or one per channel.
+    buffers : LightBuffers
+        With ``key`` (shape (H, W, C)), ``normal`` and ``light``.
+
+    Returns
+    -------
+    array, shape (H, W, C)
+        ``S + m K (f_w(mu, mu0) / f_w(1, 1) - 1)``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from invsss.light_terms import LightBuffers, apply_law
+    >>> facing = np.zeros((1, 2, 3)); facing[..., 2] = 1.0   # normal and light towards the camera
+    >>> source = np.full((1, 2, 1), 0.5); key = np.full((1, 2, 1), 0.3)
+    >>> apply_law(source, np.ones((1, 2)), 0.9, LightBuffers(facing, facing, key))[..., 0].tolist()
+    [[0.5, 0.5]]
+    """
+    image = jnp.asarray(image)
+    dtype = image.dtype
+    gain = reflectance_law(jnp.asarray(buffers.normal, dtype), jnp.asarray(buffers.light, dtype),
+                           jnp.asarray(albedo, dtype))
+    return law_source(image, jnp.asarray(buffers.key, dtype), jnp.asarray(mask, dtype), gain)

@@ -48,6 +48,8 @@ class ImagePair(eqx.Module):
     normal, light : array, shape (H, W, 3), or None
         Camera-space unit normals and unit vectors towards the light, the buffers
         of the light-aware terms (:mod:`invsss.light_terms`; None without them).
+    key : array, shape (H, W, C), or None
+        The source lit by the key light alone (the ``law`` term; None without it).
 
     Examples
     --------
@@ -67,6 +69,14 @@ class ImagePair(eqx.Module):
     fit_weight: Float[Array, "H W"] | None = None
     normal: Float[Array, "H W 3"] | None = None
     light: Float[Array, "H W 3"] | None = None
+    key: Float[Array, "H W C"] | None = None
+
+    @property
+    def light_buffers(self):
+        """The pair's buffers of the light-aware terms as an :class:`invsss.LightBuffers`."""
+        from .light_terms import LightBuffers
+
+        return LightBuffers(self.normal, self.light, self.key)
 
     @property
     def residual_weight(self) -> Float[Array, "H W"]:
@@ -94,6 +104,7 @@ class ImagePair(eqx.Module):
             _float64_or_none(self.fit_weight),
             _float64_or_none(self.normal),
             _float64_or_none(self.light),
+            None if self.key is None else _as_hwc64(self.key),
         )
 
 

@@ -149,6 +149,14 @@ def _parameter_lines(result) -> list[str]:
             if name in terms:
                 err = terms["stderr"].get(name)
                 parts.append(f"{name} {terms[name]:+.3g}{unit} (stderr {'?' if err is None else f'{err:.2g}'})")
+        if "law" in terms:
+            # One albedo per source channel (or one held value).
+            values = np.atleast_1d(terms["law"]).tolist()
+            errs = terms["stderr"].get("law")
+            errs = [None] * len(values) if errs is None else np.atleast_1d(np.asarray(errs, object)).tolist()
+            shown = "/".join(f"{w:.3f}" for w in values)
+            spread = "/".join("?" if e is None else f"{e:.2g}" for e in errs)
+            parts.append(f"law albedo {shown} (stderr {spread})")
         lines.append("light terms: " + ", ".join(parts))
     lines.extend(textwrap.wrap(_CONDITIONAL_NOTE, width=_TEXT_WIDTH, subsequent_indent="  "))
     for message in result.warnings:

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .light_terms import LIGHT_TERM_NAMES, LightBuffers, LightTerms, apply_light_terms
+from .light_terms import AFTER_BLUR, LightBuffers, LightTerms, apply_law, apply_light_terms
 from .models import MODEL_NAMES, get_model, resolve_tap_weights
 from .params import SSSParams
 from .pass_plan import pass_plan
@@ -246,20 +246,24 @@ def _render(image, depth, mask, params, model, tap_w, taps, strength, follow_sur
     return LAYOUT_RENDERERS[layout](image, depth, mask, params, tap_w, **options)
 
 
-def _light_buffers(terms, buffers, hw, mask) -> LightBuffers:
+def _light_buffers(terms, buffers, hw, mask, channels) -> LightBuffers:
     if not isinstance(terms, LightTerms):
         raise InvalidInputError(f"light_terms: expected invsss.LightTerms, got {type(terms).__name__}")
     terms.check()
     if not isinstance(buffers, LightBuffers):
         raise InvalidInputError(
-            "light_buffers: light_terms need an invsss.LightBuffers with the normal and/or light buffer, "
+            "light_buffers: light_terms need an invsss.LightBuffers with the normal, light and/or key buffer, "
             f"got {type(buffers).__name__}"
         )
-    used = [t for t in LIGHT_TERM_NAMES if not is_concrete(getattr(terms, t)) or float(getattr(terms, t)) != 0.0]
-    buffers.require(used)
+    buffers.require(terms.used)
+    if terms.law is not None and np.ndim(terms.law) == 1 and np.shape(terms.law)[0] not in (1, channels):
+        raise InvalidInputError(
+            f"light_terms.law: expected one albedo or one per image channel ({channels}), "
+            f"got {np.shape(terms.law)[0]}"
+        )
     if not is_concrete(mask):
         return buffers
-    return buffers.checked(hw, mask)
+    return buffers.checked(hw, mask, channels=channels if buffers.key is not None else None)
 
 
 def render(
@@ -301,11 +305,12 @@ def render(
         with the identity (scalar or per channel), and the follow-surface factor
         ``k`` in ``lerp(sample, centre, clamp(k |d_s - d_c|, 0, 1))`` (0 disables it).
     light_terms : LightTerms, optional
-        The light-aware terms of docs/model.md, section 8, applied to the blurred
-        image (:func:`invsss.light_terms.apply_light_terms`).
+        The light-aware terms of docs/model.md, section 8: ``law`` changes the
+        image before the blur (:func:`invsss.light_terms.apply_law`), the others
+        the blurred image (:func:`invsss.light_terms.apply_light_terms`).
     light_buffers : LightBuffers, optional
-        Their per-pixel buffers; required with ``light_terms``, and a term whose
-        parameter is not 0 needs its buffer.
+        Their per-pixel buffers; required with ``light_terms``, and a term that is
+        on (a parameter not 0; ``law`` not None) needs its buffers.
 
     Returns
     -------
@@ -349,7 +354,10 @@ def render(
         except ValueError as err:
             raise InvalidInputError(str(err)) from None
     depth, mask = jnp.asarray(depth, dtype), jnp.asarray(mask, dtype)
+    buffers = None if light_terms is None else _light_buffers(light_terms, light_buffers, hw, mask, channels)
+    if buffers is not None and light_terms.law is not None:
+        image = apply_law(image, mask, light_terms.law, buffers)
     out = _render(image, depth, mask, params, entry.name, tap_w, taps, strength, follow_surface)
-    if light_terms is not None:
-        out = apply_light_terms(out, depth, mask, params, light_terms, _light_buffers(light_terms, light_buffers, hw, mask))
+    if buffers is not None and any(t in light_terms.used for t in AFTER_BLUR):
+        out = apply_light_terms(out, depth, mask, params, light_terms, buffers)
     return out[..., 0] if squeeze else out

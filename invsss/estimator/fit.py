@@ -189,18 +189,21 @@ def fit_pair(
         :attr:`FitResult.warnings`. A clipped pixel reads darker than the light that
         reached it; about a hundred of them (0.4 % of a face) moved a photograph's
         fit to a basin with sss_level 50 % high.
-    light_terms : sequence of {"shift", "grazing", "incidence"}, or a mapping
+    light_terms : sequence of {"shift", "grazing", "incidence", "law"}, or a mapping
         Add the light-aware terms of docs/model.md, section 8, to the blur: a
         shift of the scattered light away from the light (``kappa``, mm), a
-        gain towards grazing view (``gamma``) and a gain towards grazing
-        incidence of the key light (``beta``). Names are fitted; a mapping
-        ``{"shift": 1.3, "grazing": None}`` holds a term at a number (a value
+        gain towards grazing view (``gamma``), a gain towards grazing
+        incidence of the key light (``beta``), and a multiple-scattering
+        reflectance law for the key light's part of the source (``w``, an
+        albedo in (0, 1) per source channel). Names are fitted; a mapping
+        ``{"shift": 1.3, "grazing": None}`` holds a term at a value (a value
         measured on a registered pair, for an aligned fit of a photograph) and
         fits one given None. Each needs its buffers in ``light_buffers``;
         reported in :attr:`FitResult.light_terms`.
     light_buffers : LightBuffers, optional
-        Camera-space ``light`` (unit vectors towards the light) and ``normal``
-        buffers of shape (H, W, 3), on the source's grid.
+        Camera-space ``light`` (unit vectors towards the key light) and ``normal``
+        buffers of shape (H, W, 3), and ``key`` (the source lit by the key light
+        alone, the source's shape), on the source's grid.
     options : FitOptions, optional
         All of the above options (``model`` to ``light_terms``) in one checked value;
         then leave those keywords at their defaults.
@@ -242,7 +245,8 @@ def fit_pair(
     if light_buffers is None:
         pair = (source, target, depth, mask)
     elif isinstance(light_buffers, LightBuffers):
-        pair = ImagePair(source, target, depth, mask, normal=light_buffers.normal, light=light_buffers.light)
+        pair = ImagePair(source, target, depth, mask, normal=light_buffers.normal, light=light_buffers.light,
+                         key=light_buffers.key)
     else:
         raise InvalidInputError(f"light_buffers: expected an invsss.LightBuffers, got {type(light_buffers).__name__}")
     return _fit([pair], True, _options(options, given), progress, stop)
@@ -400,8 +404,7 @@ def _fit_unsaturated(pairs, single, options, progress, stop) -> FitResult:
                                         f"{options.saturation:g}")
             messages.append(f"{name}: {count} masked pixel(s) at or above the saturation level "
                             f"{options.saturation:g} (clipped) left out of the fit")
-        out.append(ImagePair(pair.source, pair.target, pair.depth, pair.mask, pair.target_ndim,
-                             fit_weight=keep if count else pair.fit_weight, normal=pair.normal, light=pair.light))
+        out.append(dataclasses.replace(pair, fit_weight=keep if count else pair.fit_weight))
     result = _fit(out, single, dataclasses.replace(options, saturation=None), progress, stop)
     return dataclasses.replace(result, warnings=tuple(messages) + tuple(result.warnings))
 
@@ -415,9 +418,7 @@ def _fit_without_highlights(data, first, single, options, progress, stop, nuisan
         counts.append(int(bright.sum()))
         fractions.append(counts[-1] / max(float(region.sum()), 1.0))
         keep = np.where(bright, 0.0, 1.0 if pair.fit_weight is None else np.asarray(pair.fit_weight))
-        pairs.append(ImagePair(pair.source, pair.target, pair.depth, pair.mask, pair.target_ndim,
-                               fit_weight=keep if (keep * np.asarray(pair.mask)).any() else None,
-                               normal=pair.normal, light=pair.light))
+        pairs.append(dataclasses.replace(pair, fit_weight=keep if (keep * np.asarray(pair.mask)).any() else None))
     record = {
         "method": f"residual of a first fit smoothed over 1 px, brighter than the prediction by "
                   f"{HIGHLIGHT_SIGMAS:g} robust standard deviations, dilated by 1 px",
@@ -458,9 +459,11 @@ def _fit_aligned(pairs, single, options, progress, stop) -> FitResult:
                 inner = inner * np.asarray(pair.fit_weight)
             if not inner.any():
                 inner = None
+            # The key light's part of the source moves with the source.
+            key = None if pair.key is None else align_source(pair.key, depth, mask, warp, target.shape[:2])[0]
             out.append(ImagePair(moved, target[..., 0] if ndim == 2 else target, moved_depth, kept,
                                  fit_weight=inner, normal=align_vectors(pair.normal, warp, target.shape[:2]),
-                                 light=align_vectors(pair.light, warp, target.shape[:2])))
+                                 light=align_vectors(pair.light, warp, target.shape[:2]), key=key))
         return out
 
     warps = [estimate_warp(target, match_photometry(source, target, mask), mask, options.align)
@@ -485,7 +488,7 @@ def _fit_aligned(pairs, single, options, progress, stop) -> FitResult:
             # shift would leave it for the warp to take.
             lit = {} if trial.light_terms is None else {
                 "light_terms": trial.light_terms_params(),
-                "light_buffers": LightBuffers(pair.normal, pair.light)}
+                "light_buffers": pair.light_buffers}
             prediction = np.asarray(render(source, depth, mask, trial.params, options.model,
                                            tap_weights=options.tap_weights, **lit), np.float64)
             prediction = prediction[..., None] if prediction.ndim == 2 else prediction
@@ -962,15 +965,20 @@ def _light_terms_record(natural, unc) -> dict | None:
     used = {term: k for term, k in LIGHT_UNKNOWNS.items() if k in natural}
     if not used:
         return None
-    record = {term: float(natural[k]) for term, k in used.items()}
+    def number(x):
+        # The law's albedo is one per channel; the other terms one number each.
+        x = np.asarray(x, np.float64)
+        return float(x) if x.ndim == 0 else x.tolist()
+
+    record = {term: number(natural[k]) for term, k in used.items()}
     record["stderr"], record["fixed"] = {}, []
     for term, k in used.items():
         if k not in unc.stderr:
             record["stderr"][term] = None
             record["fixed"].append(term)
             continue
-        err = float(np.asarray(unc.stderr[k]))
-        record["stderr"][term] = err if np.isfinite(err) else None
+        err = np.asarray(unc.stderr[k], np.float64)
+        record["stderr"][term] = masked_list(err, ~np.isfinite(err))
     return record
 
 

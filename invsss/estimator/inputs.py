@@ -33,13 +33,13 @@ def _check_fit_weight(fit_weight, shape, mask, name: str):
     return weight
 
 
-def prepare_pair(source, target, depth, mask=None, *, fit_weight=None, normal=None, light=None,
+def prepare_pair(source, target, depth, mask=None, *, fit_weight=None, normal=None, light=None, key=None,
                  name: str = "") -> ImagePair:
     """Validate one pair and convert it to float64 (call under ``jax.enable_x64``).
 
     ``mask=None`` fits every pixel. ``name`` prefixes the input names in errors.
-    ``normal`` and ``light`` are the optional buffers of the light-aware terms
-    (:class:`invsss.LightBuffers`), checked and normalised here.
+    ``normal``, ``light`` and ``key`` are the optional buffers of the light-aware
+    terms (:class:`invsss.LightBuffers`), checked (and the vectors normalised) here.
 
     Examples
     --------
@@ -57,16 +57,17 @@ def prepare_pair(source, target, depth, mask=None, *, fit_weight=None, normal=No
     depth = fill_background_depth(depth)
     if fit_weight is not None:
         fit_weight = _check_fit_weight(fit_weight, np.shape(mask), mask, f"{name}fit_weight")
-    buffers = LightBuffers(normal, light).checked(np.shape(mask), mask, prefix=name)
+    channels = np.shape(source)[2] if np.ndim(source) == 3 else 1
+    buffers = LightBuffers(normal, light, key).checked(np.shape(mask), mask, prefix=name, channels=channels)
     return ImagePair(source, target, depth, mask, fit_weight=fit_weight, normal=buffers.normal,
-                     light=buffers.light).as_float64()
+                     light=buffers.light, key=buffers.key).as_float64()
 
 
 def _unpack(pair, index: int):
     if isinstance(pair, ImagePair):
-        return pair.source, pair.target, pair.depth, pair.mask, pair.fit_weight, pair.normal, pair.light
+        return pair.source, pair.target, pair.depth, pair.mask, pair.fit_weight, pair.normal, pair.light, pair.key
     if isinstance(pair, (tuple, list)) and len(pair) in (3, 4):
-        return (*pair, None, None, None, None) if len(pair) == 3 else (*pair, None, None, None)
+        return (*pair, *(None,) * (8 - len(pair)))
     raise InvalidInputError(
         f"pairs[{index}]: expected a (source, target, depth, mask) tuple or an "
         f"invsss.ImagePair, got {type(pair).__name__}"
@@ -79,9 +80,9 @@ def prepare_pairs(pairs) -> tuple[ImagePair, ...]:
         raise InvalidInputError("pairs: expected a non-empty sequence of (source, target, depth, mask)")
     out = []
     for i, p in enumerate(pairs):
-        source, target, depth, mask, fit_weight, normal, light = _unpack(p, i)
+        source, target, depth, mask, fit_weight, normal, light, key = _unpack(p, i)
         out.append(prepare_pair(source, target, depth, mask, fit_weight=fit_weight, normal=normal, light=light,
-                                name=f"pairs[{i}]." if len(pairs) > 1 else ""))
+                                key=key, name=f"pairs[{i}]." if len(pairs) > 1 else ""))
     out = tuple(out)
     layouts = {p.channels for p in out}
     if len(layouts) > 1:

@@ -24,18 +24,39 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ..light_terms import LightTerms, grazing_field, incidence_field, light_transport, propagation_offsets
+from ..light_terms import (
+    LightTerms,
+    grazing_field,
+    incidence_field,
+    law_source,
+    light_transport,
+    propagation_offsets,
+    reflectance_law,
+)
 from ..stretch import stretch_factors
 from .basis import basis_images
-from .parametrisation import LIGHT_UNKNOWNS, Parametrisation
+from .parametrisation import Parametrisation
 from .projection import combine, solve_linear
 from .vignetting import vignetting_field
 
 __all__ = ["Objective"]
 
+#: The unknowns of the terms applied to the blurred images (``law`` changes the source).
+_AFTER_BLUR = ("light_shift", "grazing", "incidence")
+
+
+def _lit_source(pair, natural):
+    """The pair with the ``law`` term applied to its source (docs/model.md, section 8),
+    when ``w`` is among the natural values: the blur of the changed source is the
+    model's, and the difference Jacobian sees ``w`` as it sees any blur parameter."""
+    if "law" not in natural:
+        return pair
+    gain = reflectance_law(pair.normal, pair.light, natural["law"])
+    return eqx.tree_at(lambda p: p.source, pair, law_source(pair.source, pair.key, pair.mask, gain))
+
 
 def _light_terms(images, pair, natural):
-    """The light-aware terms (docs/model.md, section 8) on every basis image of a pair.
+    """The light-aware terms after the blur (docs/model.md, section 8) on every basis image of a pair.
 
     Both terms are linear in the image, so applying them to each basis image
     and then mixing equals mixing and then applying them: the weights stay linear.
@@ -93,15 +114,16 @@ class Objective(eqx.Module):
     def blurred_bases(self, natural: dict) -> tuple:
         """The model's basis images of every pair (:func:`.basis.basis_images`): the blur."""
         return tuple(
-            basis_images(p, natural, self.model, self.tap_weights, self.linear_weights)
+            basis_images(_lit_source(p, natural), natural, self.model, self.tap_weights, self.linear_weights)
             for p in self.pairs
         )
 
     def bases(self, natural: dict, blurred: tuple | None = None) -> tuple:
         """The basis images the projection mixes: the blurred ones (made here unless
-        given), through the light-aware terms and the vignetting when fitted."""
+        given), through the light-aware terms after the blur and the vignetting when
+        fitted."""
         images = self.blurred_bases(natural) if blurred is None else blurred
-        if any(name in natural for name in LIGHT_UNKNOWNS.values()):
+        if any(name in natural for name in _AFTER_BLUR):
             images = tuple(_light_terms(x, p, natural) for x, p in zip(images, self.pairs))
         if "vignetting" not in natural:
             return images

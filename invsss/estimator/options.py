@@ -62,11 +62,12 @@ class FitOptions:
         Target level at or above which a pixel is clipped and left out of the fit.
     light_terms : tuple of str
         Light-aware terms in the model (:data:`invsss.light_terms.LIGHT_TERM_NAMES`:
-        ``"shift"``, ``"grazing"``, ``"incidence"``), stored as a tuple in that order. Given as
-        names (a list, or a comma-separated string), each term is fitted; given
-        as a mapping ``{name: value}`` (or ``"shift=1.3,grazing"``), a term with
-        a number is held at it and one with None is fitted. Each needs its
-        buffer on every pair.
+        ``"shift"``, ``"grazing"``, ``"incidence"``, ``"law"``), stored as a tuple in
+        that order. Given as names (a list, or a comma-separated string), each term
+        is fitted; given as a mapping ``{name: value}`` (or ``"shift=1.3,grazing"``),
+        a term with a number is held at it and one with None is fitted (``law``
+        takes one albedo or one per source channel, ``"law=0.93/0.8/0.7"`` in a
+        string). Each needs its buffers on every pair.
     light_fixed : mapping
         The held values (filled from ``light_terms``; read-only).
 
@@ -168,6 +169,35 @@ class FitOptions:
         return os.fspath(self.profile) if isinstance(self.profile, (str, os.PathLike)) else ""
 
 
+def _held_number(name, value) -> float:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"light_terms[{name!r}]: expected a number or None (fitted), got {value!r}") from None
+    if not np.isfinite(number) or (name in ("grazing", "incidence") and number <= -1.0):
+        raise InvalidInputError(
+            f"light_terms[{name!r}]: expected a finite number"
+            f"{' > -1' if name in ('grazing', 'incidence') else ''}, got {value!r}"
+        )
+    return number
+
+
+def _held_albedo(value) -> float | tuple[float, ...]:
+    """A held ``law`` albedo: one number in (0, 1), or one per channel (a sequence,
+    or a string such as ``"0.93/0.8/0.7"``)."""
+    parts = value.split("/") if isinstance(value, str) else value
+    try:
+        w = np.asarray(parts, np.float64)
+    except (TypeError, ValueError):
+        w = None
+    if w is None or w.ndim > 1 or w.size == 0 or not np.all(np.isfinite(w)) or np.any((w <= 0) | (w >= 1)):
+        raise InvalidInputError(
+            f"light_terms['law']: expected an albedo in (0, 1) or one per channel (e.g. 0.93/0.8/0.7), "
+            f"or None (fitted), got {value!r}"
+        )
+    return float(w) if w.ndim == 0 else tuple(float(x) for x in w)
+
+
 def check_light_terms(terms) -> tuple[tuple[str, ...], dict[str, float]]:
     """``(names, held)``: the terms in canonical order and the values of those held fixed.
 
@@ -181,6 +211,8 @@ def check_light_terms(terms) -> tuple[tuple[str, ...], dict[str, float]]:
     (('shift', 'grazing'), {})
     >>> check_light_terms("shift=1.3,grazing")
     (('shift', 'grazing'), {'shift': 1.3})
+    >>> check_light_terms("shift,law=0.93/0.8/0.7")
+    (('shift', 'law'), {'law': (0.93, 0.8, 0.7)})
     """
     if terms is None:
         return (), {}
@@ -207,14 +239,5 @@ def check_light_terms(terms) -> tuple[tuple[str, ...], dict[str, float]]:
     for name, value in entries.items():
         if value is None:
             continue
-        try:
-            number = float(value)
-        except (TypeError, ValueError):
-            raise InvalidInputError(f"light_terms[{name!r}]: expected a number or None (fitted), got {value!r}") from None
-        if not np.isfinite(number) or (name in ("grazing", "incidence") and number <= -1.0):
-            raise InvalidInputError(
-                f"light_terms[{name!r}]: expected a finite number"
-                f"{' > -1' if name in ('grazing', 'incidence') else ''}, got {value!r}"
-            )
-        held[name] = number
+        held[name] = _held_albedo(value) if name == "law" else _held_number(name, value)
     return tuple(t for t in LIGHT_TERM_NAMES if t in entries), held

@@ -36,6 +36,10 @@ light_shift    ``ref * z``                           the scene length one pixel
                                                      section 8)
 grazing        ``z``                                 0 (no grazing-view gain)
 incidence      ``z``                                 0 (no incidence gain)
+law            ``sigmoid(ref + z)``, one per source   ``logit(0.9)``: an albedo
+               channel                               between the 940 nm and the
+                                                     visible skins of docs/model.md,
+                                                     section 8
 =============  ====================================  ===============================
 
 ``softplus`` keeps the correction non-negative while letting it approach 0
@@ -70,6 +74,7 @@ __all__ = [
     "by_unknown",
     "resolve_profile",
     "softplus_inverse",
+    "logit",
     "check_fix",
     "assign_roles",
     "Parametrisation",
@@ -79,7 +84,7 @@ GAUGES = ("variances", "sss_level")
 
 #: The estimator's unknown for each light-aware term (docs/model.md, section 8);
 #: ``shift`` is ``light_shift`` here so that it is not read as a warp's shift.
-LIGHT_UNKNOWNS = {"shift": "light_shift", "grazing": "grazing", "incidence": "incidence"}
+LIGHT_UNKNOWNS = {"shift": "light_shift", "grazing": "grazing", "incidence": "incidence", "law": "law"}
 
 
 
@@ -97,7 +102,7 @@ def by_unknown(entries: dict) -> dict:
 
 #: Blocks that are ``ref * z`` with 0 a value like any other (no fall-off, no
 #: shift, no gain): the vignetting coefficients and the light terms.
-SCALED_BLOCKS = ("vignetting", *LIGHT_UNKNOWNS.values())
+SCALED_BLOCKS = ("vignetting", "light_shift", "grazing", "incidence")
 _SCALARS = ("sss_level", "correction", "maxdd")
 
 
@@ -183,6 +188,16 @@ def softplus_inverse(x):
     return x + np.log(-np.expm1(-x))
 
 
+def _sigmoid(z, xp=jnp):
+    return jax.nn.sigmoid(z) if xp is jnp else 1.0 / (1.0 + np.exp(-z))
+
+
+def logit(x):
+    """``log(x / (1 - x))``, the inverse of the sigmoid, for ``x`` in (0, 1)."""
+    x = np.asarray(x, np.float64)
+    return np.log(x) - np.log1p(-x)
+
+
 def _simplex(z, axis=0, xp=jnp):
     """``softmax`` of ``[0, z]`` along ``axis``: a point of the simplex, no redundancy."""
     pad = [(0, 0)] * z.ndim
@@ -247,6 +262,8 @@ class Parametrisation(eqx.Module):
                 out[name] = xp.exp(u)
             elif name in SCALED_BLOCKS:
                 out[name] = ref * u
+            elif name == "law":
+                out[name] = _sigmoid(ref + u, xp)
             else:  # pragma: no cover - blocks are built by this module
                 raise AssertionError(name)
         return out
@@ -266,6 +283,8 @@ class Parametrisation(eqx.Module):
                 u = (logs - logs[:1])[1:]
             elif name in SCALED_BLOCKS:
                 u = x / ref
+            elif name == "law":
+                u = logit(np.clip(x, 1e-12, 1.0 - 1e-12)) - ref
             else:
                 u = np.log(x)
             parts.append(np.broadcast_to(u, shape).ravel())

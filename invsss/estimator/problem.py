@@ -15,18 +15,22 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..executable_cache import persistent_jit
-from ..light_terms import LightBuffers
 from ..params import PARAM_NAMES
 from ..validation import InvalidInputError
 from .initial import blur_reference, choose_starts, data_scales
 from .inputs import prepare_pairs
 from .objective import Objective
 from .options import FitOptions
-from .parametrisation import LIGHT_UNKNOWNS, Parametrisation, assign_roles, resolve_profile
+from .parametrisation import LIGHT_UNKNOWNS, Parametrisation, assign_roles, logit, resolve_profile
 from .uncertainty import linearise
 from .vignetting import ORDER as VIGNETTING_ORDER
 
 __all__ = ["FitProblem", "build_problem"]
+
+
+#: Where the law's albedo starts: between the 940 nm faces' fitted 0.93-0.95 and
+#: the visible skin's 0.7-0.93 (docs/model.md, section 8).
+LAW_START = 0.9
 
 
 def _initial_weights(profile_weights, k, channels):
@@ -99,8 +103,13 @@ def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, 
         start["vignetting"] = np.zeros(VIGNETTING_ORDER)
         reference["vignetting"] = 1.0
     for i, pair in enumerate(pairs):
-        LightBuffers(pair.normal, pair.light).require(light_terms, f"pairs[{i}]." if len(pairs) > 1 else "")
+        pair.light_buffers.require(light_terms, f"pairs[{i}]." if len(pairs) > 1 else "")
     light_fixed = dict(light_fixed or {})
+    if "law" in light_fixed and np.size(light_fixed["law"]) not in (1, c_src):
+        raise InvalidInputError(
+            f"light_terms['law']: expected one albedo or one per source channel ({c_src}), "
+            f"got {np.size(light_fixed['law'])}"
+        )
     # A held term is a value like a fixed parameter's; the objective applies a
     # term whenever its name is among the natural values.
     for term, name in LIGHT_UNKNOWNS.items():
@@ -118,6 +127,12 @@ def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, 
             blocks.append((gain, ()))
             start[gain] = 0.0
             reference[gain] = 1.0
+    if "law" in light_terms and "law" not in light_fixed:
+        # One albedo per source channel: a chromatic medium's differ (skin's fall
+        # from red to blue), and the law acts before a grey mix.
+        blocks.append(("law", (c_src,)))
+        start["law"] = np.full(c_src, LAW_START)
+        reference["law"] = np.full(c_src, float(logit(LAW_START)))
     param = Parametrisation(
         tuple(blocks), {k_: _on_device(v) for k_, v in reference.items()}, values
     )

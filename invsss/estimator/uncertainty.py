@@ -117,7 +117,7 @@ def _reported(objective, linear_weights: bool, sizes, theta) -> dict:
     natural = objective.param.natural(z)
     out = {
         k: natural[k]
-        for k in ("sss_level", "correction", "maxdd", "variances", *SCALED_BLOCKS)
+        for k in ("sss_level", "correction", "maxdd", "variances", *SCALED_BLOCKS, "law")
         if k in objective.param.free
     }
     if linear_weights:

@@ -1,8 +1,8 @@
 """Which pairs an experiment uses: folders, globs and explicit file sets.
 
 A pair folder holds ``source.exr``, ``target.exr``, ``depth.exr`` and ``mask.png``
-(the layout of ``data_synthetic/``), and may hold ``normal.exr`` and ``light.exr``
-(the light-aware terms' buffers, which ``invsss scene`` writes); a glob such as ``data_synthetic/*/`` names
+(the layout of ``data_synthetic/``), and may hold ``normal.exr``, ``light.exr`` and
+``key.exr`` (the light-aware terms' buffers, which ``invsss scene`` writes); a glob such as ``data_synthetic/*/`` names
 every pair folder it matches, in sorted order (other folders it matches, such
 as ``LICENSES/``, are passed over). Paths are relative to the experiment
 file's folder, so an experiment runs the same from any working directory. Each
@@ -28,7 +28,7 @@ PAIR_FILES = {"source": "source.exr", "target": "target.exr", "depth": "depth.ex
 
 #: Optional files of a pair folder: the buffers of the light-aware terms
 #: (:class:`invsss.LightBuffers`), recorded when present.
-BUFFER_FILES = {"normal": "normal.exr", "light": "light.exr"}
+BUFFER_FILES = {"normal": "normal.exr", "light": "light.exr", "key": "key.exr"}
 
 
 def _relative(path: str, root: str) -> str:
@@ -37,7 +37,7 @@ def _relative(path: str, root: str) -> str:
 
 def resolve_pairs(data: DataSpec, root: str, name: str) -> list[dict]:
     """The pairs of ``data`` as ``{"name", "source", "target", "depth", "mask"}`` dicts,
-    with ``"normal"`` and ``"light"`` where the folder or file set has them.
+    with ``"normal"``, ``"light"`` and ``"key"`` where the folder or file set has them.
 
     Paths in the result are relative to ``root`` (the experiment file's folder)
     and normalised, so the same experiment gives the same trial ids wherever it

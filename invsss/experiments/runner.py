@@ -24,7 +24,6 @@ import warnings
 
 from ..result_dir import ResultDir
 from ..validation import InvalidInputError
-from .data import BUFFER_FILES
 from .tasks import TrialInterrupted, run_task
 from .trials import Trial
 
@@ -51,9 +50,11 @@ def _load(trial: Trial) -> list:
         data = load_pair(*(os.path.join(trial.root, pair[role]) for role in ("source", "target", "depth", "mask")),
                          depth_scale=trial.depth_scale, linear_codes=trial.linear_codes)
         if trial.options.get("light_terms"):
-            # Only a trial with light terms reads the buffers; the fit checks them.
-            buffers = {role: read_image(os.path.join(trial.root, pair[role]), linear=True)
-                       for role in BUFFER_FILES if role in pair}
+            # Only a trial with light terms reads the buffers it uses; the fit checks
+            # them. The key light's image is read as the source is.
+            buffers = {role: read_image(os.path.join(trial.root, pair[role]),
+                                        linear=trial.linear_codes if role == "key" else True)
+                       for role in trial.buffer_roles if role in pair}
             data = dataclasses.replace(data, **buffers)
         pairs.append(data)
     return pairs

@@ -78,8 +78,8 @@ _Taps = Optional[Union[str, _Numbers]]
 
 
 class FileSet(BaseModel):
-    """One pair given file by file (``[[data.files]]``); ``normal`` and ``light``
-    are the optional buffers of the light-aware terms."""
+    """One pair given file by file (``[[data.files]]``); ``normal``, ``light`` and
+    ``key`` are the optional buffers of the light-aware terms."""
 
     model_config = _STRICT
     name: Optional[str] = None
@@ -89,6 +89,7 @@ class FileSet(BaseModel):
     mask: str
     normal: Optional[str] = None
     light: Optional[str] = None
+    key: Optional[str] = None
 
 
 class DataSpec(BaseModel):

@@ -142,14 +142,13 @@ def run_task(task: str, options: dict, pairs: list, stop=None) -> TaskOutput:
     if task == "render":
         return _render(options, pairs[0])
     from ..estimator import FitInterrupted, fit_pair, fit_pairs
-    from ..light_terms import LightBuffers
 
     try:
         if task == "fit":
             pair = pairs[0]
             # A pair without buffers hands an empty LightBuffers, as the CLI does.
             result = fit_pair(pair.source, pair.target, pair.depth, pair.mask, stop=stop,
-                              light_buffers=LightBuffers(pair.normal, pair.light), **_fit_keywords(options))
+                              light_buffers=pair.light_buffers, **_fit_keywords(options))
         else:
             result = fit_pairs(pairs, stop=stop, **_fit_keywords(options))
     except FitInterrupted:

@@ -98,8 +98,9 @@ class Trial:
         options = {k: v for k, v in self.options.items()
                    if not (k in LATER_OPTIONS and v == LATER_OPTIONS[k])}
         # The buffers count only for a trial that reads them: a folder that
-        # gained light.exr keeps the ids of its trials without light terms.
-        buffers = () if self.options.get("light_terms") else BUFFER_FILES
+        # gained light.exr keeps the ids of its trials without light terms, and
+        # one that gained key.exr those without the law.
+        buffers = [role for role in BUFFER_FILES if role not in self.buffer_roles]
         return {
             "task": self.task,
             "options": options,
@@ -107,6 +108,17 @@ class Trial:
             "depth_scale": self.depth_scale,
             "linear_codes": self.linear_codes,
         }
+
+    @property
+    def buffer_roles(self) -> tuple[str, ...]:
+        """The buffers this trial reads: none without light terms, the key light's
+        image only with the law."""
+        from ..estimator.options import check_light_terms
+
+        if not self.options.get("light_terms"):
+            return ()
+        terms, held = check_light_terms(self.options["light_terms"])
+        return ("normal", "light", "key") if "law" in (*terms, *held) else ("normal", "light")
 
     def to_dict(self) -> dict:
         """A plain mapping (for another process, or JSON); :meth:`from_dict` reverses it."""

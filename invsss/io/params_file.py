@@ -133,7 +133,7 @@ class ParamsFile(BaseModel):
     highlights: Any = None
     """Fit report: pixels left out as specular highlights (fit --highlights): method, excluded_pixels, fraction; or null."""
     light_terms: Any = None
-    """Fit report: the fitted light-aware terms (fit --light-terms; docs/model.md, section 8): shift (mm), grazing, incidence, stderr, fixed; or null."""
+    """Fit report: the fitted light-aware terms (fit --light-terms; docs/model.md, section 8): shift (mm), grazing, incidence, law (an albedo per source channel), stderr, fixed; or null."""
     warnings: Optional[list[str]] = None
     """Fit report: warnings the fit raised."""
 

@@ -52,7 +52,17 @@ except ImportError as err:  # pragma: no cover - exercised only without the extr
         "(pip install 'invsss[torch]')"
     ) from err
 
-from .light_terms import apply_light_terms, grazing_field, incidence_field, propagation_offsets, shift_image
+from .light_terms import (
+    apply_law,
+    apply_light_terms,
+    chandrasekhar_h,
+    grazing_field,
+    incidence_field,
+    law_source,
+    propagation_offsets,
+    reflectance_law,
+    shift_image,
+)
 from .params import SSSParams
 from .passes import TAP_OFFSETS, TAP_WEIGHTS, directional_pass, sample_along, tap_spread, tap_weights
 from .profiles import gaussian, sum_of_gaussians
@@ -70,6 +80,10 @@ from .stretch import depth_slopes, stretch_factors
 __all__ = [
     "SSSParams",
     "apply_light_terms",
+    "apply_law",
+    "chandrasekhar_h",
+    "reflectance_law",
+    "law_source",
     "grazing_field",
     "incidence_field",
     "propagation_offsets",

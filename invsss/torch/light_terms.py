@@ -12,8 +12,8 @@ from kornia.geometry.transform import remap
 
 from .stretch import stretch_factors
 
-__all__ = ["propagation_offsets", "grazing_field", "incidence_field", "shift_image", "light_transport",
-           "apply_light_terms"]
+__all__ = ["propagation_offsets", "grazing_field", "incidence_field", "chandrasekhar_h", "reflectance_law",
+           "law_source", "shift_image", "light_transport", "apply_light_terms", "apply_law"]
 
 
 def propagation_offsets(light: torch.Tensor) -> torch.Tensor:
@@ -29,6 +29,31 @@ def grazing_field(normal: torch.Tensor) -> torch.Tensor:
 def incidence_field(normal: torch.Tensor, light: torch.Tensor) -> torch.Tensor:
     """(H, W, 3) normals and light directions -> (H, W) ``1 - clip(n . l, 0, 1)``."""
     return 1.0 - (normal * light).sum(dim=-1).clamp(0.0, 1.0)
+
+
+def chandrasekhar_h(x, albedo: torch.Tensor) -> torch.Tensor:
+    """Hapke's ``H(x) = (1 + 2x) / (1 + 2x sqrt(1 - w))``; ``albedo`` (C,) or ()."""
+    return (1.0 + 2.0 * x) / (1.0 + 2.0 * x * (1.0 - albedo).clamp_min(1e-12).sqrt())
+
+
+def reflectance_law(normal: torch.Tensor, light: torch.Tensor, albedo: torch.Tensor) -> torch.Tensor:
+    """(H, W, 3) normals and light directions, albedo (C,) or () -> (H, W, C)
+    ``f_w(mu, mu0) / f_w(1, 1)`` with ``mu = clip(n_z, 1e-3, 1)``, ``mu0 = clip(n . l, 0, 1)``."""
+    w = torch.atleast_1d(albedo)
+    mu = normal[..., 2].clamp(1e-3, 1.0)[..., None]
+    mu0 = (normal * light).sum(dim=-1).clamp(0.0, 1.0)[..., None]
+    head_on = chandrasekhar_h(1.0, w) ** 2 / 2.0
+    return chandrasekhar_h(mu, w) * chandrasekhar_h(mu0, w) / (mu + mu0) / head_on
+
+
+def law_source(source: torch.Tensor, key: torch.Tensor, mask: torch.Tensor, gain: torch.Tensor) -> torch.Tensor:
+    """(H, W, C) ``S + m K (gain - 1)``: the key light's part under the law, the rest as it is."""
+    return source + mask[..., None] * key * (gain - 1.0)
+
+
+def apply_law(image, mask, albedo, normal, light, key) -> torch.Tensor:
+    """Twin of :func:`invsss.light_terms.apply_law` with the buffers as (H, W, 3) and (H, W, C) tensors."""
+    return law_source(image, key, mask, reflectance_law(normal, light, albedo))
 
 
 def shift_image(image: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:
