@@ -19,13 +19,19 @@ target over the eroded mask, one row per way of predicting the target:
     the same with the profile fixed to a 5-Gaussian fit of the medium's dipole
     (``scene.json``'s sigma_s', sigma_a, eta);
 ``fit + shift``, ``fit + grazing``, ``fit + incidence``, ``fit + shift + grazing``,
-``fit + shift + grazing + incidence``
+``fit + shift + grazing + incidence``, ``fit + law``, ``fit + shift + law``, ``fit + shift
++ grazing + incidence + law``
     the default fit with the light-aware terms of docs/model.md, section 8 (the
-    scattered light displaced away from the key light; a gain towards grazing
-    view), read from the pair's ``light.exr`` and ``normal.exr``;
-``fit from <other pair>`` (and the same for the last two rows above)
+    scattered light displaced away from the key light; gains towards grazing
+    view and grazing incidence; the key light's reflectance law), read from the
+    pair's ``light.exr``, ``normal.exr`` and ``key.exr``;
+``fit from <other pair>`` (and the same for the rows of :data:`TRANSFER_ROWS`)
     the fit of another pair of the same medium, applied to this one (does
     a fit carry over to another view?);
+``joint fit + <terms>``
+    one fit of every pair of the same medium at once (``fit_pairs``: shared
+    parameters, a gain per pair), scored on this pair: what one set of
+    parameters for the medium costs each view;
 ``noise ceiling``
     the best PSNR a noise-free prediction can reach against this Monte Carlo target
     (``scene.json``, from the two half renders).
@@ -41,7 +47,7 @@ pixels, where the path tracer and the screen-space model see different geometry,
 do not dominate. Residual maps (target minus prediction) are saved as PNG under
 ``--out``; the table also goes to ``--out/fidelity.json``.
 
-    python experiments/fidelity.py [PAIR_DIR ...] [--out runs/fidelity] [--quick]
+    python experiments/fidelity.py [PAIR_DIR ...] [--out runs/fidelity] [--quick] [--terms "shift,law;law"]
 
 Without PAIR_DIR, every folder of ``data_synthetic/`` that holds a ``scene.json``.
 """
@@ -62,7 +68,10 @@ from invsss.estimator.diagnostics import masked_psnr, masked_ssim
 
 THESIS_HAND_VALUES = ((0.5, 2000.0), (0.7, 7500.0), (0.4, 4500.0))
 #: The light-aware term sets fitted on top of the plain fit; the last is all of them.
-LIGHT_TERM_ROWS = (("shift",), ("grazing",), ("incidence",), ("shift", "grazing"), ("shift", "grazing", "incidence"))
+LIGHT_TERM_ROWS = (("shift",), ("grazing",), ("incidence",), ("shift", "grazing"), ("shift", "grazing", "incidence"),
+                   ("law",), ("shift", "law"), ("shift", "grazing", "incidence", "law"))
+#: The term sets carried to the other view of the same medium and fitted jointly on all its views.
+TRANSFER_ROWS = (("shift", "grazing", "incidence"), ("shift", "law"), ("shift", "grazing", "incidence", "law"))
 #: The thesis gives no maxdd; this one (mm per pixel) never clamps a slope.
 THESIS_MAXDD_MM = 1000.0
 
@@ -87,6 +96,7 @@ def load_scene_pair(folder: pathlib.Path) -> dict:
         "buffers": invsss.LightBuffers(
             normal=invsss.read_image(folder / "normal.exr") if (folder / "normal.exr").is_file() else None,
             light=invsss.read_image(folder / "light.exr") if (folder / "light.exr").is_file() else None,
+            key=invsss.read_image(folder / "key.exr") if (folder / "key.exr").is_file() else None,
         ),
     }
 
@@ -173,7 +183,11 @@ def main() -> None:
     parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("runs/fidelity"))
     parser.add_argument("--erode", type=int, default=2, help="mask erosion in pixels (default 2)")
     parser.add_argument("--quick", action="store_true", help="1 start and 50 steps per fit (a smoke run)")
+    parser.add_argument("--terms", help="only these light-term rows, ';'-separated (e.g. 'shift,law;law'); "
+                        "transfer and joint rows for those of them in TRANSFER_ROWS")
     args = parser.parse_args()
+    term_rows = LIGHT_TERM_ROWS if args.terms is None else tuple(
+        tuple(t for t in invsss.light_terms.LIGHT_TERM_NAMES if t in row.split(",")) for row in args.terms.split(";"))
     folders = args.pairs or sorted(p.parent for p in pathlib.Path("data_synthetic").glob("*/scene.json"))
     if not folders:
         parser.error("no path-traced pair folders (with scene.json) found")
@@ -197,7 +211,7 @@ def main() -> None:
         dipole = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"],
                                  profile=dipole_profile(pair["info"]), **fit_options)
         rows["fit (medium's dipole)"] = score(dipole.fitted[0], pair, mask)
-        for terms in LIGHT_TERM_ROWS:
+        for terms in term_rows:
             buffers = pair["buffers"]
             if any(getattr(buffers, b) is None for t in terms for b in invsss.light_terms.NEEDED_BUFFERS[t]):
                 continue
@@ -216,12 +230,24 @@ def main() -> None:
             mask = eroded(b["mask"], args.erode)
             prediction = invsss.render(b["source"], b["depth"], b["mask"], fits[a["name"]].params, model="sog")
             table[b["name"]][f"fit from {a['name']}"] = score(prediction, b, mask)
-            for terms in LIGHT_TERM_ROWS[-2:]:
+            for terms in TRANSFER_ROWS:
                 lit = fits.get((a["name"], terms))
                 if lit is not None and (b["name"], terms) in fits:
                     prediction = invsss.render(b["source"], b["depth"], b["mask"], lit.params, model="sog",
                                                light_terms=lit.light_terms_params(), light_buffers=b["buffers"])
                     table[b["name"]][f"fit + {' + '.join(terms)} from {a['name']}"] = score(prediction, b, mask)
+    media: dict[tuple, list] = {}
+    for pair in pairs:
+        media.setdefault(medium_key(pair["info"]), []).append(pair)
+    for group in (g for g in media.values() if len(g) > 1):
+        for terms in (t for t in TRANSFER_ROWS if t in term_rows):
+            data = [invsss.ImagePair(p["source"], p["target"], p["depth"], p["mask"], normal=p["buffers"].normal,
+                                     light=p["buffers"].light, key=p["buffers"].key) for p in group]
+            joint = invsss.fit_pairs(data, light_terms=terms, **fit_options)
+            for p, fitted in zip(group, joint.fitted):
+                row = f"joint fit + {' + '.join(terms)} ({len(group)} views)"
+                table[p["name"]][row] = score(fitted, p, eroded(p["mask"], args.erode))
+                table[p["name"]][row]["light_terms"] = joint.light_terms
 
     args.out.mkdir(parents=True, exist_ok=True)
     summary = {}

@@ -4,8 +4,8 @@ One flat row per trial, the shape a table or a plot wants: ``id``,
 ``status``, one column per varied key (``sss_level``, ``fix.maxdd``, ``pair``),
 the metrics (``loss``, ``psnr``, ``ssim``, and for fits ``sigma``,
 ``converged``, ``iterations``), the parameters (``param.sss_level``,
-``param.weights``...; ``param.light_shift``, ``param.grazing`` and ``param.incidence`` where a
-trial fitted light terms), their standard errors (``stderr.sss_level``...),
+``param.weights``...; ``param.light_shift``, ``param.grazing``, ``param.incidence`` and
+``param.law``, a list of albedos per source channel, where a trial fitted light terms), their standard errors (``stderr.sss_level``...),
 ``seconds`` (the trial's total time), ``compute_seconds`` (the fit or render
 alone), ``host``, ``pid``, ``attempts``, ``warnings`` and ``error``. A pandas
 ``DataFrame`` when pandas is installed (``pip install 'invsss[report]'``),
@@ -23,7 +23,7 @@ from .store import DATABASE_NAME, ResultsStore
 #: The light terms' unknowns a fit trial may report beside the five parameters
 #: (the values of invsss.estimator.parametrisation.LIGHT_UNKNOWNS, written out so
 #: that reading results does not import JAX).
-LIGHT_PARAMS = ("light_shift", "grazing", "incidence")
+LIGHT_PARAMS = ("light_shift", "grazing", "incidence", "law")
 
 __all__ = ["results", "flat_rows"]
 
