@@ -860,8 +860,8 @@ albedo calibrated to the medium's total reflectance), `target.exr` (the mean of 
 independently seeded half renders), `depth.exr` (eye z in mm, 0 off the head), `mask.png`,
 `normal.exr`, `coverage.exr`, `light.exr` (camera-space unit vectors towards the key
 light, the buffer of the `shift` light term), `key.exr` (the source lit by the key light
-alone, same spp and seed; `source - key` is the fill light's part, with Monte Carlo noise
-of both passes) and `scene.json` (the resolved scene, seeds, spp, render times and the
+alone, same spp and seed, the buffer of the `law` light term; `source - key` is the fill
+light's part, with Monte Carlo noise of both passes) and `scene.json` (the resolved scene, seeds, spp, render times and the
 noise estimate). There are no true screen-space parameters: these pairs
 measure how well the model can match real light transport (`experiments/fidelity.py`).
 The boundary is index-matched (no refraction or Fresnel reflection): with a rough
