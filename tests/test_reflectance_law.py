@@ -479,3 +479,21 @@ def test_sweep_reads_the_key_only_for_trials_with_the_law(tmp_path):
     assert all(r["status"] == "done" for r in rows.values())
     assert rows["law"]["param.law"] == pytest.approx([0.95, 0.85, 0.7], abs=0.01)
     assert len(rows["law"]["stderr.law"]) == 3 and rows["incidence"]["param.law"] is None
+
+
+@pytest.mark.slow
+def test_an_aligned_fit_moves_the_key_with_the_source():
+    # The photograph is misregistered by a fraction of a pixel; the aligned fit
+    # resamples the source onto it, and the key light's part must move with it,
+    # or the law would change the wrong pixels.
+    source, depth, mask, buffers = _dome_with_two_lights(40)
+    truth = [0.95, 0.85, 0.7]
+    target = _target(source, depth, mask, buffers, LightTerms(law=truth), noise=0.0)
+    shifted = np.stack([ndimage.shift(target[..., k], (1.4, -0.8), order=5, mode="nearest") for k in range(3)], -1)
+    # Two starts: from one, this dome has a second minimum at sss_level 746 (loss 2e-7),
+    # with or without the warp.
+    fit = invsss.fit_pair(source, shifted, depth, mask, profile=PROFILE, fix=FIX, n_starts=2, robust=None,
+                          align="translation", light_terms="law", light_buffers=buffers)
+    np.testing.assert_allclose(fit.alignment[0]["shift_px"], (1.4, -0.8), atol=0.1)
+    assert fit.light_terms["law"] == pytest.approx(truth, abs=0.02)
+    assert float(fit.params.sss_level) == pytest.approx(600.0, rel=0.05)
