@@ -32,6 +32,10 @@ target over the eroded mask, one row per way of predicting the target:
     one fit of every pair of the same medium at once (``fit_pairs``: shared
     parameters, a gain per pair), scored on this pair: what one set of
     parameters for the medium costs each view;
+``fit + <terms>, free variances`` (and ``joint fit + ...``, for :data:`FREE_PROFILE_ROWS`)
+    the same terms with the profile's variances fitted too (``gauge="sss_level"``,
+    ``sss_level`` held at the value the fit with fixed variances found: the gauge
+    lets either carry the scale);
 ``noise ceiling``
     the best PSNR a noise-free prediction can reach against this Monte Carlo target
     (``scene.json``, from the two half renders).
@@ -70,6 +74,8 @@ THESIS_HAND_VALUES = ((0.5, 2000.0), (0.7, 7500.0), (0.4, 4500.0))
 #: The light-aware term sets fitted on top of the plain fit; the last is all of them.
 LIGHT_TERM_ROWS = (("shift",), ("grazing",), ("incidence",), ("shift", "grazing"), ("shift", "grazing", "incidence"),
                    ("law",), ("shift", "law"), ("shift", "grazing", "incidence", "law"))
+#: The term sets also fitted with free variances, per pair and jointly per medium.
+FREE_PROFILE_ROWS = (("shift", "law"),)
 #: The term sets carried to the other view of the same medium and fitted jointly on all its views.
 TRANSFER_ROWS = (("shift", "grazing", "incidence"), ("shift", "law"), ("shift", "grazing", "incidence", "law"))
 #: The thesis gives no maxdd; this one (mm per pixel) never clamps a slope.
@@ -221,6 +227,14 @@ def main() -> None:
             fits[(pair["name"], terms)] = lit
             rows[label] = score(lit.fitted[0], pair, mask)
             rows[label]["light_terms"] = lit.light_terms
+            if terms in FREE_PROFILE_ROWS:
+                free = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"],
+                                       light_terms=terms, light_buffers=buffers, gauge="sss_level",
+                                       fix={"sss_level": float(lit.params.sss_level)}, **fit_options)
+                fits[(pair["name"], terms, "free")] = free
+                rows[label + ", free variances"] = score(free.fitted[0], pair, mask)
+                rows[label + ", free variances"]["light_terms"] = free.light_terms
+                rows[label + ", free variances"]["variances"] = np.asarray(free.values["variances"]).tolist()
         rows["noise ceiling"] = {"psnr": pair["info"]["noise"]["noise_ceiling_db"], "ssim": None, "coarse": None,
                                  "residual": None}
         table[pair["name"]] = rows
@@ -230,12 +244,14 @@ def main() -> None:
             mask = eroded(b["mask"], args.erode)
             prediction = invsss.render(b["source"], b["depth"], b["mask"], fits[a["name"]].params, model="sog")
             table[b["name"]][f"fit from {a['name']}"] = score(prediction, b, mask)
-            for terms in TRANSFER_ROWS:
-                lit = fits.get((a["name"], terms))
+            for key in (*TRANSFER_ROWS, *((t, "free") for t in FREE_PROFILE_ROWS)):
+                lit = fits.get((a["name"], *key) if key[-1] == "free" else (a["name"], key))
+                terms = key[0] if key[-1] == "free" else key
                 if lit is not None and (b["name"], terms) in fits:
                     prediction = invsss.render(b["source"], b["depth"], b["mask"], lit.params, model="sog",
                                                light_terms=lit.light_terms_params(), light_buffers=b["buffers"])
-                    table[b["name"]][f"fit + {' + '.join(terms)} from {a['name']}"] = score(prediction, b, mask)
+                    free = ", free variances" if key[-1] == "free" else ""
+                    table[b["name"]][f"fit + {' + '.join(terms)}{free} from {a['name']}"] = score(prediction, b, mask)
     media: dict[tuple, list] = {}
     for pair in pairs:
         media.setdefault(medium_key(pair["info"]), []).append(pair)
@@ -244,10 +260,18 @@ def main() -> None:
             data = [invsss.ImagePair(p["source"], p["target"], p["depth"], p["mask"], normal=p["buffers"].normal,
                                      light=p["buffers"].light, key=p["buffers"].key) for p in group]
             joint = invsss.fit_pairs(data, light_terms=terms, **fit_options)
-            for p, fitted in zip(group, joint.fitted):
-                row = f"joint fit + {' + '.join(terms)} ({len(group)} views)"
-                table[p["name"]][row] = score(fitted, p, eroded(p["mask"], args.erode))
-                table[p["name"]][row]["light_terms"] = joint.light_terms
+            fitted_sets = [("", joint)]
+            if terms in FREE_PROFILE_ROWS:
+                free = invsss.fit_pairs(data, light_terms=terms, gauge="sss_level",
+                                        fix={"sss_level": float(joint.params.sss_level)}, **fit_options)
+                fitted_sets.append((", free variances", free))
+            for suffix, result in fitted_sets:
+                for p, fitted in zip(group, result.fitted):
+                    row = f"joint fit + {' + '.join(terms)}{suffix} ({len(group)} views)"
+                    table[p["name"]][row] = score(fitted, p, eroded(p["mask"], args.erode))
+                    table[p["name"]][row]["light_terms"] = result.light_terms
+                    if suffix:
+                        table[p["name"]][row]["variances"] = np.asarray(result.values["variances"]).tolist()
 
     args.out.mkdir(parents=True, exist_ok=True)
     summary = {}
@@ -263,7 +287,7 @@ def main() -> None:
                 save_residual(args.out / name / f"residual_{slug}.png", result["residual"],
                               eroded(next(p for p in pairs if p["name"] == name)["mask"], args.erode))
         summary[name] = {row: {"psnr": r["psnr"], "ssim": r["ssim"], "coarse_share": r["coarse"],
-                               "light_terms": r.get("light_terms")}
+                               "light_terms": r.get("light_terms"), "variances": r.get("variances")}
                          for row, r in rows.items()}
     (args.out / "fidelity.json").write_text(json.dumps(summary, indent=2) + "\n")
 
