@@ -300,13 +300,17 @@ def plot_fit_report(result, pairs, path) -> None:
             f"pairs: the result has {len(fitted)} fitted image(s) but {len(pairs)} pair(s) were given"
         )
     rows = len(pairs)
-    width, height = 4 * _PANEL_INCHES + 0.6, rows * _PANEL_INCHES + 5.6
+    lines = _parameter_lines(result)
+    # The text box grows with its lines (8 pt monospace: 0.147 in each, measured), so
+    # a fit with many warnings keeps the last of them on the page.
+    text_inches = max(2.3, 0.35 + 0.15 * len(lines))
+    width, height = 4 * _PANEL_INCHES + 0.6, rows * _PANEL_INCHES + 3.3 + text_inches
     fig = Figure(figsize=(width, height))
     FigureCanvasAgg(fig)
     # Fixed margins (inches) instead of matplotlib's constrained layout, which
     # measured every text box twice and took a third of the page's 0.55 s.
     grid = fig.add_gridspec(
-        rows + 2, 4, height_ratios=[_PANEL_INCHES] * rows + [3.0, 2.3],
+        rows + 2, 4, height_ratios=[_PANEL_INCHES] * rows + [3.0, text_inches],
         left=0.8 / width, right=1.0 - 1.0 / width, top=1.0 - 0.3 / height, bottom=0.1 / height,
         wspace=0.32, hspace=0.3,
     )
@@ -352,7 +356,7 @@ def plot_fit_report(result, pairs, path) -> None:
     text = fig.add_subplot(grid[rows + 1, 0:4])
     text.axis("off")
     box = text.text(
-        0.0, 1.0, "\n".join(_parameter_lines(result)), va="top", ha="left",
+        0.0, 1.0, "\n".join(lines), va="top", ha="left",
         family="monospace", fontsize=8, transform=text.transAxes, wrap=True,
         bbox={"boxstyle": "round", "facecolor": "0.96", "edgecolor": "0.7"},
     )
