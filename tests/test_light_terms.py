@@ -272,7 +272,6 @@ def test_fit_recovers_the_terms_and_the_blur():
     assert set(record) == {"shift", "grazing", "stderr", "fixed"} and record["fixed"] == []
 
 
-@pytest.mark.slow
 def _dome_pair(size=40):
     """A model-made pair for the incidence term: a textured dome lit from the upper
     left, so that the view angle (n_z) and the key light's incidence (n . l) vary
