@@ -37,6 +37,8 @@ from .validation import InvalidInputError
 __all__ = ["plot_fit_report"]
 
 _PANEL_INCHES = 2.9
+#: Resolution of the page (dots per inch), for the layout and the saved image alike.
+_DPI = 110
 _TEXT_WIDTH = 84  # characters per line in the parameter box
 
 
@@ -305,7 +307,7 @@ def plot_fit_report(result, pairs, path) -> None:
     # a fit with many warnings keeps the last of them on the page.
     text_inches = max(2.3, 0.35 + 0.15 * len(lines))
     width, height = 4 * _PANEL_INCHES + 0.6, rows * _PANEL_INCHES + 3.3 + text_inches
-    fig = Figure(figsize=(width, height))
+    fig = Figure(figsize=(width, height), dpi=_DPI)
     FigureCanvasAgg(fig)
     # Fixed margins (inches) instead of matplotlib's constrained layout, which
     # measured every text box twice and took a third of the page's 0.55 s.
@@ -361,4 +363,4 @@ def plot_fit_report(result, pairs, path) -> None:
         bbox={"boxstyle": "round", "facecolor": "0.96", "edgecolor": "0.7"},
     )
     box.set_in_layout(False)  # long lines must not squeeze the panels above
-    fig.savefig(os.fspath(path), dpi=110)
+    fig.savefig(os.fspath(path), dpi=_DPI)
