@@ -433,6 +433,7 @@ def test_sweep_fits_the_terms_from_pair_folder_buffers(tmp_path):
     for light terms, reports kappa and gamma beside the parameters, recovers them as
     fit_pair does, and keeps the ids of trials without terms."""
     import invsss.experiments as ex
+    from _pair_files import light_sweep_text, write_pair_folder
     from invsss.experiments.trials import trial_id
 
     source, depth, mask, buffers = _lit_pair(32)
@@ -440,13 +441,8 @@ def test_sweep_fits_the_terms_from_pair_folder_buffers(tmp_path):
     target = np.asarray(invsss.render(source, depth, mask, truth, light_terms=LightTerms(shift=1.2, grazing=0.3),
                                       light_buffers=buffers))
     folder = tmp_path / "data" / "card"
-    folder.mkdir(parents=True)
-    for name, image in (("source.exr", source), ("target.exr", target), ("depth.exr", depth), ("mask.png", mask),
-                        ("normal.exr", buffers.normal), ("light.exr", buffers.light)):
-        invsss.write_image(folder / name, np.asarray(image, np.float32))
-    text = ('task = "fit"\n[data]\npairs = ["data/*/"]\n[base]\nn_starts = 1\nrobust = "none"\n'
-            'profile = {weights = [0.5, 0.5], variances = [0.5, 2.0]}\nfix = {correction = 0.0, maxdd = 1.0}\n'
-            '[grid]\nlight_terms = ["", "shift,grazing"]\n')
+    write_pair_folder(folder, (source, target, depth, mask), buffers)
+    text = light_sweep_text('["", "shift,grazing"]')
     path = tmp_path / "lit.toml"
     path.write_text(text)
     experiment = ex.load(path)
@@ -472,12 +468,10 @@ def test_sweep_fits_the_terms_from_pair_folder_buffers(tmp_path):
 
 def test_sweep_refuses_light_terms_without_the_buffer(tmp_path):
     import invsss.experiments as ex
+    from _pair_files import write_pair_folder
 
     source, depth, mask, _ = _lit_pair(16)
-    folder = tmp_path / "data" / "card"
-    folder.mkdir(parents=True)
-    for name, image in (("source.exr", source), ("target.exr", source), ("depth.exr", depth), ("mask.png", mask)):
-        invsss.write_image(folder / name, np.asarray(image, np.float32))
+    write_pair_folder(tmp_path / "data" / "card", (source, source, depth, mask))
     path = tmp_path / "lit.toml"
     path.write_text('task = "fit"\n[data]\npairs = ["data/card/"]\n[base]\nlight_terms = ["shift"]\n')
     with pytest.raises(invsss.InvalidInputError, match=r"lit\.toml: trial 1 \(pair='card'\): light term 'shift' needs light\.exr "

@@ -449,17 +449,13 @@ def test_cli_fit_and_render_with_the_key_buffer(tmp_path, capsys):
 @pytest.mark.slow
 def test_sweep_reads_the_key_only_for_trials_with_the_law(tmp_path):
     import invsss.experiments as ex
+    from _pair_files import light_sweep_text, write_pair_folder
 
     source, depth, mask, buffers = _dome_with_two_lights(32)
     target = _target(source, depth, mask, buffers, LightTerms(law=[0.95, 0.85, 0.7]))
     folder = tmp_path / "data" / "dome"
-    folder.mkdir(parents=True)
-    for name, image in (("source.exr", source), ("target.exr", target), ("depth.exr", depth), ("mask.png", mask),
-                        ("normal.exr", buffers.normal), ("light.exr", buffers.light)):
-        invsss.write_image(folder / name, np.asarray(image, np.float32))
-    text = ('task = "fit"\n[data]\npairs = ["data/*/"]\n[base]\nn_starts = 1\nrobust = "none"\n'
-            'profile = {weights = [0.5, 0.5], variances = [0.5, 2.0]}\nfix = {correction = 0.0, maxdd = 1.0}\n'
-            '[grid]\nlight_terms = ["incidence", "law"]\n')
+    write_pair_folder(folder, (source, target, depth, mask), buffers)
+    text = light_sweep_text('["incidence", "law"]')
     path = tmp_path / "law.toml"
     path.write_text(text)
     # Without key.exr the trial with the law is refused before anything runs.
