@@ -25,6 +25,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ..light_terms import (
+    AFTER_BLUR,
     LightTerms,
     grazing_field,
     incidence_field,
@@ -35,14 +36,14 @@ from ..light_terms import (
 )
 from ..stretch import stretch_factors
 from .basis import basis_images
-from .parametrisation import Parametrisation
+from .parametrisation import LIGHT_UNKNOWNS, Parametrisation
 from .projection import combine, solve_linear
 from .vignetting import vignetting_field
 
 __all__ = ["Objective"]
 
 #: The unknowns of the terms applied to the blurred images (``law`` changes the source).
-_AFTER_BLUR = ("light_shift", "grazing", "incidence")
+_AFTER_BLUR = tuple(LIGHT_UNKNOWNS[term] for term in AFTER_BLUR)
 
 
 def _lit_source(pair, natural):
