@@ -74,8 +74,10 @@ THESIS_HAND_VALUES = ((0.5, 2000.0), (0.7, 7500.0), (0.4, 4500.0))
 #: The light-aware term sets fitted on top of the plain fit; the last is all of them.
 LIGHT_TERM_ROWS = (("shift",), ("grazing",), ("incidence",), ("shift", "grazing"), ("shift", "grazing", "incidence"),
                    ("law",), ("shift", "law"), ("shift", "grazing", "incidence", "law"))
-#: The term sets also fitted with free variances, per pair and jointly per medium.
+#: The term sets also fitted with free variances, per pair and jointly per medium,
+#: and the label those rows carry.
 FREE_PROFILE_ROWS = (("shift", "law"),)
+FREE = ", free variances"
 #: The term sets carried to the other view of the same medium and fitted jointly on all its views.
 TRANSFER_ROWS = (("shift", "grazing", "incidence"), ("shift", "law"), ("shift", "grazing", "incidence", "law"))
 #: The thesis gives no maxdd; this one (mm per pixel) never clamps a slope.
@@ -224,17 +226,17 @@ def main() -> None:
             lit = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"],
                                   light_terms=terms, light_buffers=buffers, **fit_options)
             label = "fit + " + " + ".join(terms)
-            fits[(pair["name"], terms)] = lit
+            fits[(pair["name"], terms, "")] = lit
             rows[label] = score(lit.fitted[0], pair, mask)
             rows[label]["light_terms"] = lit.light_terms
             if terms in FREE_PROFILE_ROWS:
                 free = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"],
                                        light_terms=terms, light_buffers=buffers, gauge="sss_level",
                                        fix={"sss_level": float(lit.params.sss_level)}, **fit_options)
-                fits[(pair["name"], terms, "free")] = free
-                rows[label + ", free variances"] = score(free.fitted[0], pair, mask)
-                rows[label + ", free variances"]["light_terms"] = free.light_terms
-                rows[label + ", free variances"]["variances"] = np.asarray(free.values["variances"]).tolist()
+                fits[(pair["name"], terms, FREE)] = free
+                rows[label + FREE] = score(free.fitted[0], pair, mask)
+                rows[label + FREE]["light_terms"] = free.light_terms
+                rows[label + FREE]["variances"] = np.asarray(free.values["variances"]).tolist()
         rows["noise ceiling"] = {"psnr": pair["info"]["noise"]["noise_ceiling_db"], "ssim": None, "coarse": None,
                                  "residual": None}
         table[pair["name"]] = rows
@@ -244,14 +246,12 @@ def main() -> None:
             mask = eroded(b["mask"], args.erode)
             prediction = invsss.render(b["source"], b["depth"], b["mask"], fits[a["name"]].params, model="sog")
             table[b["name"]][f"fit from {a['name']}"] = score(prediction, b, mask)
-            for key in (*TRANSFER_ROWS, *((t, "free") for t in FREE_PROFILE_ROWS)):
-                lit = fits.get((a["name"], *key) if key[-1] == "free" else (a["name"], key))
-                terms = key[0] if key[-1] == "free" else key
-                if lit is not None and (b["name"], terms) in fits:
+            for terms, suffix in (*((t, "") for t in TRANSFER_ROWS), *((t, FREE) for t in FREE_PROFILE_ROWS)):
+                lit = fits.get((a["name"], terms, suffix))
+                if lit is not None and (b["name"], terms, suffix) in fits:
                     prediction = invsss.render(b["source"], b["depth"], b["mask"], lit.params, model="sog",
                                                light_terms=lit.light_terms_params(), light_buffers=b["buffers"])
-                    free = ", free variances" if key[-1] == "free" else ""
-                    table[b["name"]][f"fit + {' + '.join(terms)}{free} from {a['name']}"] = score(prediction, b, mask)
+                    table[b["name"]][f"fit + {' + '.join(terms)}{suffix} from {a['name']}"] = score(prediction, b, mask)
     media: dict[tuple, list] = {}
     for pair in pairs:
         media.setdefault(medium_key(pair["info"]), []).append(pair)
@@ -264,7 +264,7 @@ def main() -> None:
             if terms in FREE_PROFILE_ROWS:
                 free = invsss.fit_pairs(data, light_terms=terms, gauge="sss_level",
                                         fix={"sss_level": float(joint.params.sss_level)}, **fit_options)
-                fitted_sets.append((", free variances", free))
+                fitted_sets.append((FREE, free))
             for suffix, result in fitted_sets:
                 for p, fitted in zip(group, result.fitted):
                     row = f"joint fit + {' + '.join(terms)}{suffix} ({len(group)} views)"

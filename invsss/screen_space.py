@@ -263,7 +263,7 @@ def _light_buffers(terms, buffers, hw, mask, channels) -> LightBuffers:
         )
     if not is_concrete(mask):
         return buffers
-    return buffers.checked(hw, mask, channels=channels if buffers.key is not None else None)
+    return buffers.checked(hw, mask, channels=channels)
 
 
 def render(
