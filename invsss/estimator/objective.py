@@ -37,13 +37,16 @@ from ..light_terms import (
 from ..stretch import stretch_factors
 from .basis import basis_images
 from .parametrisation import LIGHT_UNKNOWNS, Parametrisation
-from .projection import combine, solve_linear
+from .projection import combine, projected_jacobian, solve_linear
 from .vignetting import vignetting_field
 
 __all__ = ["Objective"]
 
 #: The unknowns of the terms applied to the blurred images (``law`` changes the source).
 _AFTER_BLUR = tuple(LIGHT_UNKNOWNS[term] for term in AFTER_BLUR)
+#: The unknowns the blurred basis images depend on (the grey mix apart: the blur is
+#: linear in the image); the others act after the blur.
+_BLURRED_BY = ("sss_level", "correction", "maxdd", "variances", "weights", LIGHT_UNKNOWNS["law"])
 
 
 def _lit_source(pair, natural):
@@ -161,33 +164,84 @@ class Objective(eqx.Module):
         """The residual at ``z`` and its Jacobian, the blur by forward differences.
 
         The blurred basis images are differentiated by forward differences of
-        ``step`` in each unknown (one blur per unknown, where forward mode costs
-        about two: each tap gathers the tangent image and the image's slope); the
-        rest (light terms, vignetting, the projection) by forward mode through their
-        linearisation in those images. Differencing the whole residual instead
-        would difference the projection's solve too, whose rounding (its normal
-        matrix is ill-conditioned: neighbouring layers are alike) then enters the
-        columns at 1e-10 / step and makes the solver's path depend on how XLA
-        happened to compile it.
+        ``step`` in each unknown the blur depends on (one blur per unknown, where
+        forward mode costs about two: each tap gathers the tangent image and the
+        image's slope), except the grey mix, whose columns are exact and cost no
+        blur (:meth:`_blurred_with_slopes`). The terms after the blur, the
+        vignetting and the gain ratios are differentiated by forward mode through
+        their linearisation in those images, and the projection by its closed form
+        (:func:`~.projection.projected_jacobian`). Differencing the whole residual
+        instead would difference the projection's solve too, whose rounding (its
+        normal matrix is ill-conditioned: neighbouring layers are alike) then
+        enters the columns at 1e-10 / step and makes the solver's path depend on
+        how XLA happened to compile it.
         """
         natural = self.param.natural(z)
-        blurred = self.blurred_bases(natural)
+        blurred, slopes = self._blurred_with_slopes(z, natural, step)
+
+        def mixing_inputs(u, images):
+            moved = self.param.natural(u)
+            return self.bases(moved, images), self.ratios(moved)
+
+        bases, ratios = mixing_inputs(z, blurred)
+        # One forward-mode direction per unknown: unit in z, the blur's slope in the images.
+        d_bases, d_ratios = jax.vmap(lambda t, s: jax.jvp(mixing_inputs, (z, blurred), (t, s))[1])(
+            jnp.eye(z.size, dtype=z.dtype), slopes
+        )
+        targets = tuple(p.target for p in self.pairs)
+        weights = self.weights()
+        coef, offset, d_predictions = projected_jacobian(
+            bases, targets, weights, ratios, self.active, d_bases,
+            d_ratios if "gain_ratio" in natural else None,
+        )
+        residual = self.mixed_residual(bases, ratios, coef, offset)
+        jacobian = jnp.concatenate(
+            [(-jnp.sqrt(w)[None] * d).reshape(z.size, -1) for w, d in zip(weights, d_predictions)], axis=1
+        )
+        return residual, jacobian.T / self.scale
+
+    def _blurred_with_slopes(self, z, natural, step) -> tuple[tuple, tuple]:
+        """The blurred basis images of every pair and their derivative along each
+        unknown, ``(n, nb, H, W, C)`` per pair.
+
+        Only the unknowns the blur depends on (:data:`_BLURRED_BY`) are differenced;
+        the others (the gain ratios, the vignetting, the terms after the blur) leave
+        the blurred images as they are. A grey mix is exact instead: the passes
+        are linear in the image, so the blur of the mixed source is the mix of the
+        blurred source channels, and each channel is blurred once (a three-channel
+        blur costs about 1.25 grey ones on CPU: the sample positions are shared),
+        where differencing the mix would cost two blurs.
+        """
         h = jnp.asarray(step, z.dtype)
         taken = (z + h) - z  # divide by the step actually taken
+        blocks = self.param.layout()
+        if "mix" in natural:
+            channels = self.blurred_bases({k: v for k, v in natural.items() if k != "mix"})
+            blurred = tuple(jnp.einsum("ihwc,c->ihw", x, natural["mix"])[..., None] for x in channels)
+        else:
+            blurred = self.blurred_bases(natural)
+        columns = [[None] * z.size for _ in self.pairs]
+        differenced = [j for name, (first, stop) in blocks.items() if name in _BLURRED_BY for j in range(first, stop)]
+        if differenced:
 
-        def column(j):
-            moved = self.blurred_bases(self.param.natural(z.at[j].add(h)))
-            return tuple((a - b) / taken[j] for a, b in zip(moved, blurred))
+            def column(j):
+                moved = self.blurred_bases(self.param.natural(z.at[j].add(h)))
+                return tuple((a - b) / taken[j] for a, b in zip(moved, blurred))
 
-        slopes = jax.lax.map(column, jnp.arange(z.size))  # each (n, nb, H, W, C)
-
-        def linearised(u):
-            images = tuple(b + jnp.tensordot(u - z, d, axes=1) for b, d in zip(blurred, slopes))
-            _, bases, ratios, coef, offset = self.linear(u, images)
-            return self.mixed_residual(bases, ratios, coef, offset)
-
-        jacobian, residual = jax.jacfwd(lambda u: (linearised(u),) * 2, has_aux=True)(z)
-        return residual, jacobian
+            found = jax.lax.map(column, jnp.asarray(differenced))
+            for p, slopes in enumerate(found):
+                for i, j in enumerate(differenced):
+                    columns[p][j] = slopes[i]
+        if "mix" in natural:
+            first, stop = blocks["mix"]
+            for j in range(first, stop):
+                d_mix = jax.jvp(lambda u: self.param.natural(u)["mix"], (z,), (jnp.zeros_like(z).at[j].set(1.0),))[1]
+                for p, x in enumerate(channels):
+                    columns[p][j] = jnp.einsum("ihwc,c->ihw", x, d_mix)[..., None]
+        slopes = tuple(
+            jnp.stack([jnp.zeros_like(b) if c is None else c for c in cols]) for b, cols in zip(blurred, columns)
+        )
+        return blurred, slopes
 
     def explicit_residual(self, z, coef, offset) -> Float[Array, " N"]:
         """The residual with the linear unknowns given instead of projected out."""

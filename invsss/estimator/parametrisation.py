@@ -234,14 +234,19 @@ class Parametrisation(eqx.Module):
     def free(self) -> tuple[str, ...]:
         return tuple(name for name, _ in self.blocks)
 
-    def split(self, z: Float[Array, " n"]) -> dict[str, Array]:
-        """The free blocks of ``z`` by name, reshaped."""
+    def layout(self) -> dict[str, tuple[int, int]]:
+        """Where each free block lies in ``z``: ``{name: (first, stop)}``."""
         out, i = {}, 0
         for name, shape in self.blocks:
             n = int(np.prod(shape))
-            out[name] = z[i : i + n].reshape(shape)
+            out[name] = (i, i + n)
             i += n
         return out
+
+    def split(self, z: Float[Array, " n"]) -> dict[str, Array]:
+        """The free blocks of ``z`` by name, reshaped."""
+        shapes = dict(self.blocks)
+        return {name: z[first:stop].reshape(shapes[name]) for name, (first, stop) in self.layout().items()}
 
     def natural(self, z: Float[Array, " n"]) -> dict[str, Array]:
         """Every parameter's natural value (free ones from ``z``, the rest as given).
