@@ -148,10 +148,12 @@ class DenseJacobian(eqx.Module):
     6 ms after.
 
     ``differences`` (static): the objective's own ``difference_jacobian`` (the
-    blur by forward differences, the rest by forward mode) instead of
-    ``jax.jacfwd`` throughout. Measured per Jacobian: 78 against 101 ms on
-    data_synthetic/fran_front (224 x 224, five unknowns), 12 against 19 ms on
-    pt_face_940 (128 x 128, three). A solver needs no more accuracy than that
+    blur by forward differences, the grey mix exact, the projection in closed
+    form) instead of ``jax.jacfwd`` throughout. Measured per Jacobian when the
+    blur alone was differenced: 78 against 101 ms on data_synthetic/fran_front
+    (224 x 224, five unknowns), 12 against 19 ms on pt_face_940 (128 x 128,
+    three); the mix and the closed form then halved fran_front's (129-143 to
+    66-74 ms on a slower machine). A solver needs no more accuracy than that
     (experiments/bench_fit.py --jacobian); the standard errors a fit reports
     come from forward mode (:mod:`.uncertainty`).
     """
