@@ -149,3 +149,22 @@ def test_starts_that_reach_a_known_basin_end_there(monkeypatch, n_starts):
     assert abs(chi2) < 0.1
     for name in ("sss_level", "correction", "maxdd"):
         assert abs(float(ended.values[name]) - float(walked.values[name])) < 0.5 * float(walked.stderr[name])
+
+
+def test_a_resumed_solve_walks_the_path_of_one_uninterrupted_solve():
+    """A solve stopped after three steps and resumed from its state takes the steps
+    one solve would have taken; started afresh at the same point it spends its
+    first step evaluating that point again (the loss repeats)."""
+    solver = optx.LevenbergMarquardt(rtol=1e-12, atol=1e-12)
+    with jax.enable_x64(True):
+        problem = _Decay(jnp.linspace(0.0, 5.0, 50), 2.0 * jnp.exp(-0.7 * jnp.linspace(0.0, 5.0, 50)) + 0.1)
+        z0 = jnp.array([0.5, 1.5, 0.0])
+        whole = run_solver(solver, problem, z0, 50)
+        first = run_solver(solver, problem, z0, 3)
+        resumed = run_solver(solver, problem, first.z, 50, state=first.state)
+        fresh = run_solver(solver, problem, first.z, 50)
+    assert not first.converged and whole.converged and resumed.converged and whole.steps > 5
+    np.testing.assert_array_equal(np.concatenate([first.history, resumed.history]), whole.history)
+    np.testing.assert_array_equal(np.asarray(resumed.z), np.asarray(whole.z))
+    assert fresh.history[0] == first.history[-1]
+    assert resumed.history[0] < first.history[-1]

@@ -685,11 +685,11 @@ def _solve(problem, options, steps) -> _Path:
     if steps.stop_requested():
         raise FitInterrupted("stop: the fit was interrupted before its first solver step")
 
-    def run(label, z0, with_solver=solver, arrived=None, max_steps=None):
+    def run(label, z0, with_solver=solver, arrived=None, max_steps=None, state=None):
         steps.begin(label)
         stall = SCREEN_STALL_TOL if with_solver is screen else STALL_TOL
         return run_solver(with_solver, path.objective, z0, max_steps or options.max_steps, steps,
-                          steps.stop_requested, arrived, NOISE_TOL, stall, SOLVER_JACOBIAN)
+                          steps.stop_requested, arrived, NOISE_TOL, stall, SOLVER_JACOBIAN, state)
 
     # Multi-start from the lowest local minima of the blur scan; keep the best.
     # Successive halving: every start first takes HALVING_STEPS steps, and only
@@ -706,6 +706,7 @@ def _solve(problem, options, steps) -> _Path:
 
     def finish(number, record):
         nonlocal best
+        record = record._replace(state=None)  # a solver state holds the Jacobian: let it go
         minima.append(np.asarray(record.z))
         records.append((number, record))
         if best is None or record.final < best.final:
@@ -728,9 +729,13 @@ def _solve(problem, options, steps) -> _Path:
             finish(number, record)
     elif halving:
         ranked = sorted(first, key=lambda item: item[1].final)[: (len(first) + 1) // 2]
-        for number, record in ranked:
+        first.clear()
+        while ranked:
+            number, record = ranked.pop(0)
             if not record.converged:
-                record = run(f"start {number}, continued", record.z, screen, known_basin)
+                # Resumed where the first round stopped, with the same solver and
+                # objective: a fresh solve would spend a step on the point it left.
+                record = run(f"start {number}, continued", record.z, screen, known_basin, state=record.state)
             finish(number, record)
             if record.interrupted:
                 interrupted = True

@@ -290,6 +290,7 @@ class SolveRecord(NamedTuple):
     converged: bool
     failure: str = ""
     interrupted: bool = False
+    state: object = None  # the solver's state after the last step: run_solver(state=) resumes there
 
     @property
     def final(self) -> float:
@@ -307,6 +308,7 @@ def run_solver(
     noise_tolerance: float | None = None,
     stall_tolerance: float | None = None,
     jacobian: str = "forward-mode",
+    state=None,
 ) -> SolveRecord:
     """Iterate ``solver`` from ``z0`` for at most ``max_steps`` steps.
 
@@ -342,6 +344,12 @@ def run_solver(
         prediction of the first test does not hold.
     jacobian : {"forward-mode", "differences"}
         How the solver's Jacobian is computed (:class:`DenseJacobian`).
+    state : optional
+        The ``state`` of an earlier record of the same solver, objective and
+        Jacobian, whose ``z`` is then ``z0``: the solve goes on from there as if
+        it had not stopped, instead of starting afresh at ``z0`` (a fresh start
+        spends its first step evaluating the point that solve had already
+        evaluated and accepted).
 
     Returns
     -------
@@ -369,18 +377,20 @@ def run_solver(
         noise_tolerance = jax.device_put(np.asarray(noise_tolerance, jnp.result_type(float)))
     try:
         return _iterate(solver, fn, jnp.asarray(z0), max_steps, on_step, stop, arrived, noise_tolerance,
-                        stall_tolerance, _init, _step)
+                        stall_tolerance, _init, _step, state)
     except StaleStatics:
         # The state came from a stored _init whose _step is not stored: solve
-        # again from the start with functions traced here. This happens before
-        # the first step is reported, so the caller sees one solve.
+        # again from z0 with functions traced here (a state to resume is
+        # dropped). This happens before the first step is reported, so the
+        # caller sees one solve.
         return _iterate(solver, fn, jnp.asarray(z0), max_steps, on_step, stop, arrived, noise_tolerance,
                         stall_tolerance, _init.jitted, _step.jitted)
 
 
 def _iterate(solver, fn, z, max_steps, on_step, stop, arrived, noise_tolerance, stall_tolerance,
-             init, step) -> SolveRecord:
-    state = init(solver, fn, z)
+             init, step, state=None) -> SolveRecord:
+    if state is None:
+        state = init(solver, fn, z)
     history, accepted = [], []
     converged, failure, interrupted = False, "", False
     for _ in range(max_steps):
@@ -407,4 +417,4 @@ def _iterate(solver, fn, z, max_steps, on_step, stop, arrived, noise_tolerance, 
         if not np.isfinite(loss):
             failure = "the loss is not finite"
             break
-    return SolveRecord(z, np.asarray(history), len(history), converged, failure, interrupted)
+    return SolveRecord(z, np.asarray(history), len(history), converged, failure, interrupted, state)
