@@ -729,6 +729,8 @@ def _solve(problem, options, steps) -> _Path:
             finish(number, record)
     elif halving:
         ranked = sorted(first, key=lambda item: item[1].final)[: (len(first) + 1) // 2]
+        # Pop each start and clear the rest: an unfinished record holds its solver
+        # state (the Jacobian among it), which should not outlive its use.
         first.clear()
         while ranked:
             number, record = ranked.pop(0)
