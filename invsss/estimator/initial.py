@@ -103,7 +103,7 @@ def _with(param, z_base, **blocks):
     return np.concatenate(out) if out else np.zeros(0)
 
 
-def choose_starts(loss, param, scales: DataScales, blur_at_zero: float | None, z_base, n_starts: int):
+def choose_starts(losses, param, scales: DataScales, blur_at_zero: float | None, z_base, n_starts: int):
     """Starting unknown vectors, best first.
 
     Stage 1 scans the blur scale alone (correction at a tenth of its reference,
@@ -112,7 +112,12 @@ def choose_starts(loss, param, scales: DataScales, blur_at_zero: float | None, z
     are the ``n_starts`` lowest *local minima* of that profile, topped up with
     the best remaining points. Stage 2 picks, for each, the best correction (0.01
     to 2 times its reference) and maxdd (15th, 50th, 85th percentile of the masked
-    slopes), one axis after the other. ``loss(z)`` evaluates the objective.
+    slopes), one axis after the other.
+
+    ``losses(points)`` evaluates the objective at a list of unknown vectors and
+    returns their losses in order. The points of one call do not depend on each
+    other's losses, so it may evaluate them concurrently: three calls in all
+    (the blur grid, the corrections of every start, their maxdd values).
     """
     blocks = dict(param.blocks)
     c_mid = {"correction": float(softplus_inverse(0.1))} if "correction" in blocks else {}
@@ -127,8 +132,7 @@ def choose_starts(loss, param, scales: DataScales, blur_at_zero: float | None, z
             u = {"sss_level": b} if "sss_level" in blocks else {"variances": 2.0 * b}
             return _with(param, z_base, **u, **c_mid, **d_mid)
 
-        profile = np.array([loss(at(b)) for b in blur])
-        profile = np.where(np.isfinite(profile), profile, np.inf)
+        profile = _finite(losses([at(b) for b in blur]))
         padded = np.concatenate([[np.inf], profile, [np.inf]])
         minima = [i for i in range(len(blur)) if padded[i + 1] <= min(padded[i], padded[i + 2])]
         order = sorted(minima, key=lambda i: profile[i])
@@ -143,24 +147,42 @@ def choose_starts(loss, param, scales: DataScales, blur_at_zero: float | None, z
         values = np.percentile(positive, _MAXDD_PERCENTILES) if positive.size else np.array([scales.slope])
         d_axis = list(np.log(np.unique(values) / scales.slope))
 
-    def best(points, known=None):
-        # The lowest-loss point (a non-finite loss never wins); ``known`` is a
-        # (point, loss) pair already evaluated, to be compared, not recomputed.
-        scores = [loss(o) for o in points]
-        if known is not None:
-            points, scores = [known[0], *points], [known[1], *scores]
-        scores = np.where(np.isfinite(scores), scores, np.inf)
-        k = int(np.argmin(scores))
-        return points[k], scores[k]
-
     # One axis at a time: correction at the middle maxdd, then maxdd at the best
     # correction (6 losses a start instead of 12). On the seven bundled pairs the
-    # fits end at the same estimates as with the whole grid.
+    # fits end at the same estimates as with the whole grid. Each axis is one
+    # call of ``losses`` for all the starts together.
     middle = len(d_axis) // 2
     d_middle = {} if d_axis[0] is None else {"maxdd": d_axis[middle]}
-    refined = []
-    for z in starts:
-        known = best([_with(param, z, **({} if c is None else {"correction": c}), **d_middle) for c in c_axis])
-        others = [d for i, d in enumerate(d_axis) if i != middle and d is not None]
-        refined.append(best([_with(param, known[0], maxdd=d) for d in others], known)[0])
-    return refined
+    by_correction = [
+        [_with(param, z, **({} if c is None else {"correction": c}), **d_middle) for c in c_axis] for z in starts
+    ]
+    best = [_lowest(points, scores) for points, scores in zip(by_correction, _rows(losses, by_correction))]
+    others = [d for i, d in enumerate(d_axis) if i != middle and d is not None]
+    by_maxdd = [[_with(param, point, maxdd=d) for d in others] for point, _ in best]
+    return [
+        _lowest([point, *points], [score, *scores])[0]
+        for (point, score), points, scores in zip(best, by_maxdd, _rows(losses, by_maxdd))
+    ]
+
+
+def _finite(scores) -> np.ndarray:
+    # A non-finite loss never wins.
+    scores = np.asarray(scores, np.float64)
+    return np.where(np.isfinite(scores), scores, np.inf)
+
+
+def _lowest(points, scores):
+    """The point with the lowest loss (the first of equals), and that loss."""
+    scores = _finite(scores)
+    k = int(np.argmin(scores))
+    return points[k], scores[k]
+
+
+def _rows(losses, table) -> list:
+    """``losses`` of every point of a list of lists, in one call, as rows again."""
+    flat = losses([point for row in table for point in row])
+    out, first = [], 0
+    for row in table:
+        out.append(list(flat[first:first + len(row)]))
+        first += len(row)
+    return out
