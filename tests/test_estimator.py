@@ -594,3 +594,20 @@ def test_build_problem_starts_where_it_is_told():
     for name in ("sss_level", "correction", "maxdd"):
         assert float(natural[name]) == pytest.approx(start[name], rel=1e-12)
     assert "weights" not in problem.param.free
+
+
+def test_start_scan_threads_give_each_points_own_float64_loss():
+    # The scan evaluates its points on SCAN_THREADS threads; float64 mode is a
+    # per-thread setting, and a thread without it would compute in float32.
+    from invsss.estimator.problem import SCAN_THREADS, _scan_losses
+
+    source, target, depth, mask, _ = scene(size=32)
+    problem = invsss.estimator.build_problem([(source, target, depth, mask)], FitOptions(profile=PROFILE3), start={})
+    rng = np.random.default_rng(3)
+    points = [np.asarray(problem.z0) + 0.3 * rng.standard_normal(problem.z0.shape) for _ in range(3 * SCAN_THREADS)]
+    threaded = _scan_losses(problem.objective)(points)
+    with jax.enable_x64(True):
+        one_by_one = [problem.loss(z) for z in points]
+    assert threaded.dtype == np.float64
+    assert threaded.tolist() == one_by_one
+    assert len(set(threaded.tolist())) == len(points)  # each point's own loss, in order
