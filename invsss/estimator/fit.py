@@ -39,6 +39,7 @@ from ..light_terms import LightBuffers
 from ..pair import ImagePair
 from ..params import PARAM_NAMES, SSSParams
 from ..validation import InvalidInputError
+from .canvas import crop, frame_terms, unused_note
 from .diagnostics import MISALIGNMENT_PX, masked_psnr, masked_ssim, misalignment
 from ..registration import Warp, align_source, align_target, align_vectors, estimate_warp, match_photometry
 from .inputs import prepare_pairs
@@ -370,7 +371,7 @@ def _fit(pairs, single, options, progress, stop, nuisance=None, start=None) -> F
         tap_weights=options.tap_label,
     )
     if options.highlights and not result.interrupted:
-        return _fit_without_highlights(problem.data, result, single, options, progress, stop, nuisance)
+        return _fit_without_highlights(problem.given, result, single, options, progress, stop, nuisance)
     return result
 
 
@@ -441,7 +442,9 @@ def _fit_aligned(pairs, single, options, progress, stop) -> FitResult:
          np.asarray(p.mask, np.float64), p.target_ndim)
         for p in prepared
     ]
-    plain = dataclasses.replace(options, align="none")
+    # The warp's sensitivity resamples the pairs at their own sizes: no canvas
+    # (the warning says so; see .canvas).
+    plain = dataclasses.replace(options, align="none", canvas=None)
 
     def aligned(warps):
         out = []
@@ -515,6 +518,8 @@ def _fit_aligned(pairs, single, options, progress, stop) -> FitResult:
     resampled = max(_warp_change(w, Warp(w.kind, (0.0,) * len(w.params), w.centre), mask)
                     for w, (_, _, _, mask, _) in zip(warps, checked))
     messages = result.warnings
+    if options.canvas is not None:
+        messages += (unused_note(frame_terms(options)),)
     if resampled > ALIGN_SETTLED_PX:
         messages += (
             f"align: the source was resampled onto the photograph's grid (the warp moves it by up to "
@@ -866,7 +871,7 @@ def _report(problem, path, single, steps, nuisance=None) -> FitResult:
     """The estimate, its uncertainty and diagnostics (step 5 above)."""
     param, roles, data, c_tgt = problem.param, problem.roles, problem.data, problem.channels
     robust, max_steps = problem.options.robust, problem.options.max_steps
-    messages = list(path.messages)
+    messages = [*problem.notes, *path.messages]
     final = _evaluate(path.objective, jnp.asarray(path.z), np.asarray(True))
     ratios, coef, offset = (np.asarray(final[k]) for k in ("ratios", "coef", "offset"))
     natural = {k: np.asarray(v) for k, v in param.natural(np.asarray(path.z, np.float64)).items()}
@@ -909,10 +914,11 @@ def _report(problem, path, single, steps, nuisance=None) -> FitResult:
         )
 
     # Goodness of fit and alignment.
-    fitted = [np.asarray(q) for q in final["predictions"]]
+    # At each pair's own size (a canvas is only padding).
+    fitted = [crop(q, shape) for q, shape in zip(final["predictions"], problem.shapes)]
     # Scored where the residual counted (the mask, less any fit_weight exclusions).
-    masks = [np.asarray(p.residual_weight) for p in data]
-    targets = [np.asarray(p.target) for p in data]
+    masks = [np.asarray(p.residual_weight) for p in problem.given]
+    targets = [np.asarray(p.target) for p in problem.given]
     size = np.array([m.sum() for m in masks])
     psnr = float(np.average([masked_psnr(f, t, m) for f, t, m in zip(fitted, targets, masks)], weights=size))
     ssim = float(np.average([masked_ssim(f, t, m) for f, t, m in zip(fitted, targets, masks)], weights=size))

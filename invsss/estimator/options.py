@@ -25,7 +25,28 @@ from .parametrisation import GAUGES, assign_roles, check_fix, resolve_profile
 from .robust import check_robust
 from .solve import SOLVERS
 
-__all__ = ["FitOptions"]
+__all__ = ["FitOptions", "check_canvas"]
+
+
+def check_canvas(canvas) -> tuple[int, int]:
+    """``canvas`` as a (height, width) tuple of ints >= 1, or a one-line error.
+
+    Examples
+    --------
+    >>> check_canvas([256, 320])
+    (256, 320)
+    >>> check_canvas((256,))
+    Traceback (most recent call last):
+    ...
+    invsss.validation.InvalidInputError: canvas: expected (height, width), two integers >= 1, got (256,)
+    """
+    ok = (
+        isinstance(canvas, (tuple, list)) and len(canvas) == 2
+        and all(isinstance(n, numbers.Integral) and not isinstance(n, bool) and n >= 1 for n in canvas)
+    )
+    if not ok:
+        raise InvalidInputError(f"canvas: expected (height, width), two integers >= 1, got {canvas!r}")
+    return int(canvas[0]), int(canvas[1])
 
 
 # eq=False: ``fix`` holds arrays, whose == is elementwise, so value equality
@@ -70,6 +91,11 @@ class FitOptions:
         string). Each needs its buffers on every pair.
     light_fixed : mapping
         The held values (filled from ``light_terms``; read-only).
+    canvas : (int, int) or None
+        Pad every pair to this (height, width) before fitting, so that pairs of
+        different sizes share one compilation (:mod:`invsss.estimator.canvas`):
+        the estimate is the one at the pair's own size. A pair the padding
+        would change is fitted at its own size, with a warning.
 
     Raises
     ------
@@ -103,9 +129,13 @@ class FitOptions:
     saturation: float | None = None
     light_terms: tuple = ()
     light_fixed: object = None
+    canvas: tuple | None = None
 
     def __post_init__(self):
         from ..registration import ALIGN_KINDS
+
+        if self.canvas is not None:
+            object.__setattr__(self, "canvas", check_canvas(self.canvas))
 
         if self.align not in ("none", *ALIGN_KINDS):
             raise InvalidInputError(f"align: expected one of none, {', '.join(ALIGN_KINDS)}, got {self.align!r}")

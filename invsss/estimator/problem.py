@@ -19,6 +19,7 @@ import numpy as np
 from ..executable_cache import persistent_jit
 from ..params import PARAM_NAMES
 from ..validation import InvalidInputError
+from .canvas import on_canvas
 from .initial import blur_reference, choose_starts, data_scales
 from .inputs import prepare_pairs
 from .objective import Objective
@@ -223,7 +224,14 @@ class FitProblem:
     ----------
     options : FitOptions
     data : tuple of PairData
-        The checked float64 pairs.
+        The checked float64 pairs the fit evaluates: on ``options.canvas``
+        where that leaves the fit unchanged (:mod:`.canvas`).
+    given : tuple of PairData
+        The checked pairs at their own sizes.
+    shapes : tuple of (int, int)
+        Each pair's own (height, width): crop predictions on a canvas to it.
+    notes : list of str
+        Why pairs were left off the canvas (for the fit's warnings).
     roles : dict
         Each parameter's role: "free", "linear", "fixed" or "unused".
     fixed : dict
@@ -254,10 +262,14 @@ class FitProblem:
     """
 
     def __init__(self, data, options, profile_w, profile_v, start=None):
-        self.options, self.data, self.model = options, tuple(data), options.model
+        self.options, self.model = options, options.model
+        self.given = tuple(data)
+        self.shapes = tuple(tuple(np.shape(p.mask)) for p in self.given)
         self.fixed = dict(options.fix)
         self.roles = assign_roles(options.model, options.gauge, self.fixed)
-        self.scales = data_scales(self.data)
+        # The scales (the start grid's span among them) are the pairs' own, on a canvas too.
+        self.scales = data_scales(self.given)
+        self.data, self.notes = on_canvas(self.given, options)
         self.param, self.z_base = _build(
             self.data, self.roles, self.fixed, profile_w, profile_v, self.scales, options.vignetting,
             options.light_terms, options.light_fixed,
