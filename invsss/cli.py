@@ -36,6 +36,7 @@ import numpy as np
 from . import __version__
 from .estimator import FitInterrupted, fit_pair, fit_pairs
 from .interrupts import Interrupted, StopSignals
+from .estimator.options import check_canvas
 from .estimator.parametrisation import GAUGES
 from .estimator.solve import SOLVERS
 from .export import EXPORT_FORMATS, export_params
@@ -321,6 +322,11 @@ def _add_fit_parser(subparsers) -> None:
                         "--normal and --light), or a list such as 'shift,law'; "
                         "'shift=1.3' holds kappa at a value measured on a registered pair "
                         "(for --align), 'law=0.93/0.8/0.7' the albedos (default: none)")
+    parser.add_argument("--canvas", default=None, metavar="HxW",
+                        help="fit on a canvas of HxW pixels at least every pair's size (e.g. 256x256): pairs "
+                        "of different sizes then share their compiled functions, in this process and in the "
+                        "compilation cache, with the estimate of a fit at the pair's own size "
+                        "(docs/model.md, section 7)")
     parser.add_argument("--light", action="append", default=[], metavar="FILE",
                         help="camera-space unit vectors towards the light, float EXR or NPY (H, W, 3), "
                         "on the source's grid (repeat per pair)")
@@ -345,6 +351,17 @@ def _add_fit_parser(subparsers) -> None:
                         "files in DIR are kept)")
     _add_no_cache_argument(parser)
     parser.set_defaults(func=_run_fit)
+
+
+def _canvas(text: str | None) -> tuple[int, int] | None:
+    """``--canvas HxW``: two integers >= 1 (None when not given)."""
+    if text is None:
+        return None
+    height, sep, width = text.lower().partition("x")
+    try:
+        return check_canvas((int(height), int(width)) if sep else None)
+    except (ValueError, InvalidInputError):
+        raise InvalidInputError(f"--canvas {text!r}: expected HxW, two integers >= 1 (e.g. 256x256)") from None
 
 
 def _saturation_level(text: str, targets: list[str]) -> float | None:
@@ -500,6 +517,7 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
         if value < 1:
             raise InvalidInputError(f"{flag}: expected an integer >= 1, got {value}")
     fix = _parse_fix(args.fix)
+    canvas = _canvas(args.canvas)
     count = _check_pair_counts(args)
     names = _fit_file_names(count)
     # The report needs matplotlib (0.3-0.4 s to import); import it beside the fit,
@@ -518,6 +536,7 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
             solver=args.solver, n_starts=args.starts, max_steps=args.max_steps, align=args.align,
             vignetting=args.vignetting, highlights=args.highlights,
             saturation=_saturation_level(args.saturation, args.target), light_terms=args.light_terms,
+            canvas=canvas,
         )
         compiled_before = _compile_seconds()
         progress = _ProgressLine(sys.stderr, lambda: _compile_seconds() - compiled_before)

@@ -205,3 +205,19 @@ def test_progress_shows_the_stage_when_given():
     stream = io.StringIO()
     _ProgressLine(stream)(17, 1.234e-3, "start 2/4")
     assert stream.getvalue() == "fit: start 2/4  iter 17  loss 1.234e-03\n"
+
+
+@pytest.mark.parametrize("canvas", ["12", "12x", "0x40", "axb"])
+def test_malformed_canvas_is_one_line_error(scene, tmp_path, capsys, canvas):
+    code = main(["fit", *pair_args(scene["pairs"][0]), "--canvas", canvas, "--out", str(tmp_path / "o")])
+    line = _one_error_line(capsys, code)
+    assert f"--canvas '{canvas}': expected HxW" in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_canvas_smaller_than_the_pair_is_one_line_error(scene, tmp_path, capsys):
+    code = main(["fit", *pair_args(scene["pairs"][0]), "--canvas", "8x8", "--out", str(tmp_path / "o")])
+    # After the progress line, which the fit had started.
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert code == 2
+    assert last == "invsss: error: canvas: the pair is 40 x 40 pixels, larger than the canvas of 8 x 8"

@@ -434,3 +434,23 @@ def test_shipped_experiment_files_load():
     for path in files:
         experiment = ex.load(path)
         assert experiment.trials, path
+
+
+@pytest.mark.slow
+def test_a_canvas_fits_pairs_of_two_sizes_as_each_fits_alone(root):
+    _write_pair(root / "sized" / "small", 7, size=20)
+    _write_pair(root / "sized" / "large", 8, size=24)
+    text = (f'task = "fit"\n[data]\npairs = ["sized/*/"]\n[base]\nn_starts = 1\nmax_steps = 40\nrobust = "none"\n'
+            f"profile = {PROFILE}\n")
+    plain = ex.run(_experiment(root, "sized.toml", text), root / "sized_plain", log=None)
+    padded = ex.run(_experiment(root, "sized_canvas.toml", text + "canvas = [28, 28]\n"), root / "sized_canvas",
+                    log=None)
+    assert plain.done == padded.done == 2
+    a = {row["pair"]: row for row in ex.results(root / "sized_plain", frame=False)}
+    b = {row["pair"]: row for row in ex.results(root / "sized_canvas", frame=False)}
+    for pair in ("small", "large"):
+        assert a[pair]["id"] != b[pair]["id"]  # the canvas is part of the trial
+        for key in ("loss", "psnr", "param.sss_level", "param.correction", "param.maxdd"):
+            assert b[pair][key] == pytest.approx(a[pair][key], rel=1e-6), (pair, key)
+    with pytest.raises(InvalidInputError, match="canvas"):
+        ex.load(_experiment(root, "sized_bad.toml", text + "canvas = [28]\n"))

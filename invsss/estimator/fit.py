@@ -109,6 +109,7 @@ def fit_pair(
     saturation: float | None = None,
     light_terms=(),
     light_buffers=None,
+    canvas=None,
     options: FitOptions | None = None,
     stop=None,
 ) -> FitResult:
@@ -205,8 +206,16 @@ def fit_pair(
         Camera-space ``light`` (unit vectors towards the key light) and ``normal``
         buffers of shape (H, W, 3), and ``key`` (the source lit by the key light
         alone, the source's shape), on the source's grid.
+    canvas : (int, int), optional
+        Fit on a (height, width) canvas at least the pair's size: pairs of
+        different sizes fitted on one canvas share one compilation (a sweep, a
+        loop over photographs), and the estimate is the one at the pair's own
+        size. The pair is padded outside its mask; where the mask reaches its
+        last row or column, or with ``vignetting``, ``light_terms`` or ``align``,
+        it is fitted at its own size and the result warns
+        (:mod:`invsss.estimator.canvas`).
     options : FitOptions, optional
-        All of the above options (``model`` to ``light_terms``) in one checked value;
+        All of the above options (``model`` to ``canvas``) in one checked value;
         then leave those keywords at their defaults.
     stop : callable, optional
         ``stop() -> bool``, polled after every solver step (and once before the
@@ -242,7 +251,8 @@ def fit_pair(
     """
     given = dict(model=model, profile=profile, fix=fix, gauge=gauge, solver=solver, n_starts=n_starts,
                  max_steps=max_steps, tap_weights=tap_weights, robust=robust, align=align,
-                 vignetting=vignetting, highlights=highlights, saturation=saturation, light_terms=light_terms)
+                 vignetting=vignetting, highlights=highlights, saturation=saturation, light_terms=light_terms,
+                 canvas=canvas)
     if light_buffers is None:
         pair = (source, target, depth, mask)
     elif isinstance(light_buffers, LightBuffers):
@@ -271,6 +281,7 @@ def fit_pairs(
     highlights: bool = False,
     saturation: float | None = None,
     light_terms=(),
+    canvas=None,
     options: FitOptions | None = None,
     stop=None,
 ) -> FitResult:
@@ -285,7 +296,8 @@ def fit_pairs(
     """
     given = dict(model=model, profile=profile, fix=fix, gauge=gauge, solver=solver, n_starts=n_starts,
                  max_steps=max_steps, tap_weights=tap_weights, robust=robust, align=align,
-                 vignetting=vignetting, highlights=highlights, saturation=saturation, light_terms=light_terms)
+                 vignetting=vignetting, highlights=highlights, saturation=saturation, light_terms=light_terms,
+                 canvas=canvas)
     return _fit(pairs, False, _options(options, given), progress, stop)
 
 

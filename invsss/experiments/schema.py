@@ -137,6 +137,8 @@ class FitTaskOptions(BaseModel):
     ``light`` in a file set). ``saturation`` is a clipping level (a number > 0)
     or ``"auto"``: the level of integer-coded targets (1.0, their top code), as
     ``invsss fit --saturation auto``; by default no pixel is left out.
+    ``canvas = [height, width]`` pads every pair to that size so that pairs of
+    different sizes compile once per worker (:mod:`invsss.estimator.canvas`).
     """
 
     model_config = _STRICT
@@ -154,6 +156,7 @@ class FitTaskOptions(BaseModel):
     highlights: bool = False
     light_terms: str = ""
     saturation: Union[Literal["auto"], float, None] = None
+    canvas: Optional[list[int]] = None
 
     @field_validator("light_terms", mode="before")
     @classmethod

@@ -48,7 +48,8 @@ def trial_id(config: dict) -> str:
 
 #: Fit options added after the first release, with the defaults that leave a
 #: trial's id unchanged.
-LATER_OPTIONS = {"align": "none", "vignetting": False, "highlights": False, "light_terms": "", "saturation": None}
+LATER_OPTIONS = {"align": "none", "vignetting": False, "highlights": False, "light_terms": "", "saturation": None,
+                 "canvas": None}
 
 
 @dataclasses.dataclass(frozen=True)
