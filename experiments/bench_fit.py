@@ -42,6 +42,13 @@ errors, and how much chi^2 the stall test left untaken. ``--jacobian PAIR_DIR
 [PAIR_DIR ...]`` does the same for the solvers' Jacobian, forward mode against
 forward differences (:class:`invsss.estimator.solve.DenseJacobian`).
 
+``--canvas PAIR_DIR`` fits three crops of a pair (its full size and two smaller
+ones that keep the mask off their last row and column) one after another in a
+fresh process, as a sweep worker over photographs of slightly different sizes
+would: once at their own sizes, once on one canvas (``FitOptions(canvas=...)``,
+the full size). It prints each fit's seconds, the solver step's compilations
+and the estimates of both runs, which must agree.
+
 ``--breakdown PAIR_DIR`` instead profiles ``fit_pair`` with the command line's
 defaults on a pair folder (``source.exr``, ``target.exr``, ``depth.exr``,
 ``mask.png``, e.g. ``data_synthetic/fran_front``), stage by stage: import,
@@ -59,6 +66,7 @@ Usage::
     python experiments/bench_fit.py --breakdown data_synthetic/fran_front
     python experiments/bench_fit.py --stopping data_synthetic/pt_face_940 data_synthetic/fran_front
     python experiments/bench_fit.py --jacobian data_synthetic/fran_front data_synthetic/pt_face_940
+    python experiments/bench_fit.py --canvas data_synthetic/fran_front
 """
 
 from __future__ import annotations
@@ -213,6 +221,9 @@ def main() -> None:
     parser.add_argument("--breakdown", metavar="PAIR_DIR", default=None,
                         help="profile fit_pair stage by stage on this pair folder, cold and warm")
     parser.add_argument("--breakdown-child", metavar="CACHE_DIR", default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--canvas", metavar="PAIR_DIR", default=None,
+                        help="three crops of a pair fitted at their own sizes and on one canvas")
+    parser.add_argument("--canvas-child", metavar="ON", default=None, help=argparse.SUPPRESS)
     parser.add_argument("--stopping", metavar="PAIR_DIR", nargs="+", default=None,
                         help="fit these pair folders with and without the stall test; steps, time, estimates")
     parser.add_argument("--jacobian", metavar="PAIR_DIR", nargs="+", default=None,
@@ -223,6 +234,12 @@ def main() -> None:
         return
     if args.jacobian is not None:
         jacobian(args.jacobian)
+        return
+    if args.canvas_child is not None:
+        canvas_child(args.canvas, args.canvas_child == "on")
+        return
+    if args.canvas is not None:
+        canvas(args.canvas)
         return
     if args.breakdown_child is not None:
         breakdown_child(args.breakdown, args.breakdown_child)
@@ -452,6 +469,70 @@ def breakdown(pair_dir: str) -> None:
     c, w, s2 = (columns[k][1]["fit"] for k in ("cold", "warm cache", "2nd fit"))
     print(f"ratios: warm cache / cold = {w / c:.2f}; 2nd fit in process / cold = {s2 / c:.2f}; "
           f"compile share of the cold fit = {totals[0] / c:.2f}")
+
+
+# ------------------------------------------------------------------ --canvas
+
+
+def _crops(mask) -> list[tuple[int, int]]:
+    """The full size and two smaller ones whose last row and column the mask stays off."""
+    h, w = mask.shape
+    rows, cols = np.nonzero(np.asarray(mask) > 0)
+    low_h, low_w = int(rows.max()) + 2, int(cols.max()) + 2  # one clear row and column at least
+    return [(h, w), (max(low_h, h - 6), max(low_w, w - 10)), (max(low_h, h - 10), max(low_w, w - 4))]
+
+
+def canvas_child(pair_dir: str, on: bool) -> None:
+    """One fresh process: fit the crops in turn; print JSON (seconds, step compilations, estimates)."""
+    from jax import monitoring
+
+    steps = []
+
+    def on_duration(event, duration, fun_name="", **_):
+        if event == "/jax/core/compile/backend_compile_duration" and fun_name == "jit(_step)":
+            steps[-1] += 1
+
+    monitoring.register_event_duration_secs_listener(on_duration)
+    pair = read_pair_folder(pair_dir)
+    crops = _crops(pair.mask)
+    runs = []
+    for h, w in crops:
+        steps.append(0)
+        t0 = time.perf_counter()
+        result = fit_pair(*(np.asarray(x)[:h, :w] for x in (pair.source, pair.target, pair.depth, pair.mask)),
+                          canvas=crops[0] if on else None)
+        runs.append({"size": [h, w], "seconds": time.perf_counter() - t0, "step compilations": steps[-1],
+                     "values": {k: float(result.values[k]) for k in ("sss_level", "correction", "maxdd")},
+                     "warnings": [m for m in result.warnings if m.startswith("canvas")]})
+    print(json.dumps(runs))
+
+
+def canvas(pair_dir: str) -> None:
+    """Crops of one pair at their own sizes, then on one canvas, each in a fresh process."""
+    env = {**os.environ, "INVSSS_NO_CACHE": "1"}  # compilations in the process, not loads from disk
+    out = {}
+    for setting in ("off", "on"):
+        command = [sys.executable, __file__, "--canvas", pair_dir, "--canvas-child", setting]
+        done = subprocess.run(command, capture_output=True, text=True, env=env, check=True)
+        out[setting] = json.loads(done.stdout.strip().splitlines()[-1])
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"bench_fit --canvas {pair_dir}: fit_pair with the CLI defaults on three crops, one fresh process "
+          f"per setting; {os.cpu_count()} CPUs, load average {load:.1f}")
+    header = (f"{'crop':>10s} {'own size s':>11s} {'steps comp.':>11s} {'canvas s':>9s} {'steps comp.':>11s} "
+              f"{'sss_level own':>14s} {'on canvas':>10s}")
+    print(header)
+    print("-" * len(header))
+    for a, b in zip(out["off"], out["on"]):
+        print(f"{a['size'][0]:>4d} x {a['size'][1]:<3d} {a['seconds']:11.2f} {a['step compilations']:11d} "
+              f"{b['seconds']:9.2f} {b['step compilations']:11d} {a['values']['sss_level']:14.4f} "
+              f"{b['values']['sss_level']:10.4f}")
+        for message in b["warnings"]:
+            print("   " + message)
+    total = [sum(r["seconds"] for r in out[k]) for k in ("off", "on")]
+    moved = max(abs(b["values"][k] / a["values"][k] - 1.0) for a, b in zip(out["off"], out["on"])
+                for k in ("sss_level", "correction", "maxdd"))
+    print(f"all three: {total[0]:.1f} s at their own sizes, {total[1]:.1f} s on one canvas "
+          f"(ratio {total[1] / total[0]:.2f}); largest relative difference of an estimate {moved:.1e}")
 
 
 def read_pair_folder(pair_dir: str):
