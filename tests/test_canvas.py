@@ -130,7 +130,7 @@ def test_frame_dependent_options_keep_pairs_at_their_own_size():
     problem = build_problem([(source, target, depth, mask)],
                             FitOptions(profile=PROFILE3, canvas=(40, 40), vignetting=True), start={})
     assert problem.data[0].source.shape[:2] == (32, 32)
-    assert problem.notes == ["canvas: not used with vignetting (which depend on the frame); "
+    assert problem.notes == ["canvas: not used with vignetting (it depends on the frame); "
                              "every pair was fitted at its own size"]
 
 

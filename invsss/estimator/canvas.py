@@ -52,7 +52,8 @@ def frame_terms(options) -> list[str]:
 
 def unused_note(blockers) -> str:
     """The warning of a fit that kept its pairs off the canvas because of ``blockers``."""
-    return (f"canvas: not used with {', '.join(blockers)} (which depend on the frame); "
+    which = "it depends" if len(blockers) == 1 else "they depend"
+    return (f"canvas: not used with {', '.join(blockers)} ({which} on the frame); "
             "every pair was fitted at its own size")
 
 
