@@ -144,3 +144,17 @@ def test_a_pair_larger_than_the_canvas_is_a_one_line_error():
     source, target, depth, mask = _scene(32)
     with pytest.raises(InvalidInputError, match=r"^canvas: the pair is 32 x 32 pixels, larger than the canvas of 40 x 30$"):
         build_problem([(source, target, depth, mask)], FitOptions(profile=PROFILE3, canvas=(40, 30)))
+
+
+@pytest.mark.slow
+def test_the_highlight_refit_on_a_canvas_is_the_refit_at_the_pairs_own_size():
+    # The refit reads the first fit's (cropped) prediction against the pair as given.
+    source, target, depth, mask = _scene(40)
+    target = target.copy()
+    target[18:21, 18:21] += 0.5  # a specular highlight
+    options = dict(profile=PROFILE3, n_starts=2, highlights=True)
+    own = fit_pair(source, target, depth, mask, options=FitOptions(**options))
+    padded = fit_pair(source, target, depth, mask, options=FitOptions(**options, canvas=(48, 46)))
+    assert own.highlights["excluded_pixels"] == padded.highlights["excluded_pixels"] != [0]
+    assert float(padded.params.sss_level) == pytest.approx(float(own.params.sss_level), rel=1e-6)
+    assert np.shape(padded.fitted[0]) == np.shape(own.fitted[0])
