@@ -106,12 +106,15 @@ def on_canvas(pairs, options) -> tuple[tuple, list[str]]:
     canvas = options.canvas
     if canvas is None:
         return tuple(pairs), []
+
+    def name(i):
+        return f"pairs[{i}]" if len(pairs) > 1 else "the pair"
+
     for i, pair in enumerate(pairs):
         h, w = np.shape(pair.mask)
         if h > canvas[0] or w > canvas[1]:
-            name = f"pairs[{i}]" if len(pairs) > 1 else "the pair"
             raise InvalidInputError(
-                f"canvas: {name} is {h} x {w} pixels, larger than the canvas of {canvas[0]} x {canvas[1]}"
+                f"canvas: {name(i)} is {h} x {w} pixels, larger than the canvas of {canvas[0]} x {canvas[1]}"
             )
     blockers = frame_terms(options)
     if blockers:
@@ -123,9 +126,8 @@ def on_canvas(pairs, options) -> tuple[tuple, list[str]]:
         # Only an edge that gets padding matters.
         touches = (h < canvas[0] and np.any(mask[-1] != 0)) or (w < canvas[1] and np.any(mask[:, -1] != 0))
         if touches:
-            name = f"pairs[{i}]" if len(pairs) > 1 else "the pair"
             notes.append(
-                f"canvas: {name}'s mask reaches its last row or column, where padding would change the "
+                f"canvas: {name(i)}'s mask reaches its last row or column, where padding would change the "
                 f"blur; it was fitted at its own size ({h} x {w})"
             )
             out.append(pair)

@@ -103,9 +103,17 @@ def solve_linear(
     coef : array, shape (nb, C)
     offset : array, shape (P, C)
     """
+    coef, offset, _, _ = _projection(bases, targets, weights, ratios, active)
+    return coef, offset
+
+
+def _projection(bases, targets, weights, ratios, active):
+    """:func:`solve_linear`'s ``coef`` and ``offset``, with the normal matrix (C, n, n)
+    and the mask of the unknowns in use (C, n) they were solved with."""
     nb = bases[0].shape[0]
-    sol = _solve_normal(*_normal_equations(bases, targets, weights, ratios, active))
-    return sol[:, :nb].T, sol[:, nb:].T
+    gram, rhs, on = _normal_equations(bases, targets, weights, ratios, active)
+    sol = _solve_normal(gram, rhs, on)
+    return sol[:, :nb].T, sol[:, nb:].T, gram, on
 
 
 def projected_jacobian(
@@ -148,9 +156,7 @@ def projected_jacobian(
         Derivative of each pair's prediction :func:`combine` along each unknown.
     """
     nb = bases[0].shape[0]
-    gram, rhs, on = _normal_equations(bases, targets, weights, ratios, active)
-    sol = _solve_normal(gram, rhs, on)
-    coef, offset = sol[:, :nb].T, sol[:, nb:].T
+    coef, offset, gram, on = _projection(bases, targets, weights, ratios, active)
     # The right-hand side of the solution's move, per channel and unknown.
     right = jnp.zeros(gram.shape[:2] + (d_bases[0].shape[0],), gram.dtype)
     columns, moved = [], []
