@@ -488,23 +488,45 @@ class _ProgressLine:
             self._width = 0
 
 
-_COMPILING = {"seconds": 0.0, "listening": False}
+_COMPILING = {"spans": [], "listening": False}
 
 
 def _compile_seconds() -> float:
-    """Seconds this process has spent in JAX compilation (tracing, lowering, XLA;
-    an executable loaded from the persistent cache counts its load), from
-    ``jax.monitoring``; the listener is registered on the first call."""
+    """Seconds of wall time during which this process was compiling (tracing,
+    lowering, XLA; an executable loaded from the persistent cache counts its
+    load), from ``jax.monitoring``; the listener is registered on the first call.
+
+    A fit compiles its solver step on a second thread while the start scan's loss
+    compiles, so the durations are not summed: each is an interval ending when
+    its event arrives, and overlapping intervals count once.
+    """
     if not _COMPILING["listening"]:
         from jax import monitoring
 
         def listen(event, duration, **_):
             if event.startswith("/jax/core/compile/"):
-                _COMPILING["seconds"] += duration
+                end = time.monotonic()
+                _COMPILING["spans"].append((end - duration, end))  # list.append is atomic
 
         monitoring.register_event_duration_secs_listener(listen)
         _COMPILING["listening"] = True
-    return _COMPILING["seconds"]
+    return _covered_seconds(_COMPILING["spans"])
+
+
+def _covered_seconds(spans) -> float:
+    """The length of the union of ``(start, end)`` intervals.
+
+    Examples
+    --------
+    >>> _covered_seconds([(0.0, 2.0), (1.0, 3.0), (5.0, 6.0)])
+    4.0
+    """
+    total, reached = 0.0, -np.inf
+    for start, end in sorted(spans):
+        if end > reached:
+            total += end - max(start, reached)
+            reached = end
+    return total
 
 
 def _fit_file_names(count: int) -> list[str]:

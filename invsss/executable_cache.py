@@ -224,18 +224,47 @@ class persistent_jit:
         self.jitted = eqx.filter_jit(fun)
         self.traces = 0
         self._memory: dict = {}
+        self._prepared: set = set()  # keys compiled by prepare() without the disk cache
         self._lock = threading.Lock()
         functools.update_wrapper(self, fun)
+
+    @staticmethod
+    def _key(args):
+        dynamic, static = eqx.partition(args, eqx.is_array)
+        leaves, in_tree = jax.tree_util.tree_flatten(dynamic)
+        static_leaves, static_tree = jax.tree_util.tree_flatten(static)
+        avals = tuple(_aval(x) for x in leaves)
+        return (in_tree, static_tree, tuple(static_leaves), avals, _settings()), leaves, in_tree, static
+
+    def prepare(self, *args) -> None:
+        """Compile (or load from disk) what a call with ``args`` would run, without running it.
+
+        A later call with arguments of the same shapes, dtypes and static parts
+        then starts at once. The fit uses it to compile the solver's step on
+        another thread while the start scan runs. Arguments with an unhashable
+        static part are left alone (the call itself will say what is wrong).
+        """
+        key, leaves, in_tree, static = self._key(args)
+        folder = _folder()
+        try:
+            hash(key)
+        except TypeError:
+            return
+        with self._lock:
+            if key in self._memory or key in self._prepared:
+                return
+            if folder is not None:
+                self._memory[key] = self._load_or_compile(folder, key, leaves, in_tree, static)
+                return
+            # filter_jit keeps what lower().compile() made for its later calls.
+            self.jitted.lower(*args).compile()
+            self._prepared.add(key)
 
     def __call__(self, *args):
         folder = _folder()
         if folder is None:
             return self.jitted(*args)
-        dynamic, static = eqx.partition(args, eqx.is_array)
-        leaves, in_tree = jax.tree_util.tree_flatten(dynamic)
-        static_leaves, static_tree = jax.tree_util.tree_flatten(static)
-        avals = tuple(_aval(x) for x in leaves)
-        key = (in_tree, static_tree, tuple(static_leaves), avals, _settings())
+        key, leaves, in_tree, static = self._key(args)
         try:
             compiled = self._memory.get(key)
         except TypeError:  # an unhashable static argument: filter_jit says so precisely

@@ -261,7 +261,7 @@ class FitProblem:
         Whether the weights are eliminated by least squares (``sog``).
     """
 
-    def __init__(self, data, options, profile_w, profile_v, start=None):
+    def __init__(self, data, options, profile_w, profile_v, start=None, before_scan=None):
         self.options, self.model = options, options.model
         self.given = tuple(data)
         self.shapes = tuple(tuple(np.shape(p.mask)) for p in self.given)
@@ -302,6 +302,8 @@ class FitProblem:
             natural.update({k: np.asarray(v, np.float64) for k, v in start.items() if k in self.param.free})
             self.starts = (jnp.asarray(self.param.unknowns(natural)),)
         elif self.param.size:
+            if before_scan is not None:
+                before_scan(self)
             blur0 = _blur_at_zero(self.roles, self.scales, self.fixed, self.variances)
             self.starts = tuple(
                 _on_device(z)
@@ -320,7 +322,9 @@ class FitProblem:
         return float(_evaluate(self.objective, _on_device(z), _NO_JACOBIAN)["loss"])
 
 
-def build_problem(pairs, options: FitOptions | None = None, start: dict | None = None) -> FitProblem:
+def build_problem(
+    pairs, options: FitOptions | None = None, start: dict | None = None, before_scan=None
+) -> FitProblem:
     """Check the pairs and build the problem :func:`invsss.fit_pairs` would solve.
 
     Parameters
@@ -334,6 +338,11 @@ def build_problem(pairs, options: FitOptions | None = None, start: dict | None =
         start from instead of scanning for starts: one start, the free blocks
         named here at these values and the others where they would begin. Names
         that are not free are ignored.
+    before_scan : callable, optional
+        ``before_scan(problem)``, called once the objective is built and before
+        the start scan (not at all when ``start`` replaces the scan or nothing is
+        free). :func:`invsss.fit_pairs` starts compiling its solver there, on
+        another thread, so that the compilation overlaps the scan.
 
     Returns
     -------
@@ -367,4 +376,4 @@ def build_problem(pairs, options: FitOptions | None = None, start: dict | None =
         raise InvalidInputError(f"options: expected a FitOptions, got {type(options).__name__}")
     with jax.enable_x64(True):
         profile_w, profile_v = resolve_profile(options.profile)
-        return FitProblem(prepare_pairs(pairs), options, profile_w, profile_v, start)
+        return FitProblem(prepare_pairs(pairs), options, profile_w, profile_v, start, before_scan)

@@ -32,7 +32,7 @@ from ..validation import InvalidInputError
 __all__ = [
     "SOLVERS", "JACOBIANS", "DIFFERENCE_STEP", "SCREEN_TOL", "NOISE_TOL", "STALL_TOL",
     "SCREEN_STALL_TOL", "STALL_WINDOW", "gauss_newton_distance", "stalled", "make_solver",
-    "SolveRecord", "run_solver", "FitInterrupted",
+    "SolveRecord", "run_solver", "compile_solver", "FitInterrupted",
 ]
 
 SOLVERS = ("lm", "gauss-newton", "bfgs")
@@ -370,11 +370,9 @@ def run_solver(
     (1, True, False)
     """
     fn = _as_fn(solver, objective, jacobian)
+    noise_tolerance = _traced_tolerance(solver, noise_tolerance)
     if isinstance(solver, optx.AbstractMinimiser):
-        noise_tolerance = stall_tolerance = None
-    elif noise_tolerance is not None:
-        # Traced, so that every tolerance shares one compiled step.
-        noise_tolerance = jax.device_put(np.asarray(noise_tolerance, jnp.result_type(float)))
+        stall_tolerance = None
     try:
         return _iterate(solver, fn, jnp.asarray(z0), max_steps, on_step, stop, arrived, noise_tolerance,
                         stall_tolerance, _init, _step, state)
@@ -385,6 +383,34 @@ def run_solver(
         # caller sees one solve.
         return _iterate(solver, fn, jnp.asarray(z0), max_steps, on_step, stop, arrived, noise_tolerance,
                         stall_tolerance, _init.jitted, _step.jitted)
+
+
+def _traced_tolerance(solver, noise_tolerance):
+    """``noise_tolerance`` as :func:`_step` takes it: ``None`` for a minimiser
+    (it has no residual to measure a step with), else an array, traced, so that
+    every tolerance shares one compiled step."""
+    if isinstance(solver, optx.AbstractMinimiser) or noise_tolerance is None:
+        return None
+    return jax.device_put(np.asarray(noise_tolerance, jnp.result_type(float)))
+
+
+def compile_solver(
+    solver, objective, z, noise_tolerance: float | None = None, jacobian: str = "forward-mode"
+) -> None:
+    """Compile (or load from the cache) the functions :func:`run_solver` will run
+    for these arguments, without taking a step.
+
+    The solver's ``init`` runs (it only sets up its state, a few milliseconds);
+    its ``step`` is compiled for that state but not run. A :func:`run_solver` of
+    an objective of the same layout (the same shapes and static parts; the
+    values may differ) then compiles nothing. The estimator calls it on a
+    second thread while the start scan runs, so the step compiles beside the
+    scan's loss instead of after it.
+    """
+    fn = _as_fn(solver, objective, jacobian)
+    z = jnp.asarray(z)
+    state = _init(solver, fn, z)
+    _step.prepare(solver, fn, z, state, _traced_tolerance(solver, noise_tolerance))
 
 
 def _iterate(solver, fn, z, max_steps, on_step, stop, arrived, noise_tolerance, stall_tolerance,

@@ -1,0 +1,109 @@
+"""Compiling ahead of the call: persistent_jit.prepare, solve.compile_solver, and
+the fit compiling its solver step on a second thread while the start scan runs."""
+
+from __future__ import annotations
+
+import threading
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from jax import monitoring
+
+import invsss
+from invsss import executable_cache
+from invsss.estimator import FitOptions, build_problem
+from invsss.estimator.fit import SOLVER_JACOBIAN
+from invsss.estimator.solve import NOISE_TOL, RTOL, SCREEN_TOL, compile_solver, make_solver, run_solver
+from invsss.executable_cache import persistent_jit
+
+from _estimator_scenes import make_pair
+
+PROFILE3 = {"weights": [0.3, 0.45, 0.25], "variances": [0.25, 1.2, 5.0]}
+TRUTH = invsss.SSSParams(700.0, 300.0, 2.0, PROFILE3["weights"], PROFILE3["variances"])
+
+
+class _Compilations:
+    """XLA compilations of jitted functions by name, with the thread each ran on."""
+
+    active = None
+
+    def __init__(self, *names):
+        self.names = {f"jit({name})" for name in names}
+        self.seen: list[tuple[str, str]] = []
+
+    def __enter__(self):
+        _Compilations.active = self
+        return self
+
+    def __exit__(self, *exc):
+        _Compilations.active = None
+
+    def count(self, name=None) -> int:
+        return sum(1 for fun, _ in self.seen if name is None or fun == f"jit({name})")
+
+    @staticmethod
+    def listen(event, duration, fun_name="", **_):
+        counter = _Compilations.active
+        if counter is not None and event == "/jax/core/compile/backend_compile_duration" and fun_name in counter.names:
+            counter.seen.append((fun_name, threading.current_thread().name))
+
+
+monitoring.register_event_duration_secs_listener(_Compilations.listen)
+
+
+@pytest.mark.parametrize("on_disk", [False, True], ids=["memory", "disk"])
+def test_prepare_compiles_what_the_call_then_runs(tmp_path, monkeypatch, on_disk):
+    # The executable cache is on when a folder is configured; either way a
+    # prepared call must find its executable.
+    monkeypatch.setattr(executable_cache, "_folder", (lambda: tmp_path / "executables") if on_disk else (lambda: None))
+
+    @persistent_jit
+    def prepared_scaled_sum(x, factor):
+        return jnp.sum(x * factor)
+
+    x = jnp.arange(5.0)
+    with _Compilations("prepared_scaled_sum") as compiled:
+        prepared_scaled_sum.prepare(x, 2.0)
+        by_prepare = compiled.count()
+        value = prepared_scaled_sum(x, 2.0)
+        prepared_scaled_sum.prepare(x, 2.0)  # compiled already: nothing to do
+        assert compiled.count() == by_prepare == 1
+        assert float(value) == 20.0
+        # Another static argument or shape is another executable.
+        assert float(prepared_scaled_sum(x, 3.0)) == 30.0
+        assert float(prepared_scaled_sum(jnp.arange(6.0), 2.0)) == 30.0
+        assert compiled.count() == 3
+    assert len(list((tmp_path / "executables").glob("*.executable"))) == (3 if on_disk else 0)
+
+
+def _scene(size, seed=0):
+    source, target, depth, mask, _ = make_pair("face", TRUTH, size=size, contrast=3.0, seed=seed)
+    return source, target, depth, mask
+
+
+def test_compile_solver_leaves_the_solve_nothing_to_compile():
+    # A size no other test compiles, so the counts are this test's own.
+    problem = build_problem([_scene(27, seed=4)], FitOptions(profile=PROFILE3, n_starts=1))
+    with jax.enable_x64(True), _Compilations("_init", "_step") as compiled:
+        # The screening solver, from z_base: what the fit compiles with.
+        compile_solver(make_solver("lm", tolerance=SCREEN_TOL), problem.objective,
+                       np.asarray(problem.z_base, np.float64), NOISE_TOL, SOLVER_JACOBIAN)
+        assert compiled.count("_init") == 1 and compiled.count("_step") == 1
+        # The full-tolerance solver from the scan's start, as the fit's refinement runs it.
+        record = run_solver(make_solver("lm", tolerance=RTOL), problem.objective, problem.z0, 4,
+                            noise_tolerance=NOISE_TOL, jacobian=SOLVER_JACOBIAN)
+        assert compiled.count() == 2
+    assert record.steps >= 1 and np.isfinite(record.final)
+
+
+@pytest.mark.slow  # a whole fit (cold compilation at a new size)
+def test_a_fit_compiles_its_step_once_on_the_second_thread():
+    pair = _scene(30, seed=5)
+    with _Compilations("_step", "_evaluate") as compiled:
+        fit = invsss.fit_pair(*pair, options=FitOptions(profile=PROFILE3, n_starts=2))
+    # The scan's loss compiled on the caller's thread, the step once, beside it.
+    assert compiled.seen.count(("jit(_evaluate)", threading.current_thread().name)) == 1
+    assert [thread for fun, thread in compiled.seen if fun == "jit(_step)"] == ["invsss-compile-solver"]
+    assert fit.converged
