@@ -47,6 +47,7 @@ def _points(pair, count=4):
 
 
 # The masks of these two reach into the scene's background on purpose.
+@pytest.mark.slow
 @pytest.mark.filterwarnings("ignore::invsss.InputNotice")
 def test_padded_pair_has_the_loss_of_the_pair_at_its_own_size():
     source, target, depth, _ = _scene(36)

@@ -95,6 +95,7 @@ def test_fit_writes_params_prediction_and_report(single_fit, scene):
     assert width >= 800 and height >= 500
 
 
+@pytest.mark.slow
 def test_fix_holds_the_value_and_reports_it(single_fit):
     content = json.loads((single_fit["out"] / "params.json").read_text())
     _, extras = invsss.read_params(single_fit["out"] / "params.json")
@@ -104,6 +105,7 @@ def test_fix_holds_the_value_and_reports_it(single_fit):
     assert set(extras["fixed"]) == {"maxdd", "variances"}  # the gauge fixes the variances
 
 
+@pytest.mark.slow
 def test_fit_prints_summary_and_progress(single_fit):
     summary = single_fit["stdout"].strip().splitlines()
     assert len(summary) == 1 and summary[0].startswith("fit: loss ")

@@ -49,6 +49,7 @@ def _error(noise_smooth: float) -> float:
     return float(fit.stderr["sss_level"])
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("ignore::invsss.InputNotice")
 def test_correlated_noise_widens_the_errors_and_white_noise_does_not(monkeypatch):
     blocks = {"white": _error(0.0), "correlated": _error(1.0)}

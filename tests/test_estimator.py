@@ -73,6 +73,7 @@ def test_recovers_known_parameters_in_default_gauge(recovered, name):
     assert 0.8 < result.sigma / noise < 1.25
 
 
+@pytest.mark.slow
 def test_result_report_and_progress(recovered):
     result, calls, target, _ = recovered["face"]
     assert [i for i, _ in calls] == list(range(1, len(calls) + 1))
@@ -389,6 +390,7 @@ def test_projected_residual_jacobian_matches_finite_differences():
             assert np.linalg.norm(jac[:, k] - fd) < 1e-4 * np.linalg.norm(fd)
 
 
+@pytest.mark.slow
 def test_solvers_difference_jacobian_matches_forward_mode():
     """The solvers' default Jacobian, forward differences of the projected residual,
     against forward mode through it, column by column, on an RGB source (five
@@ -516,6 +518,7 @@ def test_history_holds_every_start_and_round(recovered):
     assert all(len(v) > 0 for v in result.history_by_stage().values())
 
 
+@pytest.mark.slow
 def test_report_draws_every_start_and_both_profiles(recovered):
     from matplotlib.figure import Figure
 

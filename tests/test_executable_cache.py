@@ -63,6 +63,7 @@ def reference():
     return _fit("/nonexistent-unused", env_extra={"INVSSS_NO_CACHE": "1"})
 
 
+@pytest.mark.slow
 def test_a_second_process_traces_nothing_and_fits_the_same(tmp_path, reference):
     first = _fit(tmp_path)
     assert len(_entries(tmp_path)) == 3  # _evaluate, the solver's init and its step

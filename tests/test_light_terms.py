@@ -311,6 +311,7 @@ def test_fit_recovers_the_incidence_gain_beside_the_other_terms():
     assert fit.light_terms_params().incidence == pytest.approx(fit.light_terms["incidence"])
 
 
+@pytest.mark.slow
 def test_params_file_keeps_the_terms(tmp_path):
     source, depth, mask, buffers = _lit_pair(24)
     target = np.asarray(invsss.render(source, depth, mask, invsss.SSSParams(600.0, 0.0, 1.0, [0.6, 0.4], [0.5, 2.0]),

@@ -35,6 +35,7 @@ def _clipped_card():
     return source, np.minimum(target, level), depth, mask, level
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("ignore::invsss.InputNotice")
 def test_clipped_pixels_are_left_out_and_counted():
     source, target, depth, mask, level = _clipped_card()
@@ -100,6 +101,7 @@ def test_clipping_level_is_the_top_code_of_integer_files_only(tmp_path):
         invsss.clipping_level(tmp_path / "g.png")
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("ignore::invsss.InputNotice")
 def test_the_cli_leaves_out_an_integer_targets_top_code_by_default(tmp_path):
     paths, profile = _card_on_disk(tmp_path, ".png")

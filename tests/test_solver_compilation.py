@@ -85,14 +85,15 @@ def _scene(size, seed=0):
 
 def test_compile_solver_leaves_the_solve_nothing_to_compile():
     # A size no other test compiles, so the counts are this test's own.
-    problem = build_problem([_scene(27, seed=4)], FitOptions(profile=PROFILE3, n_starts=1))
+    # start={}: no scan, so nothing but the solver compiles here.
+    problem = build_problem([_scene(27, seed=4)], FitOptions(profile=PROFILE3), start={})
     with jax.enable_x64(True), _Compilations("_init", "_step") as compiled:
         # The screening solver, from z_base: what the fit compiles with.
         compile_solver(make_solver("lm", tolerance=SCREEN_TOL), problem.objective,
                        np.asarray(problem.z_base, np.float64), NOISE_TOL, SOLVER_JACOBIAN)
         assert compiled.count("_init") == 1 and compiled.count("_step") == 1
-        # The full-tolerance solver from the scan's start, as the fit's refinement runs it.
-        record = run_solver(make_solver("lm", tolerance=RTOL), problem.objective, problem.z0, 4,
+        # The full-tolerance solver from another point, as the fit's refinement runs it.
+        record = run_solver(make_solver("lm", tolerance=RTOL), problem.objective, problem.z0 + 0.1, 4,
                             noise_tolerance=NOISE_TOL, jacobian=SOLVER_JACOBIAN)
         assert compiled.count() == 2
     assert record.steps >= 1 and np.isfinite(record.final)

@@ -69,6 +69,7 @@ def test_a_nuisance_column_gives_the_marginal_covariance(linearised):
     assert float(got.stderr["sss_level"]) > 1.01 * float(_uncertainty(problem, lin).stderr["sss_level"])
 
 
+@pytest.mark.slow
 def test_a_column_the_others_cannot_see_changes_only_the_degrees_of_freedom(linearised):
     problem, lin = linearised
     J = lin["jacobian"]
@@ -82,6 +83,7 @@ def test_a_column_the_others_cannot_see_changes_only_the_degrees_of_freedom(line
     assert float(more.stderr["sss_level"]) == pytest.approx(dof_ratio * float(plain.stderr["sss_level"]), rel=1e-6)
 
 
+@pytest.mark.slow
 def test_a_copy_of_a_parameter_column_leaves_it_undetermined(linearised):
     problem, lin = linearised
     got = _uncertainty(problem, lin, lin["jacobian"][:, :1].copy())

@@ -374,9 +374,10 @@ def _fit(pairs, single, options, progress, stop, nuisance=None, start=None) -> F
         return _fit_aligned(pairs, single, options, progress, stop)
     compiling = _SolverCompilation(options)
     problem = build_problem(pairs, options, start, compiling.start)
-    compiling.wait()
     with jax.enable_x64(True):
         steps = _Steps(progress, stop, problem.to_loss)
+        if not steps.stop_requested():  # a fit stopped now need not wait for its step
+            compiling.wait()
         path = _solve(problem, options, steps)
         result = _report(problem, path, single, steps, nuisance)
     # Rebuild the parameters outside float64 mode: the caller gets arrays of their
@@ -406,7 +407,7 @@ class _SolverCompilation:
 
     ``start(problem)`` is :func:`build_problem`'s ``before_scan``; ``wait()``
     joins the thread before the first solve, so the two never compile the same
-    function at once. A failure on the thread is ignored: the solve then
+    function at once (a fit stopped before its first step does not wait). A failure on the thread is ignored: the solve then
     compiles the step itself and reports whatever is wrong.
     """
 
