@@ -402,7 +402,10 @@ class _SolverCompilation:
     went from 16.6 to 13.7 s (medians of three runs alternating with the code
     before, experiments/bench_fit.py --breakdown); less than the step's 4.6 s
     of compilation, because XLA's compilation keeps more than one core busy at
-    times. When the step is compiled already (a second fit in the process) the
+    times, and the two traces share the interpreter. The command line's cold
+    fit gained less, within this machine's noise (medians 20.3 and 19.8 s):
+    there the report's import shares the interpreter too. When the step is
+    compiled already (a second fit in the process) the
     thread only sets up a solver state, a few milliseconds.
 
     ``start(problem)`` is :func:`build_problem`'s ``before_scan``; ``wait()``
@@ -421,8 +424,9 @@ class _SolverCompilation:
                 # float64 mode is a per-thread setting.
                 with jax.enable_x64(True):
                     solver = make_solver(self.options.solver, tolerance=SCREEN_TOL)
-                    compile_solver(solver, problem.objective, np.asarray(problem.z_base, np.float64),
-                                   NOISE_TOL, SOLVER_JACOBIAN)
+                    # device_put, not jnp.asarray: that compiles a small copy for the shape.
+                    z = jax.device_put(np.asarray(problem.z_base, np.float64))
+                    compile_solver(solver, problem.objective, z, NOISE_TOL, SOLVER_JACOBIAN)
             except Exception:  # noqa: BLE001 - the solve compiles it again and says what is wrong
                 pass
 
