@@ -6,7 +6,6 @@ from __future__ import annotations
 import jax
 import numpy as np
 import pytest
-from jax import monitoring
 
 import invsss
 from invsss import InvalidInputError, fit_pair
@@ -14,6 +13,7 @@ from invsss.estimator import FitOptions, build_problem
 from invsss.estimator.canvas import pad_pair
 from invsss.estimator.inputs import prepare_pair
 
+from _compilations import Compilations
 from _estimator_scenes import make_pair
 
 PROFILE3 = {"weights": [0.3, 0.45, 0.25], "variances": [0.25, 1.2, 5.0]}
@@ -77,46 +77,21 @@ def test_a_mask_on_the_last_row_would_change_the_blur_and_keeps_the_pair_at_its_
     np.testing.assert_array_equal(kept, own)
 
 
-class _Compilations:
-    """XLA compilations of one jitted function, by name, while the block runs."""
-
-    active = None
-
-    def __init__(self, name):
-        self.name, self.count = f"jit({name})", 0
-
-    def __enter__(self):
-        _Compilations.active = self
-        return self
-
-    def __exit__(self, *exc):
-        _Compilations.active = None
-
-    @staticmethod
-    def listen(event, duration, fun_name="", **_):
-        counter = _Compilations.active
-        if counter is not None and event == "/jax/core/compile/backend_compile_duration" and fun_name == counter.name:
-            counter.count += 1
-
-
-monitoring.register_event_duration_secs_listener(_Compilations.listen)
-
-
 @pytest.mark.slow
 def test_pairs_of_two_sizes_on_one_canvas_fit_as_alone_and_compile_the_step_once():
     first, second = _scene(38, seed=1), _scene(42, seed=2)
     second = tuple(x[:, :40] for x in second)  # 42 x 40
     options = dict(profile=PROFILE3, n_starts=2)
     canvas = (46, 45)  # a size no other test compiles
-    with _Compilations("_step") as on_canvas:
+    with Compilations("_step") as on_canvas:
         a = fit_pair(*first, options=FitOptions(**options, canvas=canvas))
-        compiled_for_first = on_canvas.count
+        compiled_for_first = on_canvas.count()
         b = fit_pair(*second, options=FitOptions(**options, canvas=canvas))
-    assert compiled_for_first == 1 and on_canvas.count == 1  # the second pair reused the step
-    with _Compilations("_step") as alone:
+    assert compiled_for_first == 1 and on_canvas.count() == 1  # the second pair reused the step
+    with Compilations("_step") as alone:
         a_alone = fit_pair(*first, options=FitOptions(**options))
         b_alone = fit_pair(*second, options=FitOptions(**options))
-    assert alone.count == 2  # the counter sees compilations: one per size
+    assert alone.count() == 2  # the counter sees compilations: one per size
     for fit, own, pair in ((a, a_alone, first), (b, b_alone, second)):
         assert np.shape(fit.fitted[0]) == np.shape(pair[1])
         assert not fit.warnings

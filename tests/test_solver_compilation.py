@@ -9,7 +9,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from jax import monitoring
 
 import invsss
 from invsss import executable_cache
@@ -18,39 +17,11 @@ from invsss.estimator.fit import SOLVER_JACOBIAN
 from invsss.estimator.solve import NOISE_TOL, RTOL, SCREEN_TOL, compile_solver, make_solver, run_solver
 from invsss.executable_cache import persistent_jit
 
+from _compilations import Compilations
 from _estimator_scenes import make_pair
 
 PROFILE3 = {"weights": [0.3, 0.45, 0.25], "variances": [0.25, 1.2, 5.0]}
 TRUTH = invsss.SSSParams(700.0, 300.0, 2.0, PROFILE3["weights"], PROFILE3["variances"])
-
-
-class _Compilations:
-    """XLA compilations of jitted functions by name, with the thread each ran on."""
-
-    active = None
-
-    def __init__(self, *names):
-        self.names = {f"jit({name})" for name in names}
-        self.seen: list[tuple[str, str]] = []
-
-    def __enter__(self):
-        _Compilations.active = self
-        return self
-
-    def __exit__(self, *exc):
-        _Compilations.active = None
-
-    def count(self, name=None) -> int:
-        return sum(1 for fun, _ in self.seen if name is None or fun == f"jit({name})")
-
-    @staticmethod
-    def listen(event, duration, fun_name="", **_):
-        counter = _Compilations.active
-        if counter is not None and event == "/jax/core/compile/backend_compile_duration" and fun_name in counter.names:
-            counter.seen.append((fun_name, threading.current_thread().name))
-
-
-monitoring.register_event_duration_secs_listener(_Compilations.listen)
 
 
 @pytest.mark.parametrize("on_disk", [False, True], ids=["memory", "disk"])
@@ -64,7 +35,7 @@ def test_prepare_compiles_what_the_call_then_runs(tmp_path, monkeypatch, on_disk
         return jnp.sum(x * factor)
 
     x = jnp.arange(5.0)
-    with _Compilations("prepared_scaled_sum") as compiled:
+    with Compilations("prepared_scaled_sum") as compiled:
         prepared_scaled_sum.prepare(x, 2.0)
         by_prepare = compiled.count()
         value = prepared_scaled_sum(x, 2.0)
@@ -87,7 +58,7 @@ def test_compile_solver_leaves_the_solve_nothing_to_compile():
     # A size no other test compiles, so the counts are this test's own.
     # start={}: no scan, so nothing but the solver compiles here.
     problem = build_problem([_scene(27, seed=4)], FitOptions(profile=PROFILE3), start={})
-    with jax.enable_x64(True), _Compilations("_init", "_step") as compiled:
+    with jax.enable_x64(True), Compilations("_init", "_step") as compiled:
         # The screening solver, from z_base: what the fit compiles with.
         compile_solver(make_solver("lm", tolerance=SCREEN_TOL), problem.objective,
                        np.asarray(problem.z_base, np.float64), NOISE_TOL, SOLVER_JACOBIAN)
@@ -102,7 +73,7 @@ def test_compile_solver_leaves_the_solve_nothing_to_compile():
 @pytest.mark.slow  # a whole fit (cold compilation at a new size)
 def test_a_fit_compiles_its_step_once_on_the_second_thread():
     pair = _scene(30, seed=5)
-    with _Compilations("_step", "_evaluate") as compiled:
+    with Compilations("_step", "_evaluate") as compiled:
         fit = invsss.fit_pair(*pair, options=FitOptions(profile=PROFILE3, n_starts=2))
     # The scan's loss compiled on the caller's thread, the step once, beside it.
     assert compiled.seen.count(("jit(_evaluate)", threading.current_thread().name)) == 1

@@ -395,23 +395,25 @@ def _fit(pairs, single, options, progress, stop, nuisance=None, start=None) -> F
 class _SolverCompilation:
     """The solver's step compiled on a second thread while the start scan runs.
 
-    A cold fit compiles two big functions, the loss the scan evaluates and the
-    solver's step, and XLA compiles each on one core. The scan needs only the
-    first, so the second compiles beside it (and beside the scan itself) rather
-    than after. On data_synthetic/fran_front (2 cores) the cold ``fit_pair``
-    went from 16.6 to 13.7 s (medians of three runs alternating with the code
-    before, experiments/bench_fit.py --breakdown); less than the step's 4.6 s
-    of compilation, because XLA's compilation keeps more than one core busy at
-    times, and the two traces share the interpreter. The command line's cold
-    fit gained less, within this machine's noise (medians 20.3 and 19.8 s):
-    there the report's import shares the interpreter too. When the step is
-    compiled already (a second fit in the process) the
-    thread only sets up a solver state, a few milliseconds.
+    A cold fit compiles two big functions: the loss the scan evaluates and the
+    solver's step. The scan needs only the first, so the second compiles beside
+    it (and beside the scan itself) rather than after it.
 
-    ``start(problem)`` is :func:`build_problem`'s ``before_scan``; ``wait()``
+    On data_synthetic/fran_front (2 cores) the cold ``fit_pair`` went from 16.6
+    to 13.7 s (medians of three runs alternating with the code before,
+    experiments/bench_fit.py --breakdown). That is less than the step's 4.6 s
+    of compilation: XLA's compilation keeps more than one core busy at times,
+    and the two traces share the interpreter. The command line's cold fit
+    gained less, within that machine's noise (medians 20.3 and 19.8 s); there
+    the report's import shares the interpreter too. When the step is compiled
+    already (a second fit in the process), the thread only sets up a solver
+    state, a few milliseconds.
+
+    ``start(problem)`` is :func:`build_problem`'s ``before_scan``. ``wait()``
     joins the thread before the first solve, so the two never compile the same
-    function at once (a fit stopped before its first step does not wait). A failure on the thread is ignored: the solve then
-    compiles the step itself and reports whatever is wrong.
+    function at once; a fit stopped before its first step does not wait. A
+    failure on the thread is ignored: the solve then compiles the step itself
+    and reports whatever is wrong.
     """
 
     def __init__(self, options: FitOptions):
