@@ -34,6 +34,7 @@ import warnings
 import numpy as np
 
 from . import __version__
+from .determinism import use_deterministic_scheduler
 from .estimator import FitInterrupted, fit_pair, fit_pairs
 from .interrupts import Interrupted, StopSignals
 from .estimator.options import check_canvas
@@ -952,6 +953,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line with ``argv`` (default ``sys.argv[1:]``); return the exit code."""
+    # Before JAX computes anything: XLA reads the flag when its backend starts.
+    use_deterministic_scheduler()
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
