@@ -376,9 +376,7 @@ def _fit(pairs, single, options, progress, stop, nuisance=None, start=None) -> F
     problem = build_problem(pairs, options, start, compiling.start)
     with jax.enable_x64(True):
         steps = _Steps(progress, stop, problem.to_loss)
-        if not steps.stop_requested():  # a fit stopped now need not wait for its step
-            compiling.wait()
-        path = _solve(problem, options, steps)
+        path = _solve(problem, options, steps, compiling.wait)
         result = _report(problem, path, single, steps, nuisance)
     # Rebuild the parameters outside float64 mode: the caller gets arrays of their
     # own default precision, ready for render().
@@ -432,7 +430,10 @@ class _SolverCompilation:
             except Exception:  # noqa: BLE001 - the solve compiles it again and says what is wrong
                 pass
 
-        self.thread = threading.Thread(target=compile_step, name="invsss-compile-solver", daemon=True)
+        # Not a daemon: a process that ends while XLA compiles on a daemon thread
+        # (a fit interrupted during its scan) can abort in C++ as the interpreter
+        # shuts down (seen: exit status -6 instead of 130). It waits instead.
+        self.thread = threading.Thread(target=compile_step, name="invsss-compile-solver")
         self.thread.start()
 
     def wait(self) -> None:
@@ -737,7 +738,7 @@ class _Path:
         self.interrupted = record.interrupted
 
 
-def _solve(problem, options, steps) -> _Path:
+def _solve(problem, options, steps, before_first_step=None) -> _Path:
     """Multi-start, robust reweighting and the active set (steps 2-4 above).
 
     The starts stop at the looser :data:`~.solve.SCREEN_TOL` (they only pick the
@@ -745,6 +746,8 @@ def _solve(problem, options, steps) -> _Path:
     or, without them, by a ``refine`` solve. Both solvers carry their
     tolerances as arrays, so they share one compiled step.
     Stops early, keeping the best point so far, when ``steps.stop`` asks.
+    ``before_first_step()`` runs after the first poll of ``steps.stop`` (the fit
+    waits there for its solver's compilation).
     """
     screen = make_solver(options.solver, tolerance=SCREEN_TOL)
     solver = make_solver(options.solver, tolerance=RTOL)
@@ -755,6 +758,8 @@ def _solve(problem, options, steps) -> _Path:
     # there is nothing to report yet.
     if steps.stop_requested():
         raise FitInterrupted("stop: the fit was interrupted before its first solver step")
+    if before_first_step is not None:
+        before_first_step()
 
     def run(label, z0, with_solver=solver, arrived=None, max_steps=None, state=None):
         steps.begin(label)
