@@ -543,9 +543,6 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
     canvas = _canvas(args.canvas)
     count = _check_pair_counts(args)
     names = _fit_file_names(count)
-    # The report needs matplotlib (0.3-0.4 s to import); import it beside the fit,
-    # whose solver steps leave the interpreter free while XLA computes.
-    threading.Thread(target=importlib.import_module, args=("invsss.report",), daemon=True).start()
     # Lock and check the output directory before reading anything, so a rerun
     # into a finished result or a busy directory is refused at once.
     with ResultDir(args.out, overwrite=args.overwrite, names=names) as out:
@@ -554,6 +551,14 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
             for s, t, d, m in zip(args.source, args.target, args.depth, args.mask)
         ]
         pairs = _with_light_buffers(pairs, args)
+        # The report needs matplotlib (0.3-0.4 s to import, seconds while it builds
+        # its font cache); import it beside the fit, whose solver steps leave the
+        # interpreter free while XLA computes. Not a daemon: a process that ends
+        # while a daemon thread runs compiled code (a fit interrupted at once) can
+        # abort in C++ during shutdown (seen in CI: exit status -6 instead of 130).
+        threading.Thread(
+            target=importlib.import_module, args=("invsss.report",), name="invsss-import-report"
+        ).start()
         options = dict(
             model=args.model, profile=args.profile, fix=fix or None, gauge=args.gauge,
             solver=args.solver, n_starts=args.starts, max_steps=args.max_steps, align=args.align,

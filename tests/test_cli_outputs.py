@@ -13,6 +13,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -126,6 +127,28 @@ def test_overwrite_replaces_the_result_and_its_stale_files_but_keeps_the_users(s
     params = json.loads((out / "params.json").read_text())
     assert params["interrupted"] is False and params["sss_level"] > 0
     assert result_state(out) == "complete"
+
+
+@pytest.mark.slow
+def test_a_fit_starts_no_daemon_threads(small_pair, tmp_path, capsys):
+    # A daemon thread still inside compiled code when the interpreter shuts down
+    # (a fit interrupted at once) can abort the process in C++: CI once saw exit
+    # status -6 instead of 130. Every thread the fit starts must be joinable.
+    started = []
+
+    def record(frame, event, arg):
+        sys.setprofile(None)  # runs first thing in each new thread; one call is enough
+        started.append(threading.current_thread())
+
+    threading.setprofile(record)
+    try:
+        code = main(["fit", *small_pair, "--out", str(tmp_path / "run")])
+    finally:
+        threading.setprofile(None)
+    assert code == 0, capsys.readouterr().err
+    names = {thread.name for thread in started}
+    assert "invsss-import-report" in names and "invsss-compile-solver" in names, names
+    assert [thread.name for thread in started if thread.daemon] == []
 
 
 def test_an_input_error_leaves_no_output_directory(small_pair, tmp_path, capsys):
