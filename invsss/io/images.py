@@ -142,6 +142,9 @@ class _Raster(NamedTuple):
     codes: np.ndarray
     encoding: str | float | None  # see _declared_encoding
     file_format: str  # OpenImageIO's format name ("png", "openexr", ...) or "npy"
+    # Relative precision of stored floats (half: 2**-10), read as float32: codes
+    # that differ by less were one value in the file. None for integer codes.
+    float_eps: float | None = None
 
 
 def _open_input(name: str, kind: str):
@@ -169,7 +172,8 @@ def _read_raster(path, kind: str) -> tuple[str, _Raster]:
                 f"{name}: expected a numeric (H, W) or (H, W, C) array, "
                 f"got {array.dtype} of shape {array.shape}"
             )
-        return name, _Raster(array, None, "npy")
+        eps = float(np.finfo(array.dtype).eps) if array.dtype.kind == "f" else None
+        return name, _Raster(array, None, "npy", eps)
 
     oiio = _oiio()
     image_input = _open_input(name, kind)
@@ -201,7 +205,9 @@ def _read_raster(path, kind: str) -> tuple[str, _Raster]:
     elif kind == "depth" and spec.z_channel >= 0:
         # A render with a named depth channel: that is the depth, not channel 0.
         codes = codes[..., spec.z_channel : spec.z_channel + 1]
-    return name, _Raster(codes, _declared_encoding(spec), file_format)
+    # Doubles arrive as float32 (read_as "float"): theirs is float32's precision.
+    eps = {oiio.HALF: 2.0**-10, oiio.FLOAT: 2.0**-23, oiio.DOUBLE: 2.0**-23}.get(basetype)
+    return name, _Raster(codes, _declared_encoding(spec), file_format, eps)
 
 
 def _bits(codes: np.ndarray) -> int | None:
@@ -289,6 +295,11 @@ def read_image(path, *, linear: bool = False) -> np.ndarray:
     >>> image.shape, round(float(image[0, 0, 0]), 2)
     ((4, 4, 1), 0.5)
     """
+    return _read_colour(path, linear)[0]
+
+
+def _read_colour(path, linear: bool) -> tuple[np.ndarray, bool]:
+    """:func:`read_image`'s image, and whether it is a grey stored as three channels."""
     name, raster = _read_raster(path, "image")
     if raster.file_format == "npy" and raster.codes.dtype.kind != "f":
         raise InvalidInputError(
@@ -301,14 +312,56 @@ def read_image(path, *, linear: bool = False) -> np.ndarray:
             f"{name}: {_bits(raster.codes)}-bit codes decoded as sRGB to linear values "
             "(if they are linear already, use linear=True / --linear-codes)",
             InputNotice,
-            stacklevel=2,
+            stacklevel=3,
         )
     if image.shape[2] not in (1, 3):
         raise InvalidInputError(
             f"{name}: expected 1 or 3 colour channels (plus optional alpha), got {image.shape[2]}"
         )
     check_image(image, name)
-    return np.ascontiguousarray(image)
+    return np.ascontiguousarray(image), _is_grey_rgb(raster)
+
+
+#: How far apart, in 8-bit codes, a JPEG's channels may lie and still be one grey.
+#: A grey pixel has chroma Cb = Cr = 128 exactly, a flat plane that neither chroma
+#: subsampling nor quantisation changes: libjpeg (through OpenImageIO) decoded
+#: grey JPEGs to identical channels at 4:4:4, 4:2:2 and 4:2:0, quality 50-100.
+#: One code allows for decoders that round each channel on its own; a tint of
+#: two codes survives JPEG as two codes, so it is still read as colour.
+JPEG_GREY_CODES = 1
+
+
+def _is_grey_rgb(raster: _Raster) -> bool:
+    """Whether a three-channel image's channels are identical to within the file's precision.
+
+    Compared on the stored codes: integer codes exactly (a JPEG's to within
+    :data:`JPEG_GREY_CODES`), floats to within the relative precision of their
+    stored type (a grey written through a colour matrix may differ in the last bit).
+    """
+    codes = raster.codes
+    if codes.ndim != 3 or codes.shape[2] != 3:
+        return False
+    first, others = codes[..., :1], codes[..., 1:]
+    if raster.float_eps is None:
+        allowed = JPEG_GREY_CODES if raster.file_format == "jpeg" else 0
+        return bool(np.all(np.abs(others.astype(np.int32) - first.astype(np.int32)) <= allowed))
+    first, others = first.astype(np.float64), others.astype(np.float64)
+    scale = np.maximum(np.abs(first), np.abs(others))
+    return bool(np.all(np.abs(others - first) <= raster.float_eps * scale))
+
+
+def _one_channel(image: np.ndarray) -> np.ndarray:
+    """The mean of ``image``'s channels as one channel (exactly the value where they agree)."""
+    return image.astype(np.float64).mean(axis=2, keepdims=True).astype(np.float32)
+
+
+def _note_grey(name: str, what: str) -> None:
+    warnings.warn(
+        f"{name}: its three channels are identical (a grey image stored as RGB); read as one "
+        f"grey channel{what}",
+        InputNotice,
+        stacklevel=3,
+    )
 
 
 def clipping_level(path) -> float | None:
@@ -441,14 +494,22 @@ def read_mask(path) -> np.ndarray:
     """Read a skin mask as float32 (H, W) in [0, 1] from its first channel.
 
     Integer image codes are divided by their maximum (255 or 65535) with no
-    colour decoding: a mask is data. Float files and ``.npy`` arrays (float,
-    bool or integer) must already hold values in [0, 1].
+    colour decoding: a mask is data. Codes whose largest is 1 (a boolean mask
+    saved with ``astype(uint8)``) are read as 0 and 1. Float files and ``.npy``
+    arrays (float, bool or integer) must already hold values in [0, 1].
 
     Raises
     ------
     InvalidInputError
         Missing or corrupt file, values outside [0, 1] or NaN, an empty mask
         (no pixel > 0).
+
+    Warns
+    -----
+    InputNotice
+        Integer codes 0 and 1 were read as 0 and 1; no pixel reaches
+        :data:`MASK_FAINT`; or more than :data:`MASK_SOFT_SHARE` of the non-zero
+        pixels lie between 0 and 1.
 
     Examples
     --------
@@ -462,7 +523,7 @@ def read_mask(path) -> np.ndarray:
     codes = raster.codes[..., 0]
     bits = _bits(codes)
     if bits is not None and raster.file_format != "npy":
-        mask = codes.astype(np.float64) / float(2**bits - 1)
+        mask = codes.astype(np.float64) / _mask_top_code(codes, bits, name)
     else:
         mask = codes.astype(np.float64)
     mask = mask.astype(np.float32)
@@ -476,7 +537,58 @@ def read_mask(path) -> np.ndarray:
         )
     if not np.any(mask > 0):
         raise InvalidInputError(f"{name}: mask is empty (no pixel > 0), expected some skin")
+    _note_mask_levels(mask, name)
     return mask
+
+
+#: A mask none of whose pixels reaches this is not a skin mask at full strength.
+MASK_FAINT = 0.5
+#: A mask with more than this share of its non-zero pixels strictly between
+#: 0 and 1 (give or take one 8-bit code) is more than a binary mask with a soft rim.
+MASK_SOFT_SHARE = 0.5
+
+
+def _mask_top_code(codes: np.ndarray, bits: int, name: str) -> float:
+    """The code a mask file's 1.0 is stored as: the type's top code, or 1 for 0/1 codes."""
+    top = float(2**bits - 1)
+    if int(codes.max()) == 1:
+        # numpy's astype(uint8) of a boolean mask: read as 0.0039 it left the
+        # image all but unblurred and moved fran_front's sss_level to 4082.7.
+        warnings.warn(
+            f"{name}: mask codes are 0 and 1 (of 0..{top:.0f}), as a boolean mask saved as "
+            "integers is; read as 0 and 1",
+            InputNotice,
+            stacklevel=4,
+        )
+        return 1.0
+    return top
+
+
+def _note_mask_levels(mask: np.ndarray, name: str) -> None:
+    """Warn when a mask's values look like something other than a skin mask.
+
+    The model blends ``image + mask * (blurred - image)``: a mask whose values are
+    all small blurs nothing, and one of mostly intermediate values (an image, or a
+    mask saved at another scale) blurs each pixel partly.
+    """
+    largest = float(mask.max())
+    if largest < MASK_FAINT:
+        warnings.warn(
+            f"{name}: the mask's largest value is {largest:.3g}, so no pixel is fully skin "
+            "(expected 1 on skin, 0 elsewhere; was it saved at another scale?)",
+            InputNotice,
+            stacklevel=3,
+        )
+        return
+    on = mask[mask > 0]
+    soft = float(np.mean((on > 1.0 / 255.0) & (on < 1.0 - 1.0 / 255.0)))
+    if soft > MASK_SOFT_SHARE:
+        warnings.warn(
+            f"{name}: {soft:.0%} of the mask's non-zero pixels lie between 0 and 1 "
+            "(expected a mask of 0 and 1 with at most a soft rim; is it an image?)",
+            InputNotice,
+            stacklevel=3,
+        )
 
 
 def load_pair(
@@ -514,8 +626,12 @@ def load_pair(
     -----
     InputNotice
         The mask likely includes background (see
-        :func:`invsss.validation.check_mask_background`), or the target is a
-        JPEG (its compression biases the fitted blur, docs/capture.md).
+        :func:`invsss.validation.check_mask_background`), the target is a
+        JPEG (its compression biases the fitted blur, docs/capture.md), or an
+        image is a grey stored as three identical channels (to within the
+        file's precision; a JPEG's to within :data:`JPEG_GREY_CODES`), which is
+        read as one channel: the target always, the source when the target is
+        grey (a grey source before a colour target stays RGB).
 
     Examples
     --------
@@ -528,12 +644,23 @@ def load_pair(
     >>> pair.source.shape, pair.target.shape, pair.depth.shape
     ((4, 6, 3), (4, 6, 1), (4, 6))
     """
-    source_image = read_image(source, linear=linear_codes)
-    target_image = read_image(target, linear=linear_codes)
+    source_image, source_grey = _read_colour(source, linear_codes)
+    target_image, target_grey = _read_colour(target, linear_codes)
     depth_map = read_depth(depth, scale=depth_scale)
     mask_map = read_mask(mask)
     names = {"source": source, "target": target, "depth": depth, "mask": mask}
     names = {k: os.fspath(v) for k, v in names.items()}
+    # A grey photograph stored as RGB fitted as three photographs gets a weight per
+    # channel from one channel's information (fran_front: sss_level 1081.7 against
+    # 598.1 from the same target stored as one channel).
+    if target_grey:
+        target_image = _one_channel(target_image)
+        _note_grey(names["target"], "")
+    # A grey source stays RGB before a colour target (each channel gets its weights);
+    # before a grey one its mix to grey would be undetermined.
+    if source_grey and target_image.shape[2] == 1:
+        source_image = _one_channel(source_image)
+        _note_grey(names["source"], ", as the target is grey")
     check_pair(source_image, target_image, depth_map, mask_map, names)
     if image_extension(names["target"], "image") in (".jpg", ".jpeg"):
         # Measured (docs/capture.md): JPEG q90 of a model-made face moved sss_level
