@@ -31,11 +31,22 @@ afresh on failure.
 The same switch turns on :mod:`invsss.executable_cache`, which keeps the
 estimator's largest functions whole (traced, lowered and compiled) in the
 directory's ``executables`` folder.
+
+Cache entries are machine code that this process will run, so the directory
+must be yours alone: folders are created with mode 0700, and a directory that
+is not owned by you, or that group or others may write to, is not used (one
+warning, then everything compiles as usual; :func:`private_folder_problem`). A
+directory you may read but not write (a read-only mount, say) is used for
+reading only, quietly: JAX's size bound and its lock file are left off, and
+nothing is written.
 """
 
 from __future__ import annotations
 
 import os
+import stat
+import threading
+import warnings
 from pathlib import Path
 
 from .validation import InvalidInputError
@@ -47,6 +58,9 @@ __all__ = [
     "cache_disabled",
     "enable_compile_cache",
     "enabled_directory",
+    "make_private_folder",
+    "private_folder_problem",
+    "warn_once",
 ]
 
 #: Bound on the cache directory's size; least recently used entries go first.
@@ -119,7 +133,85 @@ def cache_directory(directory: str | os.PathLike | None = None) -> Path:
     return Path(directory).expanduser().absolute()
 
 
+_warned: set = set()
+_warned_lock = threading.Lock()
+
+
+def warn_once(topic, message: str) -> bool:
+    """``warnings.warn(message)`` the first time this process names ``topic``; True if it warned.
+
+    The caches' notices (a refused folder, a damaged entry) are said once per
+    run, however many functions or threads meet the same problem.
+    """
+    with _warned_lock:
+        if topic in _warned:
+            return False
+        _warned.add(topic)
+    warnings.warn(message, stacklevel=3)
+    return True
+
+
+def private_folder_problem(path: str | os.PathLike) -> str | None:
+    """Why ``path`` may not hold cache entries this process will run, or None if it may.
+
+    It may when it is a folder (symbolic links followed) owned by this user and
+    not writable by group or others. A missing folder has no problem.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> folder = tempfile.mkdtemp()
+    >>> private_folder_problem(folder) is None
+    True
+    >>> os.chmod(folder, 0o777)
+    >>> private_folder_problem(folder)
+    'writable by group and others (mode 0777)'
+    """
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        return None
+    except OSError as err:
+        return f"unreadable ({err.strerror})"
+    if not stat.S_ISDIR(info.st_mode):
+        return "not a folder"
+    return _ownership_problem(info)
+
+
+def _ownership_problem(info: os.stat_result) -> str | None:
+    if info.st_uid != os.getuid():
+        return f"owned by uid {info.st_uid}, not by you (uid {os.getuid()})"
+    who = {0o020: "group", 0o002: "others", 0o022: "group and others"}.get(info.st_mode & 0o022)
+    if who:
+        return f"writable by {who} (mode {stat.S_IMODE(info.st_mode):04o})"
+    return None
+
+
+def make_private_folder(path: str | os.PathLike) -> Path:
+    """Create ``path`` and any missing parents with mode 0700 (whatever the umask)."""
+    path = Path(path)
+    missing, folder = [], path
+    while not folder.exists() and folder != folder.parent:
+        missing.append(folder)
+        folder = folder.parent
+    for folder in reversed(missing):
+        try:
+            folder.mkdir(mode=0o700)
+        except FileExistsError:  # made by a concurrent process a moment ago
+            continue
+        os.chmod(folder, 0o700)  # mkdir's mode is masked by the umask
+    if not path.is_dir():
+        raise NotADirectoryError(20, "Not a directory", str(path))
+    return path
+
+
 _enabled: Path | None = None
+_read_only = False
+
+
+def read_only() -> bool:
+    """Whether the directory in use (:func:`enabled_directory`) is used for reading only."""
+    return _read_only
 
 
 def enabled_directory() -> Path | None:
@@ -166,9 +258,10 @@ def enable_compile_cache(
     Returns
     -------
     pathlib.Path or None
-        The directory in use, or None when ``$INVSSS_NO_CACHE`` is set or the
-        directory cannot be created (then a warning says why; fitting works as
-        before, only slower to start).
+        The directory in use, or None when ``$INVSSS_NO_CACHE`` is set, or the
+        directory cannot be created or is not yours alone (then a warning says
+        why; fitting works as before, only slower to start). A directory you
+        can read but not write is used for reading only.
 
     Examples
     --------
@@ -182,7 +275,7 @@ def enable_compile_cache(
     ...
     invsss.validation.InvalidInputError: min_compile_seconds: expected a number >= 0, got -1
     """
-    global _enabled
+    global _enabled, _read_only
     path = cache_directory(directory)
     if isinstance(min_compile_seconds, bool) or not isinstance(min_compile_seconds, (int, float)) \
             or not min_compile_seconds >= 0:
@@ -191,8 +284,6 @@ def enable_compile_cache(
         )
     if cache_disabled():
         return None
-    import warnings
-
     try:
         # JAX's size bound, and with it the lock that makes a shared directory safe
         # (module docstring), needs filelock; without it every cache read would
@@ -203,20 +294,34 @@ def enable_compile_cache(
                       "(pip install filelock); not caching")
         return None
     try:
-        path.mkdir(parents=True, exist_ok=True)
+        make_private_folder(path)
     except OSError as err:
         warnings.warn(f"compilation cache {path}: cannot create it ({err.strerror}); not caching")
         return None
+    problem = private_folder_problem(path)
+    if problem is not None:
+        # JAX would run whatever executables such a folder holds.
+        warn_once(("refused", str(path)), f"compilation cache {path}: not used, as it is {problem}; "
+                  "compiling as usual (make it yours alone, e.g. chmod 700, or set INVSSS_CACHE_DIR)")
+        return None
+    read_only = not os.access(path, os.W_OK)
 
     import jax
     from jax.experimental.compilation_cache import compilation_cache
 
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_seconds))
+    if read_only:
+        # Reading only: nothing is written (no compilation is slow enough to be
+        # stored), and no size bound, whose lock file JAX could not create.
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", float("inf"))
+        jax.config.update("jax_compilation_cache_max_size", -1)
+    else:
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_seconds))
+        jax.config.update("jax_compilation_cache_max_size", MAX_CACHE_BYTES)
     # -1: no size floor (0 would let JAX substitute its own default).
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
-    jax.config.update("jax_compilation_cache_max_size", MAX_CACHE_BYTES)
-    if _enabled == path and jax.config.jax_compilation_cache_dir == str(path):
+    if _enabled == path and _read_only == read_only and jax.config.jax_compilation_cache_dir == str(path):
         return path
+    _read_only = read_only
     jax.config.update("jax_compilation_cache_dir", str(path))
     # JAX decides once per process, at the first compilation, whether a cache is
     # in use (and opens it once); anything compiled before this call (an

@@ -27,18 +27,45 @@ Several processes may share the folder: an entry is written to a temporary
 file and renamed into place, so a reader sees a whole entry or none. An entry
 that cannot be read or loaded costs a compilation (and one warning), never a
 wrong result. The folder is kept under :data:`MAX_EXECUTABLE_BYTES`, the
-least recently used entries going first. Entries are pickles holding machine
-code, as JAX's own cache entries are: the directory must be writable by you
-alone.
+least recently used entries going first.
+
+Entries are pickles holding machine code, so nothing in one is unpickled or run
+before these checks, in this order:
+
+1. **Yours alone.** The folder is created with mode 0700; a folder or an entry
+   that is not owned by you, or that group or others may write to, is refused
+   (one warning per run) and the function compiled as usual.
+2. **Whole.** Each entry starts with the SHA-256 of the rest of its bytes,
+   taken when it was written; an entry whose bytes no longer match (a flipped
+   bit, a truncated or overwritten file) is reported once and compiled again.
+3. **Tried in another process first.** A checksum cannot tell bytes that were
+   wrong when they were written (a bug in a writer, memory corruption) from
+   good ones, and such an entry can crash the process that loads or runs it
+   (a segmentation fault). So the first time an entry is used, a child process
+   loads it and runs it once on this call's arguments; only if that child
+   succeeds is the entry loaded here, and ``<entry>.verified`` records the
+   entry's digest so that later runs load it directly. A child that fails or
+   dies costs one warning, and the entry is replaced by a fresh compilation.
+
+A folder you can read but not write is used for reading only, without a word
+(its entries still pass the three checks; a child process then tries each
+entry on every run, as no record can be written).
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import functools
 import hashlib
 import io
+import json
 import os
 import pickle
+import stat
+import signal
+import subprocess
+import sys
 import tempfile
 import threading
 import warnings
@@ -56,7 +83,15 @@ __all__ = ["MAX_EXECUTABLE_BYTES", "StaleStatics", "persistent_jit"]
 MAX_EXECUTABLE_BYTES = 512 * 1024**2
 
 _LIBRARIES = ("jax", "jaxlib", "equinox", "optimistix", "lineax", "jaxtyping")
-_FORMAT = 1  # of the entry files; bump when their layout changes
+_FORMAT = 2  # of the entry files; bump when their layout changes
+
+#: An entry file: this, the SHA-256 digest of the rest (32 bytes), the pickle.
+_MAGIC = b"invsss-executable-2\n"
+_DIGEST_BYTES = 32
+
+#: How long the child process that tries an entry may take (it loads the entry
+#: and runs one call) before the entry counts as failed.
+VERIFY_SECONDS = 600
 
 
 @functools.lru_cache(maxsize=1)
@@ -167,11 +202,192 @@ def _prepare_runtime() -> None:
         initialize_lapack()
 
 
+_checked_folders: dict = {}
+
+
 def _folder() -> Path | None:
-    from .compile_cache import enabled_directory
+    """The ``executables`` folder, or None when the cache is off or the folder is refused."""
+    from .compile_cache import enabled_directory, private_folder_problem, warn_once
 
     directory = enabled_directory()
-    return None if directory is None else directory / "executables"
+    if directory is None:
+        return None
+    folder = directory / "executables"
+    verdict = _checked_folders.get(folder)
+    if verdict is None:
+        problem = private_folder_problem(folder)
+        if problem is not None:
+            warn_once(("refused", str(folder)), f"executable cache {folder}: not used, as it is {problem}; "
+                      "compiling as usual (make it yours alone, e.g. chmod 700)")
+            verdict = False
+        elif folder.is_dir():
+            verdict = True
+        else:
+            return folder  # not made yet: the first entry stored creates it, mode 0700
+        _checked_folders[folder] = verdict
+    return folder if verdict else None
+
+
+def _writable(folder: Path) -> bool:
+    """False for a folder this process may read but not write (then it only reads, quietly)."""
+    from .compile_cache import read_only
+
+    target = folder if folder.exists() else folder.parent
+    return not read_only() and os.access(target, os.W_OK)
+
+
+class _Refused(Exception):
+    """A file that is not this user's alone."""
+
+
+def _seal(payload: bytes) -> bytes:
+    """An entry file's bytes: the magic line, the payload's SHA-256 digest, the payload."""
+    return _MAGIC + hashlib.sha256(payload).digest() + payload
+
+
+def _unseal(data: bytes) -> bytes | None:
+    """The payload of an entry file's bytes, or None if they do not match their checksum."""
+    head = len(_MAGIC) + _DIGEST_BYTES
+    if len(data) < head or not data.startswith(_MAGIC):
+        return None
+    payload = data[head:]
+    return payload if hashlib.sha256(payload).digest() == data[len(_MAGIC):head] else None
+
+
+def _read_private(path: Path) -> bytes:
+    """The bytes of ``path``; :class:`_Refused` unless it is a regular file (not a
+    symbolic link) owned by this user and writable by nobody else."""
+    from .compile_cache import _ownership_problem
+
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+    except OSError as err:
+        if err.errno == errno.ELOOP:
+            raise _Refused("a symbolic link") from None
+        raise
+    try:
+        info = os.fstat(fd)
+        problem = "not a regular file" if not stat.S_ISREG(info.st_mode) else _ownership_problem(info)
+        if problem is not None:
+            raise _Refused(problem)
+        with os.fdopen(os.dup(fd), "rb") as file:
+            return file.read()
+    finally:
+        os.close(fd)
+
+
+def _warn_entry(path: Path, what: str) -> None:
+    """One warning per entry and run: ``executable cache: NAME <what>; compiling it again``."""
+    from .compile_cache import warn_once
+
+    warn_once(("entry", path.name), f"executable cache: {path.name} {what}; compiling it again")
+
+
+def _record_path(path: Path) -> Path:
+    return path.with_suffix(".verified")
+
+
+def _is_verified(path: Path, digest: str) -> bool:
+    """Whether a child process has already run the entry whose file has SHA-256 ``digest``."""
+    try:
+        return _read_private(_record_path(path)).decode("ascii", "replace").strip() == digest
+    except (OSError, _Refused):
+        return False
+
+
+def _record_verified(path: Path, digest: str) -> None:
+    _write_atomic(_record_path(path), (digest + "\n").encode())
+
+
+def _write_atomic(path: Path, data: bytes) -> bool:
+    """Write ``data`` to ``path`` through a temporary file and a rename; False if the disk refused."""
+    temporary = None
+    try:
+        handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=".writing-")
+        with os.fdopen(handle, "wb") as file:
+            file.write(data)
+        os.replace(temporary, path)
+        return True
+    except OSError:
+        # A full or read-only disk costs the next process a compilation.
+        if temporary is not None and os.path.exists(temporary):
+            with contextlib.suppress(OSError):
+                os.unlink(temporary)
+        return False
+
+
+# The child process that tries an entry: argv[1] the entry's bytes (a copy of what
+# the parent checked), argv[2] its SHA-256, argv[3] the call's arguments (.npz),
+# argv[4] options (JSON). It prints "ok" after the call has finished.
+_TRY = """
+import sys
+from invsss.executable_cache import _try_entry
+_try_entry(*sys.argv[1:5])
+print("ok", flush=True)
+"""
+
+
+def _try_in_child(data: bytes, digest: str, leaves) -> str | None:
+    """None if a child process loaded the entry ``data`` and ran it on ``leaves``; else what went wrong."""
+    import numpy as np
+
+    env = dict(os.environ, INVSSS_NO_CACHE="1")
+    package_root = str(Path(__file__).resolve().parent.parent)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
+    weak = [bool(getattr(jax.typeof(leaf), "weak_type", False)) for leaf in leaves]
+    options = json.dumps({"x64": bool(jax.config.jax_enable_x64), "weak": weak})
+    with tempfile.TemporaryDirectory(prefix="invsss-try-entry-") as scratch:
+        entry_file = os.path.join(scratch, "entry")
+        arguments = os.path.join(scratch, "arguments.npz")
+        try:
+            with open(entry_file, "wb") as file:
+                file.write(data)
+            np.savez(arguments, *[np.asarray(leaf) for leaf in leaves])
+        except OSError as err:
+            return f"its arguments could not be written for the trial ({err.strerror})"
+        try:
+            child = subprocess.run([sys.executable, "-c", _TRY, entry_file, digest, arguments, options],
+                                   env=env, capture_output=True, timeout=VERIFY_SECONDS)
+        except subprocess.TimeoutExpired:
+            return f"no answer within {VERIFY_SECONDS} s"
+        except OSError as err:
+            return f"the process could not start ({err.strerror})"
+    if child.returncode == 0 and child.stdout.split()[-1:] == [b"ok"]:
+        return None
+    if child.returncode < 0:
+        try:
+            return f"the process was killed by {signal.Signals(-child.returncode).name}"
+        except ValueError:
+            return f"the process was killed by signal {-child.returncode}"
+    lines = child.stderr.decode(errors="replace").strip().splitlines()
+    return f"exit status {child.returncode}" + (f": {lines[-1][:100]}" if lines else "")
+
+
+def _try_entry(entry_file: str, digest: str, arguments: str, options: str) -> None:
+    """In the child process of :func:`_try_in_child`: load the entry, run it once."""
+    import numpy as np
+    from jax.experimental import serialize_executable
+
+    settings = json.loads(options)
+    jax.config.update("jax_enable_x64", settings["x64"])
+    data = Path(entry_file).read_bytes()
+    payload = _unseal(data)
+    if payload is None or hashlib.sha256(data).hexdigest() != digest:
+        sys.exit("the entry's bytes changed on their way to the trial")
+    _prepare_runtime()
+    entry = pickle.loads(payload)
+    executable = serialize_executable.deserialize_and_load(entry["executable"], entry["in_tree"], entry["out_tree"])
+    with np.load(arguments, allow_pickle=False) as stored:
+        leaves = [stored[f"arr_{i}"] for i in range(len(settings["weak"]))]
+    leaves = [_weak(value) if weak else jax.numpy.asarray(value) for value, weak in zip(leaves, settings["weak"])]
+    jax.block_until_ready(executable(*leaves))
+
+
+def _weak(value):
+    """``value`` as a weakly typed array (as a Python scalar argument is traced)."""
+    from jax._src.lax import lax as lax_internal
+
+    return lax_internal._convert_element_type(jax.numpy.asarray(value), value.dtype, weak_type=True)
 
 
 class _Slot:
@@ -283,10 +499,11 @@ class persistent_jit:
         try:
             out = jax.block_until_ready(compiled(leaves))
         except jax.errors.JaxRuntimeError as err:
-            warnings.warn(f"executable cache: {compiled.loaded_from.name} could not run "
-                          f"({str(err).splitlines()[0][:80]}); compiling it again")
+            path = compiled.loaded_from
+            _warn_entry(path, f"could not run ({str(err).splitlines()[0][:80]})")
             with self._lock:
-                compiled = self._compile_and_store(compiled.loaded_from, leaves, in_tree, static)
+                compiled = self._compile_and_store(path if _writable(path.parent) else None,
+                                                   leaves, in_tree, static)
                 self._memory[key] = compiled
             return compiled(leaves)
         compiled.loaded_from = None
@@ -307,26 +524,62 @@ class persistent_jit:
 
     def _load_or_compile(self, folder: Path, key, leaves, in_tree, static) -> _Compiled:
         """The entry for ``key`` from disk, else compiled here and stored."""
-        from jax.experimental import serialize_executable
-
         name = self._file_key(key, static)
         path = None if name is None else folder / f"{name}.executable"
-        if path is not None and path.is_file():
-            try:
-                _prepare_runtime()
-                entry = pickle.loads(path.read_bytes())
-                executable = serialize_executable.deserialize_and_load(
-                    entry["executable"], entry["in_tree"], entry["out_tree"]
-                )
-                # The outline is pickled as a pytree of slots, not as a PyTreeDef:
-                # equinox's tree nodes do not survive pickling.
-                out_tree = jax.tree_util.tree_structure(entry["outline"])
+        writable = _writable(folder)
+        if path is not None and os.path.lexists(path):
+            loaded = self._load(path, leaves, writable)
+            if loaded is not None:
+                return loaded
+        return self._compile_and_store(path if writable else None, leaves, in_tree, static)
+
+    @staticmethod
+    def _load(path: Path, leaves, writable: bool) -> _Compiled | None:
+        """The entry at ``path``, checked (module docstring) before anything in it is
+        unpickled or run; None (with one warning) if it is refused, damaged or fails."""
+        from jax.experimental import serialize_executable
+
+        from .compile_cache import warn_once
+
+        try:
+            data = _read_private(path)
+        except _Refused as err:
+            warn_once("refused entry", f"executable cache: {path.name}: not used, as it is {err}; "
+                      "compiling it (and any other such entry) as usual")
+            return None
+        except FileNotFoundError:  # pruned by another process meanwhile
+            return None
+        except OSError as err:
+            _warn_entry(path, f"could not be read ({err.strerror})")
+            return None
+        payload = _unseal(data)
+        if payload is None:
+            _warn_entry(path, "is damaged (its bytes do not match the checksum written with it)")
+            return None
+        digest = hashlib.sha256(data).hexdigest()
+        if not _is_verified(path, digest):
+            failure = _try_in_child(data, digest, leaves)
+            if failure is not None:
+                _warn_entry(path, f"failed when a separate process tried it ({failure})")
+                return None
+            if writable:
+                _record_verified(path, digest)
+        try:
+            _prepare_runtime()
+            entry = pickle.loads(payload)
+            executable = serialize_executable.deserialize_and_load(
+                entry["executable"], entry["in_tree"], entry["out_tree"]
+            )
+            # The outline is pickled as a pytree of slots, not as a PyTreeDef:
+            # equinox's tree nodes do not survive pickling.
+            out_tree = jax.tree_util.tree_structure(entry["outline"])
+        except Exception as err:  # noqa: BLE001 - any unreadable entry means: compile again
+            _warn_entry(path, f"could not be loaded ({type(err).__name__})")
+            return None
+        if writable:
+            with contextlib.suppress(OSError):
                 os.utime(path)  # most recently used
-                return _Compiled(executable, out_tree, entry["out_static"], loaded_from=path)
-            except Exception as err:  # noqa: BLE001 - any unreadable entry means: compile again
-                warnings.warn(f"executable cache: {path.name} could not be loaded ({type(err).__name__}); "
-                              "compiling it again")
-        return self._compile_and_store(path, leaves, in_tree, static)
+        return _Compiled(executable, out_tree, entry["out_static"], loaded_from=path)
 
     def _compile_and_store(self, path: Path | None, leaves, in_tree, static) -> _Compiled:
         compiled, out_tree, out_static = self._compile(leaves, in_tree, static)
@@ -373,20 +626,15 @@ class persistent_jit:
                            "outline": outline, "out_static": out_static})
         except Exception:  # noqa: BLE001 - not serialisable: kept in memory only
             return
+        from .compile_cache import make_private_folder
+
         folder = path.parent
-        temporary = None
         try:
-            folder.mkdir(parents=True, exist_ok=True)
-            handle, temporary = tempfile.mkstemp(dir=folder, prefix=".writing-")
-            with os.fdopen(handle, "wb") as file:
-                file.write(data)
-            os.replace(temporary, path)
+            make_private_folder(folder)
         except OSError:
-            # A full or read-only disk costs the next process a compilation.
-            if temporary is not None and os.path.exists(temporary):
-                os.unlink(temporary)
             return
-        _prune(folder, MAX_EXECUTABLE_BYTES)
+        if _write_atomic(path, _seal(data)):
+            _prune(folder, MAX_EXECUTABLE_BYTES)
 
 
 def _prune(folder: Path, limit: int) -> None:
@@ -407,3 +655,8 @@ def _prune(folder: Path, limit: int) -> None:
         except OSError:
             pass
         total -= size
+    # The records of entries that are gone (pruned, or replaced by another process).
+    for record in folder.glob("*.verified"):
+        if not record.with_suffix(".executable").exists():
+            with contextlib.suppress(OSError):
+                record.unlink()

@@ -4,12 +4,14 @@ missing entry costs a compilation, never a wrong result or a crash."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import pickle
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import pytest
@@ -147,3 +149,211 @@ def test_prune_removes_the_least_recently_used(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mid.executable", "new.executable", "other.txt"]
     _prune(tmp_path, 100)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["new.executable", "other.txt"]
+
+
+# ------------------------------------------------- checks before anything is unpickled
+
+_ROOT = os.geteuid() == 0
+
+
+def _double(x, factor):
+    return x * factor
+
+
+@pytest.fixture
+def cache_dir(tmp_path):
+    """A fresh cache switched on in this process (the session's is put back afterwards)."""
+    from invsss import compile_cache, executable_cache
+    from invsss.compile_cache import enable_compile_cache
+
+    def forget():  # what this process has warned about and checked
+        for name, module in (("_warned", compile_cache), ("_checked_folders", executable_cache)):
+            getattr(module, name, {}).clear()
+
+    session = os.environ["INVSSS_CACHE_DIR"]
+    forget()
+    yield lambda path=tmp_path / "cache": enable_compile_cache(path)
+    forget()
+    enable_compile_cache(session)
+
+
+def _call(x=None):
+    """A fresh persistent_jit of _double (nothing in memory), called; its result and warnings."""
+    import warnings
+
+    import jax.numpy as jnp
+
+    from invsss.executable_cache import persistent_jit
+
+    function = persistent_jit(_double)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out = function(jnp.arange(4.0) if x is None else x, 2.0)
+    return [float(v) for v in out], function.traces, [str(w.message) for w in caught]
+
+
+def _entry_files(cache: Path) -> list[Path]:
+    return sorted((cache / "executables").glob("*.executable"))
+
+
+def _sealed(payload: bytes) -> bytes:
+    """``payload`` as an entry file holds it (a pickle, after the checksum)."""
+    from invsss import executable_cache
+
+    return getattr(executable_cache, "_seal", lambda data: data)(payload)
+
+
+class _Bomb:
+    """A pickle that runs ``call(*args)`` when it is loaded."""
+
+    def __init__(self, call, *args):
+        self.call, self.args = call, args
+
+    def __reduce__(self):
+        return self.call, self.args
+
+
+def test_a_checksum_is_written_with_each_entry_and_checked():
+    from invsss.executable_cache import _seal, _unseal
+
+    sealed = _seal(b"payload bytes")
+    assert _unseal(sealed) == b"payload bytes"
+    for position in (len(sealed) // 2, len(sealed) - 1, 3):
+        damaged = bytearray(sealed)
+        damaged[position] ^= 0x10
+        assert _unseal(bytes(damaged)) is None
+    assert _unseal(sealed[:-1]) is None and _unseal(b"") is None
+
+
+def test_a_damaged_entry_is_warned_about_once_and_compiled_again(cache_dir):
+    cache = cache_dir()
+    assert _call()[:2] == ([0.0, 2.0, 4.0, 6.0], 1)
+    (entry,) = _entry_files(cache)
+    data = bytearray(entry.read_bytes())
+    data[len(data) * 2 // 3] ^= 0x10
+    entry.write_bytes(bytes(data))
+    out, traces, warned = _call()
+    assert out == [0.0, 2.0, 4.0, 6.0] and traces == 1
+    assert len(warned) == 1 and f"executable cache: {entry.name} is damaged" in warned[0]
+    assert _call()[1:] == (0, [])  # compiled again and stored whole
+
+
+def test_an_entry_that_crashes_its_loader_is_tried_in_a_separate_process_first(cache_dir):
+    # Bytes that were wrong when written pass their checksum: such an entry (here
+    # a pickle that aborts the process loading it, as a flipped bit in compiled
+    # code did) must not take this process down.
+    cache = cache_dir()
+    _call()
+    (entry,) = _entry_files(cache)
+    entry.write_bytes(_sealed(pickle.dumps(_Bomb(os.abort))))
+    out, traces, warned = _call()
+    assert out == [0.0, 2.0, 4.0, 6.0] and traces == 1
+    assert len(warned) == 1, warned
+    assert f"executable cache: {entry.name} failed when a separate process tried it" in warned[0]
+    assert "SIGABRT" in warned[0]
+    # Replaced by the compilation; tried once more in a child, then recorded as tried.
+    assert _call()[1:] == (0, [])
+    assert entry.with_suffix(".verified").is_file()
+    assert _call()[1:] == (0, [])
+
+
+def test_entries_not_yours_alone_are_refused_before_anything_is_unpickled(cache_dir, tmp_path):
+    import jax.numpy as jnp
+
+    cache = cache_dir()
+    _call()
+    _call(jnp.arange(5.0))  # a second entry
+    entries = _entry_files(cache)
+    assert len(entries) == 2
+    markers = [tmp_path / "ran-0", tmp_path / "ran-1"]
+    for entry, marker in zip(entries, markers):
+        entry.write_bytes(_sealed(pickle.dumps(_Bomb(open, str(marker), "w"))))
+    entries[0].chmod(0o666)  # writable by group and others
+    if _ROOT:
+        os.chown(entries[1], 4242, 4242)  # someone else's
+    else:
+        entries[1].chmod(0o620)
+    first = _call()
+    second = _call(jnp.arange(5.0))
+    assert first[:2] == ([0.0, 2.0, 4.0, 6.0], 1) and second[1] == 1
+    assert not any(marker.exists() for marker in markers)
+    # One notice for the run, however many entries are refused.
+    notices = first[2] + second[2]
+    assert len(notices) == 1 and "not used, as it is" in notices[0], notices
+    assert "writable by group and others" in notices[0] or "not by you" in notices[0]
+
+
+def test_a_folder_not_yours_alone_is_refused_with_one_notice(cache_dir, tmp_path):
+    cache = cache_dir()
+    _call()
+    (entry,) = _entry_files(cache)
+    marker = tmp_path / "ran"
+    entry.write_bytes(_sealed(pickle.dumps(_Bomb(open, str(marker), "w"))))
+    (cache / "executables").chmod(0o777)
+    first, second = _call(), _call()
+    assert first[0] == [0.0, 2.0, 4.0, 6.0] and not marker.exists()
+    assert len(first[2]) == 1 and "executable cache" in first[2][0] and "not used" in first[2][0]
+    assert "writable by group and others (mode 0777)" in first[2][0]
+    assert second[2] == []
+
+
+def _mount_tmpfs(where: Path, size: str) -> None:
+    where.mkdir(parents=True, exist_ok=True)
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(where)],
+                          capture_output=True, text=True)
+    if done.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here ({done.stderr.strip() or done.returncode})")
+
+
+def _unmount(where: Path) -> None:
+    subprocess.run(["umount", "-l", str(where)], capture_output=True)
+
+
+@pytest.fixture
+def read_only(tmp_path):
+    """``read_only(folder)``: a copy of ``folder`` this process can read but not write
+    (a read-only tmpfs when running as root, who may write anything else; else chmod)."""
+    import shutil
+
+    mounted = []
+
+    def make(folder: Path) -> Path:
+        copy = tmp_path / "read-only"
+        if _ROOT:
+            _mount_tmpfs(copy, "64m")
+            mounted.append(copy)
+            shutil.copytree(folder, copy, dirs_exist_ok=True, symlinks=True)
+            done = subprocess.run(["mount", "-o", "remount,ro", str(copy)], capture_output=True, text=True)
+            if done.returncode != 0:
+                pytest.skip(f"cannot remount a tmpfs read-only here ({done.stderr.strip()})")
+        else:
+            shutil.copytree(folder, copy, symlinks=True)
+            for path in [copy, *copy.rglob("*")]:
+                path.chmod(path.stat().st_mode & ~0o222)
+        return copy
+
+    yield make
+    for where in mounted:
+        _unmount(where)
+    for path in [tmp_path, *tmp_path.rglob("*")] if not _ROOT else []:
+        with contextlib.suppress(OSError):
+            path.chmod(path.stat().st_mode | 0o200)
+
+
+def test_a_read_only_cache_is_used_for_reading_quietly(cache_dir, read_only):
+    import jax
+    import jax.numpy as jnp
+
+    cache = cache_dir()
+    _call()
+    _call()  # tried in a child process and recorded
+    frozen = read_only(cache)
+    listing = sorted(str(p.relative_to(frozen)) for p in frozen.rglob("*"))
+    assert cache_dir(frozen) == frozen
+    out, traces, warned = _call()
+    assert out == [0.0, 2.0, 4.0, 6.0] and traces == 0  # loaded, not compiled
+    with warnings.catch_warnings(record=True) as caught:  # JAX's own cache: nothing written, no lock
+        warnings.simplefilter("always")
+        jax.jit(lambda x: jnp.tanh(x @ x.T) * 3.0)(jnp.ones((7, 7))).block_until_ready()
+    assert warned == [] and [str(w.message) for w in caught] == []
+    assert sorted(str(p.relative_to(frozen)) for p in frozen.rglob("*")) == listing
