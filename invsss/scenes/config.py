@@ -7,7 +7,7 @@ angles degrees, scattering coefficients 1/mm. A minimal file::
     seed = 1
 
     [object]
-    primitive = "sphere"        # or "slab" (with size), or mesh = "head.glb" with mm_per_unit
+    primitive = "sphere"        # or "slab" (with size), "face", or mesh = "head.glb" with mm_per_unit
     radius = 40.0
 
     [camera]
@@ -87,21 +87,38 @@ class Pose(_Strict):
 
 
 class SceneObject(_Strict):
-    """The skin object: a closed mesh file, or a built-in primitive for tests.
+    """The skin object: a closed mesh file, or a built-in primitive.
 
     ``primitive = "slab"``: a box of ``size = [width, height, thickness]`` mm whose
     front face is the plane z = 0 (facing +z), centred on the z axis.
     ``primitive = "sphere"``: a sphere of ``radius`` mm about the origin.
+    ``primitive = "face"``: a procedural closed head with nose, chin, eye sockets,
+    and optionally thin ear flaps (``ears``, default true) and forehead furrows
+    (``wrinkles``, default true), meshed by marching cubes at ``cell`` mm (default
+    1; 8-12 gives a low-poly head whose smoothed shading normals disagree with its
+    triangles). Head centre at the origin, y up, face towards +z, 144 x 190 x 176
+    mm (:mod:`invsss.scenes.procedural`).
     A ``mesh`` (any format trimesh reads; a relative path is relative to the
     config file) is scaled by ``mm_per_unit`` and must be closed, since it holds
     the medium. ``pose`` then places it.
+
+    ``bumps`` (degrees, default 0) tilts the shading normals of a mesh or face, and
+    not its surface, by up to that angle in a smooth pattern 25 mm across, as a
+    normal map does (:func:`~invsss.scenes.mitsuba_scene.bumped_normals`): the
+    normal buffer and the Lambertian source show bumps that the medium's boundary
+    does not have, and near the silhouette some normals face away from the camera.
     """
 
     mesh: str | None = None
     mm_per_unit: Positive | None = None
-    primitive: Literal["slab", "sphere"] | None = None
+    primitive: Literal["slab", "sphere", "face"] | None = None
     size: Annotated[list[Positive], Field(min_length=3, max_length=3)] | None = None
     radius: Positive | None = None
+    # The face's grid is held to 1 mm or coarser: at 1 mm it already has 290 000 triangles.
+    cell: Annotated[float, Field(ge=1.0, le=20.0)] | None = None
+    ears: bool | None = None
+    wrinkles: bool | None = None
+    bumps: Annotated[float, Field(ge=0.0, lt=60.0)] = 0.0
     pose: Pose = Pose()
 
     @model_validator(mode="after")
@@ -114,7 +131,27 @@ class SceneObject(_Strict):
             raise ValueError('primitive "slab" needs size = [width, height, thickness] in mm')
         if self.primitive == "sphere" and self.radius is None:
             raise ValueError('primitive "sphere" needs radius in mm')
+        face_keys = [k for k in ("cell", "ears", "wrinkles") if getattr(self, k) is not None]
+        if face_keys and self.primitive != "face":
+            raise ValueError(f'{", ".join(face_keys)}: only for primitive "face"')
+        if self.bumps > 0 and self.primitive in ("slab", "sphere"):
+            raise ValueError('bumps: only for a mesh or primitive "face" (Mitsuba\'s slab and sphere have their own normals)')
+        if self.primitive == "face" and (self.size is not None or self.radius is not None):
+            raise ValueError('primitive "face" has a fixed size: leave out size and radius (scale it with the camera)')
         return self
+
+    @property
+    def cell_mm(self) -> float:
+        """The face's marching-cubes grid spacing (mm), 1 unless given."""
+        return 1.0 if self.cell is None else self.cell
+
+    @property
+    def ears_on(self) -> bool:
+        return True if self.ears is None else self.ears
+
+    @property
+    def wrinkles_on(self) -> bool:
+        return True if self.wrinkles is None else self.wrinkles
 
 
 class Camera(_Strict):

@@ -25,7 +25,8 @@ import numpy as np
 from ..validation import InvalidInputError
 from .config import SceneConfig
 
-__all__ = ["import_mitsuba", "scene_dict", "medium_dict", "boundary_bsdf", "load_mesh_ply", "SCENE_KINDS"]
+__all__ = ["import_mitsuba", "scene_dict", "medium_dict", "boundary_bsdf", "load_mesh_ply", "bumped_normals",
+           "write_mesh_ply", "SCENE_KINDS"]
 
 SCENE_KINDS = ("source", "target", "specular", "geometry", "visible")
 
@@ -100,12 +101,61 @@ def _pose(mi, config: SceneConfig):
     )
 
 
-def load_mesh_ply(mesh_path: str, folder: str) -> str:
+#: The bump pattern's wavelength (mm, in the mesh's own frame after scaling to mm).
+BUMP_WAVELENGTH_MM = 25.0
+
+
+def bumped_normals(vertices, normals, degrees: float) -> np.ndarray:
+    """Unit normals tilted by a smooth, fixed pattern of at most ``degrees`` (a normal map's effect).
+
+    The tilt at a vertex ``p`` (mm) is the part of ``g(p) = (sin(k p_y + 1), sin(k p_z + 2),
+    sin(k p_x + 3)) / sqrt(3)``, ``k = 2 pi / BUMP_WAVELENGTH_MM``, that lies in the tangent
+    plane, times ``tan(degrees)``: no randomness, the same mesh gives the same normals.
+
+    Examples
+    --------
+    >>> n = np.tile([0.0, 0.0, 1.0], (50, 1))
+    >>> p = np.random.default_rng(0).uniform(-50, 50, (50, 3))
+    >>> tilted = bumped_normals(p, n, 30.0)
+    >>> bool(np.allclose(np.linalg.norm(tilted, axis=1), 1.0)), bool(np.degrees(np.arccos(tilted[:, 2].min())) <= 30.0)
+    (True, True)
+    """
+    p = np.asarray(vertices, np.float64)
+    n = np.asarray(normals, np.float64)
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    k = 2.0 * np.pi / BUMP_WAVELENGTH_MM
+    g = np.stack([np.sin(k * p[:, 1] + 1.0), np.sin(k * p[:, 2] + 2.0), np.sin(k * p[:, 0] + 3.0)], axis=1) / np.sqrt(3.0)
+    tangent = g - n * np.sum(g * n, axis=1, keepdims=True)  # |tangent| <= |g| <= 1
+    tilted = n + np.tan(np.radians(degrees)) * tangent
+    return tilted / np.linalg.norm(tilted, axis=1, keepdims=True)
+
+
+def write_mesh_ply(mesh, folder: str, *, bumps: float = 0.0, mm_per_unit: float = 1.0) -> str:
+    """Save a closed trimesh as ``folder/object.ply``; with ``bumps`` > 0 its vertex normals are tilted.
+
+    Without bumps the file has no normals and Mitsuba interpolates its own smooth
+    vertex normals. With them it carries :func:`bumped_normals` of trimesh's smooth
+    vertex normals (the pattern laid out in mm: ``mm_per_unit`` scales the positions),
+    which Mitsuba interpolates instead.
+    """
+    path = os.path.join(folder, "object.ply")
+    if bumps > 0:
+        normals = bumped_normals(np.asarray(mesh.vertices) * mm_per_unit, mesh.vertex_normals, bumps)
+        mesh = mesh.copy()
+        mesh.vertex_normals = normals
+        mesh.export(path, file_type="ply", vertex_normal=True, include_attributes=False)
+    else:
+        mesh.export(path, file_type="ply")
+    return path
+
+
+def load_mesh_ply(mesh_path: str, folder: str, *, bumps: float = 0.0, mm_per_unit: float = 1.0) -> str:
     """Load a mesh with trimesh, check that it is closed, and save it as PLY in ``folder``.
 
     Vertices that coincide are merged first (seams of texture coordinates or
     normals split a closed surface into open pieces); the surface must then be
     watertight with outward normals, since it is the boundary of the medium.
+    ``bumps`` and ``mm_per_unit``: see :func:`write_mesh_ply`.
 
     Raises
     ------
@@ -143,9 +193,7 @@ def load_mesh_ply(mesh_path: str, folder: str) -> str:
         )
     if mesh.volume < 0:
         mesh.invert()  # inward-facing triangles would swap the inside and outside of the medium
-    path = os.path.join(folder, "object.ply")
-    mesh.export(path, file_type="ply")
-    return path
+    return write_mesh_ply(mesh, folder, bumps=bumps, mm_per_unit=mm_per_unit)
 
 
 def medium_dict(sigma_s_prime, sigma_a) -> dict:
@@ -200,6 +248,8 @@ def _object_shape(mi, config: SceneConfig, mesh_ply: str | None) -> dict:
         # Mitsuba's cube spans [-1, 1]^3; the slab's front face is z = 0.
         return {"type": "cube",
                 "to_world": pose.translate([0, 0, -thickness / 2]).scale([width / 2, height / 2, thickness / 2])}
+    if obj.primitive == "face":
+        return {"type": "ply", "filename": mesh_ply, "to_world": pose}  # meshed in mm already
     return {"type": "ply", "filename": mesh_ply, "to_world": pose.scale(obj.mm_per_unit)}
 
 
@@ -305,7 +355,8 @@ def scene_dict(mi, config: SceneConfig, kind: str, *, albedo=None, mesh_ply: str
     albedo : float or list of float
         The Lambertian albedo of ``"source"``.
     mesh_ply : str
-        The object's mesh as PLY (:func:`load_mesh_ply`), for mesh objects.
+        The object's mesh as PLY (:func:`load_mesh_ply`, or
+        :func:`~invsss.scenes.procedural.write_face_ply` for ``primitive = "face"``).
     coefficients : dict
         :meth:`~invsss.scenes.config.Medium.coefficients`, for ``"target"`` and ``"specular"``.
     spp : int

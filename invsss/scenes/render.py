@@ -176,7 +176,14 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
     seeds = {"source": 2 * config.seed, "target_halves": [2 * config.seed, 2 * config.seed + 1],
              "specular_halves": [2 * config.seed, 2 * config.seed + 1], "calibration": 0}
     with tempfile.TemporaryDirectory(prefix="invsss-scene-") as folder:
-        mesh_ply = load_mesh_ply(config.object.mesh, folder) if config.object.mesh else None
+        mesh_ply, mesh_record = None, _mesh_record(config.object.mesh)
+        if config.object.mesh:
+            mesh_ply = load_mesh_ply(config.object.mesh, folder, bumps=config.object.bumps,
+                                     mm_per_unit=config.object.mm_per_unit)
+        elif config.object.primitive == "face":
+            from .procedural import write_face_ply
+
+            mesh_ply, mesh_record = write_face_ply(config.object, folder)
 
         def build(kind: str, scene_config: SceneConfig = config, **extra):
             return scene_dict(mi, scene_config, kind, mesh_ply=mesh_ply, coefficients=coefficients, **extra)
@@ -242,7 +249,7 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         "variant": config.variant,
         "platform": platform.platform(),
         "config": _portable(config.model_dump()),
-        "mesh": _mesh_record(config.object.mesh),
+        "mesh": mesh_record,
         "focal_px": config.camera.focal_length_px,
         "channels": channels,
         "medium": {
