@@ -35,7 +35,7 @@ import jax
 import numpy as np
 
 from .io import read_params, write_text_atomic
-from .light_terms import AFTER_BLUR, LightTerms
+from .light_terms import AFTER_BLUR, LAW_TRUST, LightTerms
 from .models import get_model, resolve_tap_weights
 from .params import SSSParams
 from .passes import TAP_OFFSETS, tap_spread
@@ -174,9 +174,11 @@ def _light_constants(light_terms) -> dict:
     """``lightShift``, ``grazingGain``, ``incidenceGain`` and ``lawAlbedo`` of the terms in use."""
     if isinstance(light_terms, LightTerms):
         given = {term: getattr(light_terms, term) for term in light_terms.used}
+        if "law" in given:
+            given["law_strength"] = light_terms.law_strength
         after = [getattr(light_terms, term) for term in AFTER_BLUR]
     elif hasattr(light_terms, "get"):
-        given = {term: light_terms[term] for term in (*AFTER_BLUR, "law") if term in light_terms}
+        given = {term: light_terms[term] for term in (*AFTER_BLUR, "law", "law_strength") if term in light_terms}
         after = [light_terms.get(term, 0.0) for term in AFTER_BLUR]
     else:
         raise InvalidInputError(
@@ -186,7 +188,9 @@ def _light_constants(light_terms) -> dict:
     # JAX's default float32 outside x64, which would round them.
     shift, grazing, incidence = (float(np.asarray(v, np.float64)) for v in after)
     law = None if given.get("law") is None else np.asarray(given["law"], np.float64)
-    LightTerms(shift, grazing, incidence, law).check()
+    # A params file from before the strength existed applied the law in full.
+    strength = float(np.asarray(given.get("law_strength", 1.0), np.float64))
+    LightTerms(shift, grazing, incidence, law, strength).check()
     out = {}
     if law is None or any(term in given for term in AFTER_BLUR):
         out.update(lightShift=shift, grazingGain=grazing, incidenceGain=incidence)
@@ -194,6 +198,7 @@ def _light_constants(light_terms) -> dict:
         if law.size not in (1, 3):
             raise InvalidInputError(f"light_terms.law: expected one albedo or three (RGB), got {law.size}")
         out["lawAlbedo"] = np.broadcast_to(law.ravel(), (3,)).tolist()
+        out["lawStrength"] = strength
     return out
 
 
@@ -225,7 +230,9 @@ LAW_HLSL = """
 // lighting pass, multiply the key light's Lambertian diffuse term
 // (albedo * irradiance * saturate(dot(normal, toLight))) by this factor; the
 // other lights stay Lambertian and the blur passes do not change. normal and
-// toLight are unit vectors in view space, z towards the camera.
+// toLight are unit vectors in view space, z towards the camera. The factor
+// fades to 1 where the normal faces (nearly) away from the camera or the light,
+// and lawStrength 0 makes it 1 everywhere.
 float3 invsssHapkeH(float x, float3 w)
 {
     return (1.0 + 2.0 * x) / (1.0 + 2.0 * x * sqrt(max(1.0 - w, 1e-12)));
@@ -234,10 +241,13 @@ float3 invsssHapkeH(float x, float3 w)
 float3 invsssKeyLightLaw(float3 normal, float3 toLight)
 {
     float3 w = float3({prefix}lawAlbedo[0], {prefix}lawAlbedo[1], {prefix}lawAlbedo[2]);
-    float mu = clamp(normal.z, 1e-3, 1.0);
-    float mu0 = saturate(dot(normal, toLight));
+    float nDotL = dot(normal, toLight);
+    float mu = saturate(normal.z);
+    float mu0 = saturate(nDotL);
+    float trust = saturate(min(normal.z, nDotL) / LAW_TRUST_PLACEHOLDER);
     float3 headOn = invsssHapkeH(1.0, w) * invsssHapkeH(1.0, w) / 2.0;
-    return invsssHapkeH(mu, w) * invsssHapkeH(mu0, w) / (mu + mu0) / headOn;
+    float3 ratio = invsssHapkeH(mu, w) * invsssHapkeH(mu0, w) / max(mu + mu0, 1e-6) / headOn;
+    return 1.0 + {prefix}lawStrength * trust * (ratio - 1.0);
 }
 """
 
@@ -374,7 +384,7 @@ def to_hlsl(constants: dict, prefix: str = "") -> str:
     if "lightShift" in constants:
         text += LIGHT_TERMS_HLSL.replace("{prefix}", prefix)
     if "lawAlbedo" in constants:
-        text += LAW_HLSL.replace("{prefix}", prefix)
+        text += LAW_HLSL.replace("{prefix}", prefix).replace("LAW_TRUST_PLACEHOLDER", repr(LAW_TRUST))
     return text
 
 

@@ -6,7 +6,8 @@ light transport do neither, and each is added here as a switch with fitted
 parameters, using per-pixel buffers a deferred renderer already has. One acts on
 the source before the blur:
 
-``law`` (``w``, one per source channel in (0, 1), needs the key, normal and light buffers)
+``law`` (``w``, one per source channel in (0, 1), and a strength ``a``; needs the
+key, normal and light buffers)
     A scattering medium does not reflect light from one direction as a Lambertian
     surface does. Chandrasekhar's law for a semi-infinite medium of
     single-scattering albedo ``w`` (isotropic scattering, Hapke's ``H``) gives the
@@ -15,14 +16,20 @@ the source before the blur:
         f_w(mu, mu0) = H(mu) H(mu0) / (mu + mu0),   H(x) = (1 + 2x) / (1 + 2x sqrt(1 - w))
 
     with ``mu = n_z`` (the view cosine of a distant camera) and ``mu0 = n . l``.
-    It is applied to the key light's part ``K`` of the source (a renderer's
-    lighting pass has it; ``invsss scene`` writes it as ``key.exr``), normalised
-    to 1 for light arriving and leaving along the normal:
+    Its gain over Lambert, normalised to 1 for light arriving and leaving along
+    the normal, is trusted only where the buffers resolve both angles
+    (:data:`LAW_TRUST`): ``g = 1 + t (f_w(mu, mu0) / f_w(1, 1) - 1)`` with
+    ``t = clip(min(mu, mu0) / LAW_TRUST, 0, 1)``, so that it is 1 (Lambert) where
+    the normal faces away from the camera or the light and bounded everywhere.
+    It is applied, with strength ``a``, to the key light's part ``K`` of the
+    source (a renderer's lighting pass has it; ``invsss scene`` writes it as
+    ``key.exr``):
 
-        S' = S + m K (f_w(mu, mu0) / f_w(1, 1) - 1)
+        S' = S + m a K (g - 1)
 
-    so the other lights keep their Lambertian shading. No ``w`` is the identity:
-    the term is off when it is not given (None), not at 0.
+    so the other lights keep their Lambertian shading. ``a = 0`` is the identity
+    (the plain model), ``a = 1`` the law; no ``w`` alone is the identity, which
+    is why the strength exists: a fit with the law contains the fit without it.
 
 The other three act on the blurred image:
 
@@ -81,12 +88,15 @@ from .validation import InvalidInputError, is_concrete
 
 __all__ = [
     "LIGHT_TERM_NAMES",
+    "LIGHT_TERM_FIELDS",
     "LightTerms",
     "LightBuffers",
+    "LAW_TRUST",
     "propagation_offsets",
     "grazing_field",
     "incidence_field",
     "chandrasekhar_h",
+    "law_trust",
     "reflectance_law",
     "law_source",
     "shift_image",
@@ -97,10 +107,20 @@ __all__ = [
 
 #: The terms, in the order of docs/model.md, section 8, with the buffers each needs.
 LIGHT_TERM_NAMES = ("shift", "grazing", "incidence", "law")
+#: The fields of :class:`LightTerms` (a params file's ``light_terms`` keys that set them).
+LIGHT_TERM_FIELDS = (*LIGHT_TERM_NAMES, "law_strength")
 NEEDED_BUFFERS = {"shift": ("light",), "grazing": ("normal",), "incidence": ("normal", "light"),
                   "law": ("key", "normal", "light")}
 #: The terms applied to the blurred image (``law`` changes the source instead).
 AFTER_BLUR = ("shift", "grazing", "incidence")
+
+#: Below this cosine of the view or of the key light's incidence the law's gain
+#: fades to Lambert's (docs/model.md, section 8). A pixel's key radiance is an
+#: average over its footprint while its normal is taken at the centre; near
+#: grazing the two disagree, and ``f_w`` divides by ``mu + mu0``, so an unfaded
+#: gain ran to 232 on one silhouette pixel of a scene the terms were not built on.
+#: With the fade the gain is at most about 11 (``w -> 0``), 4 at ``w = 0.9``.
+LAW_TRUST = 0.1
 
 #: How far from unit length a buffer's vectors may be before it is refused
 #: (8-bit normal maps are off by about 1 %; a wrongly decoded map by far more).
@@ -129,6 +149,10 @@ class LightTerms(eqx.Module):
         ``w``: the single-scattering albedo of the key light's reflectance law,
         in (0, 1), one for every channel or one per source channel; None (the
         default) leaves the source Lambertian.
+    law_strength : float
+        ``a``: how much of the key light follows the law (0: Lambert, the
+        identity; 1, the default: the law). Values outside [0, 1] extrapolate
+        the blend; a fit warns about them.
 
     Examples
     --------
@@ -137,22 +161,28 @@ class LightTerms(eqx.Module):
     0.0
     >>> LightTerms(law=[0.93, 0.8, 0.7]).law.shape   # one albedo per channel
     (3,)
+    >>> LightTerms(law=0.9, law_strength=0.0).used   # at strength 0 the law changes nothing
+    ()
     """
 
     shift: Float[Array, ""] = eqx.field(converter=_as_float, default=0.0)
     grazing: Float[Array, ""] = eqx.field(converter=_as_float, default=0.0)
     incidence: Float[Array, ""] = eqx.field(converter=_as_float, default=0.0)
     law: Float[Array, "*C"] | None = eqx.field(converter=_albedo_or_none, default=None)
+    law_strength: Float[Array, ""] = eqx.field(converter=_as_float, default=1.0)
 
     @property
     def used(self) -> tuple[str, ...]:
         """The terms that change the image (a traced value counts as used)."""
-        on = [t for t in AFTER_BLUR if not is_concrete(getattr(self, t)) or float(getattr(self, t)) != 0.0]
-        return tuple(on) + (("law",) if self.law is not None else ())
+        def nonzero(x):
+            return not is_concrete(x) or float(x) != 0.0
+
+        on = [t for t in AFTER_BLUR if nonzero(getattr(self, t))]
+        return tuple(on) + (("law",) if self.law is not None and nonzero(self.law_strength) else ())
 
     def check(self, name: str = "light_terms") -> None:
         """Raise :class:`InvalidInputError` for values outside the model's domain."""
-        for field in AFTER_BLUR:
+        for field in (*AFTER_BLUR, "law_strength"):
             value = getattr(self, field)
             if not is_concrete(value):
                 continue
@@ -174,6 +204,7 @@ class LightTerms(eqx.Module):
         if self.law is not None:
             w = np.asarray(self.law, np.float64)
             out["law"] = float(w) if w.ndim == 0 else w.tolist()
+            out["law_strength"] = float(self.law_strength)
         return out
 
 
@@ -200,7 +231,7 @@ def _check_unit_vectors(array, shape, mask, name: str):
     return safe / np.linalg.norm(safe, axis=-1, keepdims=True)
 
 
-def _check_key(array, shape, channels, name: str):
+def _check_key(array, shape, channels, name: str, mask=None):
     try:
         a = np.asarray(array, dtype=np.float64)
     except (TypeError, ValueError):
@@ -213,9 +244,12 @@ def _check_key(array, shape, channels, name: str):
         raise InvalidInputError(
             f"{name}: expected shape {expected} (the key light's part of the source), got {np.shape(array)}"
         )
-    if not np.all(np.isfinite(a)):
-        raise InvalidInputError(f"{name}: NaN or infinite values")
-    return a
+    on = np.ones(a.shape[:2], bool) if mask is None else np.asarray(mask) > 0
+    if not np.all(np.isfinite(a[on])):
+        raise InvalidInputError(f"{name}: NaN or infinite values on the mask")
+    # Off the mask the term does nothing (it is multiplied by the mask), but a
+    # NaN there would still poison the product: a renderer's cleared buffer.
+    return np.where(np.isfinite(a), a, 0.0)
 
 
 class LightBuffers(eqx.Module):
@@ -257,7 +291,7 @@ class LightBuffers(eqx.Module):
         return LightBuffers(
             None if self.normal is None else _check_unit_vectors(self.normal, shape, mask, f"{prefix}normal"),
             None if self.light is None else _check_unit_vectors(self.light, shape, mask, f"{prefix}light"),
-            None if self.key is None else _check_key(self.key, shape, channels, f"{prefix}key"),
+            None if self.key is None else _check_key(self.key, shape, channels, f"{prefix}key", mask),
         )
 
     def require(self, terms, prefix: str = "light_buffers.") -> None:
@@ -293,28 +327,42 @@ def chandrasekhar_h(x, albedo):
     return (1.0 + 2.0 * x) / (1.0 + 2.0 * x * jnp.sqrt(jnp.maximum(1.0 - albedo, 1e-12)))
 
 
+def law_trust(normal: Float[Array, "H W 3"], light: Float[Array, "H W 3"]) -> Float[Array, "H W"]:
+    """``t = clip(min(n_z, n . l) / LAW_TRUST, 0, 1)``: 0 where the normal faces away
+    from the camera or from the key light, 1 where the buffers resolve both angles."""
+    return jnp.clip(jnp.minimum(normal[..., 2], jnp.sum(normal * light, axis=-1)) / LAW_TRUST, 0.0, 1.0)
+
+
 def reflectance_law(
     normal: Float[Array, "H W 3"], light: Float[Array, "H W 3"], albedo: Float[Array, "*C"]
 ) -> Float[Array, "H W C"]:
-    """``f_w(mu, mu0) / f_w(1, 1)``: the law's gain over a Lambertian reflection.
+    """``g = 1 + t (f_w(mu, mu0) / f_w(1, 1) - 1)``: the law's gain over a Lambertian
+    reflection, faded to 1 (:func:`law_trust`) where the buffers cannot resolve it.
 
-    ``mu = clip(n_z, 1e-3, 1)`` and ``mu0 = clip(n . l, 0, 1)``; ``albedo`` is one
+    ``mu = clip(n_z, 0, 1)`` and ``mu0 = clip(n . l, 0, 1)``; ``albedo`` is one
     ``w`` or one per channel (the last axis of the result; 1 for one ``w``).
+    Bounded: at most about 11 for any ``w`` (the fade starts before
+    ``1 / (mu + mu0)`` grows).
     """
     w = jnp.atleast_1d(albedo)
-    mu = jnp.clip(normal[..., 2], 1e-3, 1.0)[..., None]
+    mu = jnp.clip(normal[..., 2], 0.0, 1.0)[..., None]
     mu0 = jnp.clip(jnp.sum(normal * light, axis=-1), 0.0, 1.0)[..., None]
+    trust = law_trust(normal, light)[..., None]
     head_on = chandrasekhar_h(1.0, w) ** 2 / 2.0
-    return chandrasekhar_h(mu, w) * chandrasekhar_h(mu0, w) / (mu + mu0) / head_on
+    # Where t = 0 both cosines may be 0: the floor keeps the (unused) ratio finite,
+    # and its derivative too.
+    ratio = chandrasekhar_h(mu, w) * chandrasekhar_h(mu0, w) / jnp.maximum(mu + mu0, 1e-6) / head_on
+    return 1.0 + trust * (ratio - 1.0)
 
 
 def law_source(
     source: Float[Array, "H W C"], key: Float[Array, "H W C"], mask: Float[Array, "H W"],
-    gain: Float[Array, "H W C"],
+    gain: Float[Array, "H W C"], strength=1.0,
 ) -> Float[Array, "H W C"]:
-    """``S + m K (gain - 1)``: the key light's part of the source under the law's
-    ``gain`` (:func:`reflectance_law`), the rest of the source as it is."""
-    return source + mask[..., None] * key * (gain - 1.0)
+    """``S + m a K (gain - 1)``: the key light's part of the source under the law's
+    ``gain`` (:func:`reflectance_law`) with strength ``a``, the rest of the source
+    as it is."""
+    return source + strength * mask[..., None] * key * (gain - 1.0)
 
 
 def shift_image(image: Float[Array, "H W C"], offset: Float[Array, "H W 2"]) -> Float[Array, "H W C"]:
@@ -402,7 +450,7 @@ def apply_light_terms(blurred, depth, mask, params, terms: LightTerms, buffers: 
     return light_transport(blurred, mask, stretch, terms, offsets, grazing, incidence)
 
 
-def apply_law(image, mask, albedo, buffers: LightBuffers):
+def apply_law(image, mask, albedo, buffers: LightBuffers, strength=1.0):
     """Apply the ``law`` term to a source image before :func:`invsss.render` blurs it.
 
     Parameters
@@ -414,11 +462,13 @@ def apply_law(image, mask, albedo, buffers: LightBuffers):
         ``w`` in (0, 1), one or one per channel.
     buffers : LightBuffers
         With ``key`` (shape (H, W, C)), ``normal`` and ``light``.
+    strength : float
+        ``a``: 0 leaves the image as it is, 1 (the default) applies the law.
 
     Returns
     -------
     array, shape (H, W, C)
-        ``S + m K (f_w(mu, mu0) / f_w(1, 1) - 1)``.
+        ``S + m a K (g - 1)``, ``g`` from :func:`reflectance_law`.
 
     Examples
     --------
@@ -433,4 +483,5 @@ def apply_law(image, mask, albedo, buffers: LightBuffers):
     dtype = image.dtype
     gain = reflectance_law(jnp.asarray(buffers.normal, dtype), jnp.asarray(buffers.light, dtype),
                            jnp.asarray(albedo, dtype))
-    return law_source(image, jnp.asarray(buffers.key, dtype), jnp.asarray(mask, dtype), gain)
+    return law_source(image, jnp.asarray(buffers.key, dtype), jnp.asarray(mask, dtype), gain,
+                      jnp.asarray(strength, dtype))

@@ -49,21 +49,26 @@ def _scene(seed=0):
     return source, key, depth, mask, _unit(normal), _unit(light)
 
 
-def _reference_source(source, key, mask, normal, light, albedo):
-    """docs/model.md, section 8, written out: S + m K (f_w(mu, mu0) / f_w(1, 1) - 1)."""
+def _reference_source(source, key, mask, normal, light, albedo, strength=1.0):
+    """docs/model.md, section 8, written out: S + m a K (g - 1), with
+    g = 1 + t (f_w(mu, mu0) / f_w(1, 1) - 1) and t = clip(min(n_z, n . l) / 0.1, 0, 1)."""
     w = np.broadcast_to(np.asarray(albedo, np.float64), (source.shape[-1],))
     out = np.empty_like(source)
+    n_dot_l = np.einsum("hwk,hwk->hw", normal, light)
+    trust = np.clip(np.minimum(normal[..., 2], n_dot_l) / 0.1, 0.0, 1.0)
     for c in range(source.shape[-1]):
         root = np.sqrt(1.0 - w[c])
 
         def h(x):
             return (1.0 + 2.0 * x) / (1.0 + 2.0 * x * root)
 
-        mu = np.clip(normal[..., 2], 1e-3, 1.0)
-        mu0 = np.clip(np.einsum("hwk,hwk->hw", normal, light), 0.0, 1.0)
-        law = h(mu) * h(mu0) / (mu + mu0)
+        mu = np.clip(normal[..., 2], 0.0, 1.0)
+        mu0 = np.clip(n_dot_l, 0.0, 1.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            law = np.where(trust > 0, h(mu) * h(mu0) / (mu + mu0), 0.0)
         head_on = h(1.0) * h(1.0) / 2.0
-        out[..., c] = source[..., c] + mask * key[..., c] * (law / head_on - 1.0)
+        gain = 1.0 + trust * (law / head_on - 1.0)
+        out[..., c] = source[..., c] + strength * mask * key[..., c] * (gain - 1.0)
     return out
 
 
@@ -102,15 +107,23 @@ def test_the_law_has_the_known_limits_and_order_in_albedo():
     rng = np.random.default_rng(9)
     normal = _unit(rng.normal(size=(4, 5, 3)) + [0.0, 0.0, 2.0])
     light = _unit(rng.normal(size=(4, 5, 3)) + [0.0, 0.0, 1.0])
-    mu = np.clip(normal[..., 2], 1e-3, 1.0)
+    mu = np.clip(normal[..., 2], 0.0, 1.0)
     mu0 = np.clip(np.einsum("hwk,hwk->hw", normal, light), 0.0, 1.0)
+    # The law is trusted where both cosines reach 0.1, faded to Lambert (1) below.
+    trust = np.clip(np.minimum(normal[..., 2], np.einsum("hwk,hwk->hw", normal, light)) / 0.1, 0.0, 1.0)
+    assert 0 < np.mean(trust == 1.0) < 1  # both kinds of pixel are tested
 
     def gain(w):
         return np.asarray(reflectance_law(jnp.asarray(normal), jnp.asarray(light), w))[..., 0]
 
-    np.testing.assert_allclose(gain(1e-12), 2.0 / (mu + mu0), rtol=1e-9)
-    # sqrt(1 - w) is floored at 1e-6, which moves H by up to about 2e-6 relative.
-    np.testing.assert_allclose(gain(1.0 - 1e-12), (1 + 2 * mu) * (1 + 2 * mu0) / (mu + mu0) / 4.5, rtol=1e-5)
+    def faded(law):
+        return 1.0 + trust * (np.where(trust > 0, law, 1.0) - 1.0)
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        np.testing.assert_allclose(gain(1e-12), faded(2.0 / (mu + mu0)), rtol=1e-9)
+        # sqrt(1 - w) is floored at 1e-6, which moves H by up to about 2e-6 relative.
+        np.testing.assert_allclose(gain(1.0 - 1e-12), faded((1 + 2 * mu) * (1 + 2 * mu0) / (mu + mu0) / 4.5),
+                                   rtol=1e-5)
     facing = np.zeros((1, 3, 3))
     facing[..., 2] = 1.0
     oblique = _unit(np.array([[[0.0, 0.0, 1.0], [0.6, 0.0, 0.8], [0.95, 0.0, 0.312]]]))
@@ -274,8 +287,9 @@ def _hlsl_function_as_python(text: str, name: str):
 def test_the_exported_law_is_the_model():
     source, key, _, mask, normal, light = _scene(8)
     albedo = [0.93, 0.8, 0.55]
-    constants = invsss.shader_constants(PARAMS, light_terms={"law": albedo, "shift": 1.1})
+    constants = invsss.shader_constants(PARAMS, light_terms={"law": albedo, "law_strength": 0.7, "shift": 1.1})
     assert constants["lawAlbedo"] == albedo and constants["lightShift"] == 1.1
+    assert constants["lawStrength"] == 0.7
     hlsl = invsss.to_hlsl(constants, prefix="sss_")
     assert "static const float sss_lawAlbedo[3] = { 0.93, 0.8, 0.55 };" in hlsl
     assert "float3 invsssKeyLightLaw(float3 normal, float3 toLight)" in hlsl
@@ -290,7 +304,9 @@ def test_the_exported_law_is_the_model():
         "saturate": lambda x: np.clip(x, 0.0, 1.0),
         "dot": lambda a, b: float(np.dot(a, b)),
         "float3": lambda *v: np.array(v, np.float64),
+        "min": np.minimum,
         "sss_lawAlbedo": constants["lawAlbedo"],
+        "sss_lawStrength": constants["lawStrength"],
     }
 
     def invsssHapkeH(x, w):  # noqa: N802 - the shader's name
@@ -299,15 +315,17 @@ def test_the_exported_law_is_the_model():
         return scope["result"]
 
     helpers["invsssHapkeH"] = invsssHapkeH
-    expected = np.asarray(reflectance_law(jnp.asarray(normal), jnp.asarray(light), jnp.asarray(albedo)))
+    # The key light's factor at strength a: 1 + a (g - 1).
+    expected = 1.0 + 0.7 * (np.asarray(reflectance_law(jnp.asarray(normal), jnp.asarray(light),
+                                                       jnp.asarray(albedo))) - 1.0)
     for r, c in [(3, 4), (5, 9), (11, 14), (7, 0)]:
         n, l_ = normal[r, c].copy(), light[r, c].copy()
         if r == 7:
             l_ = -n  # the key light behind the surface: mu0 = 0
         scope = {**helpers, "normal": n.view(_Vector), "toLight": l_.view(_Vector)}
         exec(law, scope)
-        wanted = expected[r, c] if r != 7 else np.asarray(
-            reflectance_law(jnp.asarray(n[None, None]), jnp.asarray(l_[None, None]), jnp.asarray(albedo)))[0, 0]
+        wanted = expected[r, c] if r != 7 else 1.0 + 0.7 * (np.asarray(
+            reflectance_law(jnp.asarray(n[None, None]), jnp.asarray(l_[None, None]), jnp.asarray(albedo)))[0, 0] - 1.0)
         np.testing.assert_allclose(scope["result"], wanted, rtol=1e-12)
 
 

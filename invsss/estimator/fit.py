@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import ndimage
 
-from ..light_terms import LightBuffers
+from ..light_terms import AFTER_BLUR, LightBuffers
 from ..pair import ImagePair
 from ..params import PARAM_NAMES, SSSParams
 from ..validation import InvalidInputError
@@ -372,12 +372,23 @@ def _fit(pairs, single, options, progress, stop, nuisance=None, start=None) -> F
         return _fit_unsaturated(pairs, single, options, progress, stop)
     if options.align != "none":
         return _fit_aligned(pairs, single, options, progress, stop)
+    plain = None
+    if options.light_terms and start is None:
+        # The terms nest the plain model (each has a value that is the identity):
+        # fit the plain model first and give its estimate, every term at its
+        # identity, to the fit with the terms as a start it cannot end above.
+        plain = _fit(pairs, single, _without_light_terms(options), progress, stop, nuisance)
+        if plain.interrupted:
+            return plain
     compiling = _SolverCompilation(options)
-    problem = build_problem(pairs, options, start, compiling.start)
+    nested = None if plain is None else {**_estimate(plain), **_IDENTITY}
+    problem = build_problem(pairs, options, start, compiling.start, nested=nested)
     with jax.enable_x64(True):
         steps = _Steps(progress, stop, problem.to_loss)
         path = _solve(problem, options, steps, compiling.wait)
         result = _report(problem, path, single, steps, nuisance)
+        if plain is not None:
+            result = _against_plain(problem, path, result, plain)
     # Rebuild the parameters outside float64 mode: the caller gets arrays of their
     # own default precision, ready for render().
     params = SSSParams(*(np.asarray(result.values[k]) for k in PARAM_NAMES))  # host arrays: no compile
@@ -388,6 +399,71 @@ def _fit(pairs, single, options, progress, stop, nuisance=None, start=None) -> F
     if options.highlights and not result.interrupted:
         return _fit_without_highlights(problem.given, result, single, options, progress, stop, nuisance)
     return result
+
+
+#: Every light term's unknown at its identity (docs/model.md, section 8): no
+#: shift, no gain, the law at strength 0 (its albedo then does nothing).
+_IDENTITY = {"light_shift": 0.0, "grazing": 0.0, "incidence": 0.0, "law_strength": 0.0}
+#: A term set that scores this much (dB) below the plain fit on the fit's own
+#: mask is not kept: the plain fit is returned, with every term at its identity.
+WORSE_THAN_PLAIN_DB = 0.0
+
+
+def _without_light_terms(options: FitOptions) -> FitOptions:
+    """The plain model's options: no light terms; highlights are left to the caller's
+    own refit, which starts its plain fit again on the pairs it keeps."""
+    return dataclasses.replace(options, light_terms=(), light_fixed={}, highlights=False)
+
+
+def _psnr(problem, predictions) -> float:
+    """PSNR over the pairs where the residual counted, at each pair's own size."""
+    fitted = [crop(np.asarray(q), shape) for q, shape in zip(predictions, problem.shapes)]
+    masks = [np.asarray(p.residual_weight) for p in problem.given]
+    size = np.array([m.sum() for m in masks])
+    return float(np.average(
+        [masked_psnr(f, np.asarray(p.target), m) for f, p, m in zip(fitted, problem.given, masks)], weights=size))
+
+
+def _against_plain(problem, path, result, plain) -> FitResult:
+    """Measure what each term adds to the plain fit (``psnr_plain``, ``psnr_without``
+    in the terms' record), warn about terms that did not help, and fall back to the
+    plain fit when the terms together scored below it."""
+    record = dict(result.light_terms)
+    layout = problem.param.layout()
+    without = {}
+    for term, name in LIGHT_UNKNOWNS.items():
+        if term == "law_strength" or term not in record:
+            continue
+        knocked = "law_strength" if term == "law" else name
+        if knocked not in layout:
+            continue  # a held term: its value is the user's
+        first, stop = layout[knocked]
+        z = np.asarray(path.z, np.float64).copy()
+        z[first:stop] = 0.0
+        predictions = _evaluate(path.objective, jax.device_put(z), np.asarray(False))["predictions"]
+        without[term] = _psnr(problem, predictions)
+    record["psnr_plain"] = plain.psnr
+    record["psnr_without"] = without
+    messages = list(result.warnings)
+    if result.psnr < plain.psnr - WORSE_THAN_PLAIN_DB and not result.interrupted:
+        held = {term: 0.0 for term in AFTER_BLUR if term in record}
+        if "law" in record:
+            held["law_strength"] = 0.0
+        identity = {**record, **held, "psnr_without": {}, "fallback": True}
+        identity["stderr"] = {term: None for term in record["stderr"]}
+        message = (
+            f"light_terms: the fit with {', '.join(sorted(without) or record)} scored "
+            f"{plain.psnr - result.psnr:.2f} dB below the plain fit ({result.psnr:.2f} against "
+            f"{plain.psnr:.2f} dB); the plain fit is returned, every term at its identity"
+        )
+        return dataclasses.replace(plain, light_terms=identity, warnings=(*plain.warnings, message))
+    for term, value in without.items():
+        if value >= result.psnr:
+            messages.append(
+                f"light_terms.{term}: does not improve the fit (PSNR {result.psnr:.2f} dB with it, "
+                f"{value:.2f} dB with it at its identity)"
+            )
+    return dataclasses.replace(result, light_terms=record, warnings=tuple(messages))
 
 
 class _SolverCompilation:
@@ -805,6 +881,10 @@ def _solve(problem, options, steps, before_first_step=None) -> _Path:
             finish(number, record)
     elif halving:
         ranked = sorted(first, key=lambda item: item[1].final)[: (len(first) + 1) // 2]
+        if problem.nested and not any(item is first[0] for item in ranked):
+            # The contained model's fit goes on whatever its first steps showed:
+            # it is what makes the fit with the terms end at or below it.
+            ranked.append(first[0])
         # Pop each start and clear the rest: an unfinished record holds its solver
         # state (the Jacobian among it), which should not outlive its use.
         first.clear()

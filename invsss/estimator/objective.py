@@ -46,7 +46,8 @@ __all__ = ["Objective"]
 _AFTER_BLUR = tuple(LIGHT_UNKNOWNS[term] for term in AFTER_BLUR)
 #: The unknowns the blurred basis images depend on (the grey mix apart: the blur is
 #: linear in the image); the others act after the blur.
-_BLURRED_BY = ("sss_level", "correction", "maxdd", "variances", "weights", LIGHT_UNKNOWNS["law"])
+_BLURRED_BY = ("sss_level", "correction", "maxdd", "variances", "weights", LIGHT_UNKNOWNS["law"],
+               LIGHT_UNKNOWNS["law_strength"])
 
 
 def _lit_source(pair, natural):
@@ -56,7 +57,8 @@ def _lit_source(pair, natural):
     if "law" not in natural:
         return pair
     gain = reflectance_law(pair.normal, pair.light, natural["law"])
-    return eqx.tree_at(lambda p: p.source, pair, law_source(pair.source, pair.key, pair.mask, gain))
+    lit = law_source(pair.source, pair.key, pair.mask, gain, natural["law_strength"])
+    return eqx.tree_at(lambda p: p.source, pair, lit)
 
 
 def _light_terms(images, pair, natural):

@@ -40,6 +40,7 @@ law            ``sigmoid(ref + z)``, one per source   ``logit(0.9)``: an albedo
                channel                               between the 940 nm and the
                                                      visible skins of docs/model.md,
                                                      section 8
+law_strength   ``z``                                 0 (Lambert: the plain model)
 =============  ====================================  ===============================
 
 ``softplus`` keeps the correction non-negative while letting it approach 0
@@ -83,8 +84,11 @@ __all__ = [
 GAUGES = ("variances", "sss_level")
 
 #: The estimator's unknown for each light-aware term (docs/model.md, section 8);
-#: ``shift`` is ``light_shift`` here so that it is not read as a warp's shift.
-LIGHT_UNKNOWNS = {"shift": "light_shift", "grazing": "grazing", "incidence": "incidence", "law": "law"}
+#: ``shift`` is ``light_shift`` here so that it is not read as a warp's shift. The
+#: law has two: its albedo and its strength (0 is the identity, so that a fit with
+#: the law contains the fit without it).
+LIGHT_UNKNOWNS = {"shift": "light_shift", "grazing": "grazing", "incidence": "incidence", "law": "law",
+                  "law_strength": "law_strength"}
 
 
 

@@ -136,6 +136,13 @@ def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, 
         blocks.append(("law", (c_src,)))
         start["law"] = np.full(c_src, LAW_START)
         reference["law"] = np.full(c_src, float(logit(LAW_START)))
+    if "law" in light_terms:
+        # The strength is free with a held albedo too: it is what lets the fit
+        # fall back to Lambert (0) where the law does not describe the data. The
+        # scan starts with the law on; the plain fit's start has it at 0.
+        blocks.append(("law_strength", ()))
+        start["law_strength"] = 1.0
+        reference["law_strength"] = 1.0
     param = Parametrisation(
         tuple(blocks), {k_: _on_device(v) for k_, v in reference.items()}, values
     )
@@ -246,7 +253,10 @@ class FitProblem:
         in its refinement rounds).
     starts : tuple of arrays, shape (n,)
         Starting unknowns, best first (at most ``options.n_starts``; empty when
-        nothing is free).
+        nothing is free), after the nested start when there is one.
+    nested : bool
+        Whether ``starts[0]`` is a contained model's fit (``nested=``), which the
+        solve never drops.
     z_base : array, shape (n,)
         The natural starting values of the free blocks, before the start search.
     to_loss : float
@@ -261,7 +271,7 @@ class FitProblem:
         Whether the weights are eliminated by least squares (``sog``).
     """
 
-    def __init__(self, data, options, profile_w, profile_v, start=None, before_scan=None):
+    def __init__(self, data, options, profile_w, profile_v, start=None, before_scan=None, nested=None):
         self.options, self.model = options, options.model
         self.given = tuple(data)
         self.shapes = tuple(tuple(np.shape(p.mask)) for p in self.given)
@@ -295,12 +305,11 @@ class FitProblem:
         # 0.5 * sum(rho^2) -> the reported loss (see objective.py).
         self.to_loss = 2.0 * scale**2 / total
         self.starts = ()
+        self.nested = False
         if self.param.size and start is not None:
             # A known neighbourhood (an earlier fit of nearly the same pair): start
             # there, without the scan.
-            natural = {k: np.asarray(v) for k, v in self.param.natural(np.asarray(self.z_base, np.float64)).items()}
-            natural.update({k: np.asarray(v, np.float64) for k, v in start.items() if k in self.param.free})
-            self.starts = (jnp.asarray(self.param.unknowns(natural)),)
+            self.starts = (self._unknowns_at(start),)
         elif self.param.size:
             if before_scan is not None:
                 before_scan(self)
@@ -311,6 +320,15 @@ class FitProblem:
                     _scan_losses(self.objective), self.param, self.scales, blur0, self.z_base, options.n_starts
                 )
             )
+            if nested is not None:
+                self.starts = (self._unknowns_at(nested), *self.starts)
+                self.nested = True
+
+    def _unknowns_at(self, natural_values: dict):
+        """The unknowns at the given natural values of free blocks, the others at ``z_base``."""
+        natural = {k: np.asarray(v) for k, v in self.param.natural(np.asarray(self.z_base, np.float64)).items()}
+        natural.update({k: np.asarray(v, np.float64) for k, v in natural_values.items() if k in self.param.free})
+        return jax.device_put(self.param.unknowns(natural))
 
     @property
     def z0(self):
@@ -323,7 +341,7 @@ class FitProblem:
 
 
 def build_problem(
-    pairs, options: FitOptions | None = None, start: dict | None = None, before_scan=None
+    pairs, options: FitOptions | None = None, start: dict | None = None, before_scan=None, nested: dict | None = None
 ) -> FitProblem:
     """Check the pairs and build the problem :func:`invsss.fit_pairs` would solve.
 
@@ -343,6 +361,11 @@ def build_problem(
         the start scan (not at all when ``start`` replaces the scan or nothing is
         free). :func:`invsss.fit_pairs` starts compiling its solver there, on
         another thread, so that the compilation overlaps the scan.
+    nested : dict, optional
+        Natural values of a simpler model's fit that this model contains (the
+        plain fit, with every light term at its identity): put first among the
+        scan's starts, and :attr:`FitProblem.nested` set, so that the solve
+        always carries it to the end and cannot finish above it.
 
     Returns
     -------
@@ -376,4 +399,4 @@ def build_problem(
         raise InvalidInputError(f"options: expected a FitOptions, got {type(options).__name__}")
     with jax.enable_x64(True):
         profile_w, profile_v = resolve_profile(options.profile)
-        return FitProblem(prepare_pairs(pairs), options, profile_w, profile_v, start, before_scan)
+        return FitProblem(prepare_pairs(pairs), options, profile_w, profile_v, start, before_scan, nested)

@@ -157,9 +157,9 @@ class FitResult(eqx.Module):
         """The fitted light-aware terms as an :class:`invsss.LightTerms` (None without them)."""
         if self.light_terms is None:
             return None
-        from ..light_terms import LIGHT_TERM_NAMES, LightTerms
+        from ..light_terms import LIGHT_TERM_FIELDS, LightTerms
 
-        return LightTerms(**{k: v for k, v in self.light_terms.items() if k in LIGHT_TERM_NAMES})
+        return LightTerms(**{k: v for k, v in self.light_terms.items() if k in LIGHT_TERM_FIELDS})
 
     def history_by_stage(self) -> dict:
         """``{label: losses}`` for each solve of the fit (see ``stages``).

@@ -10,9 +10,10 @@ from __future__ import annotations
 import torch
 from kornia.geometry.transform import remap
 
+from ..light_terms import LAW_TRUST
 from .stretch import stretch_factors
 
-__all__ = ["propagation_offsets", "grazing_field", "incidence_field", "chandrasekhar_h", "reflectance_law",
+__all__ = ["propagation_offsets", "grazing_field", "incidence_field", "chandrasekhar_h", "law_trust", "reflectance_law",
            "law_source", "shift_image", "light_transport", "apply_light_terms", "apply_law"]
 
 
@@ -36,24 +37,34 @@ def chandrasekhar_h(x, albedo: torch.Tensor) -> torch.Tensor:
     return (1.0 + 2.0 * x) / (1.0 + 2.0 * x * (1.0 - albedo).clamp_min(1e-12).sqrt())
 
 
+def law_trust(normal: torch.Tensor, light: torch.Tensor) -> torch.Tensor:
+    """(H, W, 3) normals and light directions -> (H, W) ``clip(min(n_z, n . l) / LAW_TRUST, 0, 1)``."""
+    cosines = torch.minimum(normal[..., 2], (normal * light).sum(dim=-1))
+    return (cosines / LAW_TRUST).clamp(0.0, 1.0)
+
+
 def reflectance_law(normal: torch.Tensor, light: torch.Tensor, albedo: torch.Tensor) -> torch.Tensor:
     """(H, W, 3) normals and light directions, albedo (C,) or () -> (H, W, C)
-    ``f_w(mu, mu0) / f_w(1, 1)`` with ``mu = clip(n_z, 1e-3, 1)``, ``mu0 = clip(n . l, 0, 1)``."""
+    ``1 + t (f_w(mu, mu0) / f_w(1, 1) - 1)`` with ``mu = clip(n_z, 0, 1)``,
+    ``mu0 = clip(n . l, 0, 1)`` and ``t`` from :func:`law_trust`."""
     w = torch.atleast_1d(albedo)
-    mu = normal[..., 2].clamp(1e-3, 1.0)[..., None]
+    mu = normal[..., 2].clamp(0.0, 1.0)[..., None]
     mu0 = (normal * light).sum(dim=-1).clamp(0.0, 1.0)[..., None]
     head_on = chandrasekhar_h(1.0, w) ** 2 / 2.0
-    return chandrasekhar_h(mu, w) * chandrasekhar_h(mu0, w) / (mu + mu0) / head_on
+    ratio = chandrasekhar_h(mu, w) * chandrasekhar_h(mu0, w) / (mu + mu0).clamp_min(1e-6) / head_on
+    return 1.0 + law_trust(normal, light)[..., None] * (ratio - 1.0)
 
 
-def law_source(source: torch.Tensor, key: torch.Tensor, mask: torch.Tensor, gain: torch.Tensor) -> torch.Tensor:
-    """(H, W, C) ``S + m K (gain - 1)``: the key light's part under the law, the rest as it is."""
-    return source + mask[..., None] * key * (gain - 1.0)
+def law_source(source: torch.Tensor, key: torch.Tensor, mask: torch.Tensor, gain: torch.Tensor,
+               strength=1.0) -> torch.Tensor:
+    """(H, W, C) ``S + m a K (gain - 1)``: the key light's part under the law with
+    strength ``a``, the rest as it is."""
+    return source + strength * mask[..., None] * key * (gain - 1.0)
 
 
-def apply_law(image, mask, albedo, normal, light, key) -> torch.Tensor:
+def apply_law(image, mask, albedo, normal, light, key, strength=1.0) -> torch.Tensor:
     """Twin of :func:`invsss.light_terms.apply_law` with the buffers as (H, W, 3) and (H, W, C) tensors."""
-    return law_source(image, key, mask, reflectance_law(normal, light, albedo))
+    return law_source(image, key, mask, reflectance_law(normal, light, albedo), strength)
 
 
 def shift_image(image: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:
