@@ -788,6 +788,10 @@ def _add_sweep_parser(subparsers) -> None:
                         "the Dask LocalCluster started without --scheduler (default 2)")
     parser.add_argument("--scheduler", default=None, metavar="ADDR",
                         help="address of a running Dask scheduler (tcp://host:8786)")
+    parser.add_argument("--rebuild-store", action="store_true",
+                        help="first make DIR/results.sqlite again from the trial folders DIR/trials/<id>/ "
+                        "(after it was damaged; the old file is kept as results.sqlite.damaged-<time>), "
+                        "then run the trials not done")
     _add_no_cache_argument(parser)
     parser.set_defaults(func=_run_sweep)
     # `invsss sweep-report` is the sweep's other half: registered with it.
@@ -806,7 +810,8 @@ def _run_sweep(args: argparse.Namespace, stop: StopSignals) -> int:
 
     with stop.deferred(stopping):
         summary = run(experiment, args.out, executor=args.executor, jobs=args.jobs,
-                      scheduler=args.scheduler, stop=stop)
+                      scheduler=args.scheduler, stop=stop,
+                      rebuild_store=args.rebuild_store)
     print(f"sweep: {summary.done} done, {summary.failed} failed, {summary.remaining} not run "
           f"({summary.ran} run now, {summary.seconds:.1f}s); report: invsss sweep-report {args.out}")
     if summary.interrupted:

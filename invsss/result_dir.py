@@ -291,8 +291,22 @@ class ResultDir:
             "started": datetime.datetime.now().isoformat(timespec="seconds"),
             "command": self.description,
         }
-        os.ftruncate(fd, 0)
-        os.write(fd, (json.dumps(holder) + "\n").encode())
+        try:
+            # Written, then cut to length: a full disk fails here, on the write.
+            written = os.write(fd, (json.dumps(holder) + "\n").encode())
+            os.ftruncate(fd, written)
+        except OSError as err:
+            # A full disk: refused now, before any work, leaving no empty lock
+            # file (nor a directory this run made) behind.
+            with contextlib.suppress(OSError):
+                os.unlink(lock_path)
+            os.close(fd)
+            if self._created:
+                with contextlib.suppress(OSError):
+                    os.rmdir(self.path)
+            raise InvalidInputError(
+                f"{self.path}: cannot write to the output directory ({err.strerror})"
+            ) from None
         self._fd = fd
 
     def _check_contents(self) -> None:
@@ -324,7 +338,9 @@ class ResultDir:
 
         Every writer runs first, into a staging folder; the directory changes
         only once all have succeeded. ``info`` (JSON-ready) is stored in the
-        manifest. Returns the paths of the files now in the directory.
+        manifest; it may be a callable, called once after the writers and
+        before the manifest is written (a sweep's trial records its timings
+        there). Returns the paths of the files now in the directory.
 
         Raises
         ------
@@ -348,6 +364,8 @@ class ResultDir:
                 raise ResultWriteError(f"{self.path}: cannot write the result ({_reason(err)})") from None
             raise
 
+        if callable(info):
+            info = info()
         manifest_path = os.path.join(self.path, MANIFEST_NAME)
         manifest = {
             "state": "incomplete",

@@ -4,8 +4,12 @@ The runner reads the pair(s), runs the task (:mod:`.tasks`), refuses a result
 whose loss is not finite, and commits the trial's files to ``OUT/trials/<id>/``
 through :class:`invsss.result_dir.ResultDir` (all files or none). Only then
 does it return ``status: "done"``; the sweep marks the trial done in the
-database after that, so a done row always has its files. Any exception becomes
-``status: "failed"`` with a one-line message: one bad trial never ends a sweep.
+database after that, so a done row always has its files. The manifest of
+those files holds the row the sweep records (``info.row``: the trial's
+position, configuration, axes, attempt and outcome), from which
+:func:`invsss.experiments.store.rebuild` recovers a damaged database.
+Any exception becomes ``status: "failed"`` with a one-line message: one bad
+trial never ends a sweep.
 
 :func:`execute` takes and returns plain dicts, so it can be sent to a process
 pool or a Dask worker as it is. Each worker process keeps JAX's compiled
@@ -92,6 +96,8 @@ def execute(trial: dict, out: str, stop=None) -> dict:
         (Unix times).
     """
     started = time.time()
+    trial = dict(trial)
+    attempt = trial.pop("attempt", 1)  # the sweep's count of tries, this one included
     outcome = {
         "id": trial["id"], "status": "failed", "params": None, "stderr": None, "metrics": None,
         "warnings": [], "error": None, "timings": {}, "host": socket.gethostname(),
@@ -116,15 +122,28 @@ def execute(trial: dict, out: str, stop=None) -> dict:
             raise FloatingPointError(f"the loss is {loss if loss is not None else 'NaN'}; nothing written")
         clock = time.perf_counter()
         folder = trial_folder(out, spec.id)
+
+        def info():
+            # Called once the files are staged: the outcome is final, and goes
+            # into the manifest as the row the sweep will record.
+            timings["write"] = time.perf_counter() - clock
+            outcome.update(params=result.params, stderr=result.stderr, metrics=result.metrics,
+                           finished=time.time())
+            timings["total"] = outcome["finished"] - started
+            kept = {k: v for k, v in outcome.items() if k not in ("id", "status", "error")}
+            row = {"id": spec.id, "position": spec.index, "task": spec.task, "config": spec.config,
+                   "axes": spec.axes, "attempts": attempt, "outcome": kept}
+            return {"trial": spec.id, "task": spec.task, "row": row}
+
         with ResultDir(folder, overwrite=True, names=list(result.files),
                        description=f"invsss sweep trial {spec.id}") as directory:
-            directory.commit(result.files, info={"trial": spec.id, "task": spec.task})
-        timings["write"] = time.perf_counter() - clock
-        outcome.update(status="done", params=result.params, stderr=result.stderr, metrics=result.metrics)
+            directory.commit(result.files, info=info)
+        outcome.update(status="done")
     except TrialInterrupted:
         outcome.update(status="interrupted", error="interrupted")
     except Exception as err:  # noqa: BLE001 -- any failure is the trial's, recorded, not raised
-        outcome["error"] = _one_line(err)
-    outcome["finished"] = time.time()
-    timings["total"] = outcome["finished"] - started
+        outcome.update(params=None, stderr=None, metrics=None, error=_one_line(err))
+    if outcome["status"] != "done":  # a done trial's times were fixed when its files were
+        outcome["finished"] = time.time()
+        timings["total"] = outcome["finished"] - started
     return outcome

@@ -7,6 +7,13 @@ Running the same experiment into the same folder again therefore resumes: a
 sweep killed at any point, by Ctrl-C, SIGTERM, SIGKILL or a power cut, loses
 at most the trials that were running.
 
+A damaged or empty ``results.sqlite`` (while ``OUT/trials/`` holds results) is
+refused with one line; ``rebuild_store=True`` (``invsss sweep --rebuild-store``)
+moves it aside and makes the table again from the trial folders
+(:func:`.store.rebuild`), then runs what is not done. A full disk ends the
+run with one line (:class:`.store.StoreError`); the same command resumes once
+there is room.
+
 One sweep at a time per folder: ``OUT/.sweep.lock`` is held (``fcntl.flock``,
 released by the kernel if the process dies) for the whole run, and a second
 sweep into the folder is refused with the first one's pid and host.
@@ -23,6 +30,7 @@ pace.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import fcntl
 import os
@@ -35,7 +43,7 @@ from ..validation import InvalidInputError
 from .executors import make_executor
 from .experiment import Experiment, load
 from .runner import _one_line, execute, trial_folder
-from .store import ResultsStore
+from .store import ResultsStore, StoreError, rebuild
 
 __all__ = ["SweepSummary", "run"]
 
@@ -92,8 +100,14 @@ class _SweepLock:
                 f"{os.path.dirname(self.path)}: another sweep is running into this folder ({holder}); "
                 "wait for it or choose another --out"
             ) from None
-        os.ftruncate(fd, 0)
-        os.write(fd, f"pid {os.getpid()} on {socket.gethostname()}\n".encode())
+        try:
+            os.ftruncate(fd, os.pwrite(fd, f"pid {os.getpid()} on {socket.gethostname()}\n".encode(), 0))
+        except OSError as err:  # a full disk: nothing could be recorded either
+            os.close(fd)
+            raise InvalidInputError(
+                f"{os.path.dirname(self.path)}: cannot write to the output folder ({err.strerror}); "
+                "free some space, then run the same command again to resume"
+            ) from None
         self._fd = fd
         return self
 
@@ -164,6 +178,7 @@ def run(
     scheduler: str | None = None,
     stop=None,
     log="stderr",
+    rebuild_store: bool = False,
 ) -> SweepSummary:
     """Run the trials of ``experiment`` not yet done in ``out`` (see the module docstring).
 
@@ -186,6 +201,10 @@ def run(
     log : file, "stderr" or None
         Where progress lines go: a file, ``sys.stderr`` as it is when the run
         starts (default), or nowhere.
+    rebuild_store : bool
+        First make ``results.sqlite`` again from the trial folders (the old
+        file is moved aside to ``results.sqlite.damaged-<time>``); see
+        :func:`invsss.experiments.store.rebuild`.
 
     Returns
     -------
@@ -195,7 +214,9 @@ def run(
     ------
     InvalidInputError
         A bad experiment file, an unusable output folder, another sweep running
-        into it, a bad executor choice.
+        into it, a bad executor choice; :class:`~invsss.experiments.store.StoreError`
+        (a subclass) for a damaged or empty results database, or one that
+        cannot be written (a full disk).
 
     Examples
     --------
@@ -233,32 +254,46 @@ def run(
     log = sys.stderr if log == "stderr" else log
     chosen = make_executor(executor, jobs, scheduler)
     start = time.monotonic()
-    with _SweepLock(out), ResultsStore(out) as store:
-        store.set_meta(name=experiment.name, task=experiment.task, path=experiment.path,
-                       axes=list(experiment.axes), text=experiment.text)
-        store.add(_trial_rows(experiment))
-        ids = [t.id for t in experiment.trials]
-        todo = store.to_run(ids)
-        counts = store.counts(ids)
-        statuses = {row["id"]: row["status"] for row in store.rows()}
-        by_id = {t.id: t.to_dict() for t in experiment.trials}
-        stale = sum(store.counts().values()) - len(ids)
-        progress = _Progress(log, len(ids), counts["done"], counts["failed"])
-        progress.say(
-            f"{experiment.name}: {len(ids)} trials, {counts['done']} already done, {len(todo)} to run"
-            + (f" ({stale} older trials in {out} kept)" if stale > 0 else "")
-        )
-        running: list[str] = []
-        interrupted = False
-        try:
-            if todo:
-                with chosen:
-                    progress.say(f"running {chosen.describe()}")
-                    interrupted = _drive(chosen, store, out, [by_id[i] for i in todo], statuses, stop,
-                                         progress, running)
-        finally:
+    with _SweepLock(out):
+        if rebuild_store:
+            recovered, left_out = rebuild(out, experiment)
+            _Progress(log, 0, 0, 0).say(
+                f"rebuilt {os.path.join(out, 'results.sqlite')} from {recovered} trial folder(s)"
+                + (f"; {left_out} folder(s) without a recorded row left out (they run again)" if left_out else ""))
+        with ResultsStore(out) as store:
+            return _run_in(store, experiment, out, chosen, stop, log, start)
+
+
+def _run_in(store, experiment, out, chosen, stop, log, start) -> SweepSummary:
+    """:func:`run`'s work, with the lock held and the database open."""
+    store.set_meta(name=experiment.name, task=experiment.task, path=experiment.path,
+                   axes=list(experiment.axes), text=experiment.text)
+    store.add(_trial_rows(experiment))
+    ids = [t.id for t in experiment.trials]
+    todo = store.to_run(ids)
+    counts = store.counts(ids)
+    statuses = {row["id"]: row["status"] for row in store.rows()}
+    by_id = {t.id: t.to_dict() for t in experiment.trials}
+    stale = sum(store.counts().values()) - len(ids)
+    progress = _Progress(log, len(ids), counts["done"], counts["failed"])
+    progress.say(
+        f"{experiment.name}: {len(ids)} trials, {counts['done']} already done, {len(todo)} to run"
+        + (f" ({stale} older trials in {out} kept)" if stale > 0 else "")
+    )
+    running: list[str] = []
+    interrupted = False
+    try:
+        if todo:
+            with chosen:
+                progress.say(f"running {chosen.describe()}")
+                interrupted = _drive(chosen, store, out, [by_id[i] for i in todo], statuses, stop,
+                                     progress, running)
+    finally:
+        # Also after a store error (a full disk), when this may fail as well:
+        # rows left running are run again next time all the same.
+        with contextlib.suppress(StoreError):
             store.mark_pending(running)
-        counts = store.counts(ids)
+    counts = store.counts(ids)
     summary = SweepSummary(
         trials=len(ids), done=counts["done"], failed=counts["failed"],
         remaining=len(ids) - counts["done"] - counts["failed"], ran=progress.ran,
@@ -276,9 +311,9 @@ def _drive(executor, store, out, queue, statuses, stop, progress, running) -> bo
         for trial in queue:
             if stop():
                 return True
-            store.mark_running(trial["id"])
+            attempt = store.mark_running(trial["id"])
             running.append(trial["id"])
-            outcome = execute(trial, out, stop)
+            outcome = execute({**trial, "attempt": attempt}, out, stop)
             if outcome["status"] == "interrupted":
                 return True
             _record(store, out, outcome)
@@ -291,9 +326,9 @@ def _drive(executor, store, out, queue, statuses, stop, progress, running) -> bo
     while queue or in_flight:
         while queue and len(in_flight) < executor.slots and not stop():
             trial = queue.pop(0)
-            store.mark_running(trial["id"])
+            attempt = store.mark_running(trial["id"])
             running.append(trial["id"])
-            in_flight[executor.submit(trial, out)] = trial["id"]
+            in_flight[executor.submit({**trial, "attempt": attempt}, out)] = trial["id"]
         if stop() and not told:
             told = True
             progress.say(f"stopping: waiting for the {len(in_flight)} running trial(s) "
