@@ -40,6 +40,16 @@ target over the eroded mask, one row per way of predicting the target:
     the best PSNR a noise-free prediction can reach against this Monte Carlo target
     (``scene.json``, from the two half renders).
 
+**Tuning and held-out pairs.** ``data_synthetic/SPLIT.toml`` puts every bundled pair in
+one of two parts (docs/scenes.md): ``tuning`` pairs may be used to choose anything,
+``held-out`` pairs only to measure a finished method. Without PAIR_DIR the script takes
+the pairs of ``--split`` (``tuning`` unless told otherwise, so that a plain run never
+fits the held-out pairs); with PAIR_DIRs it takes those, and ``--split`` keeps only the
+ones of that part. Each table names its pair's part, the tables are printed part by
+part, and every row of ``fidelity.json`` carries ``split``. Transfer rows and joint fits
+join pairs of the same part only, so no held-out pair enters a tuning row or the other
+way round. A folder that SPLIT.toml does not list is in neither part (``-``).
+
 The last column is the share of each residual's energy that is smooth over a few
 pixels (:func:`coarse_share`): shading that differs over the whole face rather than
 detail the blur should have moved.
@@ -51,9 +61,11 @@ pixels, where the path tracer and the screen-space model see different geometry,
 do not dominate. Residual maps (target minus prediction) are saved as PNG under
 ``--out``; the table also goes to ``--out/fidelity.json``.
 
-    python experiments/fidelity.py [PAIR_DIR ...] [--out runs/fidelity] [--quick] [--terms "shift,law;law"]
+    python experiments/fidelity.py [PAIR_DIR ...] [--split tuning|held-out|all] [--out runs/fidelity] [--quick] [--terms "shift,law;law"]
 
-Without PAIR_DIR, every folder of ``data_synthetic/`` that holds a ``scene.json``.
+Without PAIR_DIR, every folder of ``data_synthetic/`` that holds a ``scene.json`` and is
+in the chosen part. ``--terms ""`` leaves out every light-term row (and the transfer
+and joint rows made from them): the rows up to the medium's dipole fit remain.
 """
 
 from __future__ import annotations
@@ -69,6 +81,12 @@ from scipy import ndimage
 
 import invsss
 from invsss.estimator.diagnostics import masked_psnr, masked_ssim
+from invsss.scenes.split import SPLITS, pair_split, read_split
+
+#: The split file of the bundled pairs (docs/scenes.md).
+SPLIT_FILE = pathlib.Path("data_synthetic/SPLIT.toml")
+#: The label of a pair that the split file does not list.
+NO_SPLIT = "-"
 
 THESIS_HAND_VALUES = ((0.5, 2000.0), (0.7, 7500.0), (0.4, 4500.0))
 #: The light-aware term sets fitted on top of the plain fit; the last is all of them.
@@ -142,6 +160,15 @@ def medium_key(info: dict) -> tuple:
     return (tuple(medium["sigma_s_prime"]), tuple(medium["sigma_a"]), medium["eta"], medium.get("boundary"))
 
 
+def chosen_pairs(folders: list[pathlib.Path], split: dict[str, str], part: str) -> list[pathlib.Path]:
+    """The folders in ``part`` of the split (``"all"``: every folder).
+
+    >>> chosen_pairs([pathlib.Path("a"), pathlib.Path("b")], {"a": "tuning", "b": "held-out"}, "held-out")
+    [PosixPath('b')]
+    """
+    return [f for f in folders if part == "all" or pair_split(f, split) == part]
+
+
 #: Residual structure wider than this (Gaussian sigma, pixels) counts as "coarse".
 COARSE_SIGMA_PX = 3.0
 
@@ -192,15 +219,27 @@ def main() -> None:
     parser.add_argument("--erode", type=int, default=2, help="mask erosion in pixels (default 2)")
     parser.add_argument("--quick", action="store_true", help="1 start and 50 steps per fit (a smoke run)")
     parser.add_argument("--terms", help="only these light-term rows, ';'-separated (e.g. 'shift,law;law'); "
-                        "transfer and joint rows for those of them in TRANSFER_ROWS")
+                        "transfer and joint rows for those of them in TRANSFER_ROWS; '' for none")
+    parser.add_argument("--split", choices=(*SPLITS, "all"),
+                        help="the part of data_synthetic/SPLIT.toml to run (default: tuning without PAIR_DIR, "
+                        "else every PAIR_DIR given)")
+    parser.add_argument("--split-file", type=pathlib.Path, default=SPLIT_FILE,
+                        help=f"the split file (default {SPLIT_FILE})")
     args = parser.parse_args()
     term_rows = LIGHT_TERM_ROWS if args.terms is None else tuple(
-        tuple(t for t in invsss.light_terms.LIGHT_TERM_NAMES if t in row.split(",")) for row in args.terms.split(";"))
+        tuple(t for t in invsss.light_terms.LIGHT_TERM_NAMES if t in row.split(","))
+        for row in args.terms.split(";") if row.strip())
+    split = read_split(args.split_file) if args.split_file.is_file() else {}
     folders = args.pairs or sorted(p.parent for p in pathlib.Path("data_synthetic").glob("*/scene.json"))
+    part = args.split or ("all" if args.pairs else "tuning")
+    folders = chosen_pairs(folders, split, part)
     if not folders:
-        parser.error("no path-traced pair folders (with scene.json) found")
+        parser.error(f"no path-traced pair folders (with scene.json) found in split {part!r}")
+    print(f"pairs ({part}): {', '.join(f.name for f in folders)}", flush=True)
     fit_options = {"n_starts": 1, "max_steps": 50} if args.quick else {}
     pairs = [load_scene_pair(folder) for folder in folders]
+    for pair, folder in zip(pairs, folders):
+        pair["split"] = pair_split(folder, split) or NO_SPLIT
     table: dict[str, dict[str, dict]] = {}
     fits = {}
     for pair in pairs:
@@ -242,7 +281,7 @@ def main() -> None:
         table[pair["name"]] = rows
         print(f"{pair['name']}: {time.perf_counter() - started:.0f} s", flush=True)
     for a, b in itertools.permutations(pairs, 2):
-        if medium_key(a["info"]) == medium_key(b["info"]):
+        if medium_key(a["info"]) == medium_key(b["info"]) and a["split"] == b["split"]:
             mask = eroded(b["mask"], args.erode)
             prediction = invsss.render(b["source"], b["depth"], b["mask"], fits[a["name"]].params, model="sog")
             table[b["name"]][f"fit from {a['name']}"] = score(prediction, b, mask)
@@ -254,7 +293,7 @@ def main() -> None:
                     table[b["name"]][f"fit + {' + '.join(terms)}{suffix} from {a['name']}"] = score(prediction, b, mask)
     media: dict[tuple, list] = {}
     for pair in pairs:
-        media.setdefault(medium_key(pair["info"]), []).append(pair)
+        media.setdefault((pair["split"], medium_key(pair["info"])), []).append(pair)
     for group in (g for g in media.values() if len(g) > 1):
         for terms in (t for t in TRANSFER_ROWS if t in term_rows):
             data = [invsss.ImagePair(p["source"], p["target"], p["depth"], p["mask"], normal=p["buffers"].normal,
@@ -275,8 +314,10 @@ def main() -> None:
 
     args.out.mkdir(parents=True, exist_ok=True)
     summary = {}
-    for name, rows in table.items():
-        print(f"\n{name}\n\n| prediction | PSNR (dB) | SSIM | coarse share of residual |\n|---|---|---|---|")
+    parts = {p["name"]: p["split"] for p in pairs}
+    order = {part: k for k, part in enumerate((*SPLITS, NO_SPLIT))}
+    for name, rows in sorted(table.items(), key=lambda item: order[parts[item[0]]]):
+        print(f"\n{name} ({parts[name]})\n\n| prediction | PSNR (dB) | SSIM | coarse share of residual |\n|---|---|---|---|")
         (args.out / name).mkdir(exist_ok=True)
         for row, result in rows.items():
             ssim = "" if result["ssim"] is None else f"{result['ssim']:.4f}"
@@ -287,7 +328,8 @@ def main() -> None:
                 save_residual(args.out / name / f"residual_{slug}.png", result["residual"],
                               eroded(next(p for p in pairs if p["name"] == name)["mask"], args.erode))
         summary[name] = {row: {"psnr": r["psnr"], "ssim": r["ssim"], "coarse_share": r["coarse"],
-                               "light_terms": r.get("light_terms"), "variances": r.get("variances")}
+                               "light_terms": r.get("light_terms"), "variances": r.get("variances"),
+                               "split": parts[name]}
                          for row, r in rows.items()}
     (args.out / "fidelity.json").write_text(json.dumps(summary, indent=2) + "\n")
 

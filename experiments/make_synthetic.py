@@ -15,10 +15,12 @@ parameters, so an estimator can be checked on exactly known answers:
 * ``truth.json``  the parameters and everything else needed to rebuild the target,
 * ``preview.png`` source | depth | mask | target, for people.
 
-**Path-traced pairs** (``pt_face_940``, ``pt_face_940_turned``, ``pt_face_skin1``): the
-scene descriptions ``experiments/scenes/<name>.toml`` rendered by :mod:`invsss.scenes`
-(a volumetric path tracer, not invsss's model), the files ``invsss scene`` writes.
-They take minutes each; ``--skip-path-traced`` leaves them alone.
+**Path-traced pairs** (``pt_*``, listed in :data:`PATH_TRACED`): the scene descriptions
+``experiments/scenes/<name>.toml`` rendered by :mod:`invsss.scenes` (a volumetric path
+tracer, not invsss's model), the files ``invsss scene`` writes. They take minutes each
+(``data_synthetic/README.md`` lists each one's time); ``--skip-path-traced`` leaves them
+alone, ``--scenes pt_proc_area_940 ...`` remakes some. Which of them are tuning and which
+held-out pairs is ``data_synthetic/SPLIT.toml``, written by hand.
 
 Run from the repository root::
 
@@ -775,8 +777,13 @@ files were changed, keep the attribution notices). Both texts are copied unchang
 `LICENSES/vtk-data-Copyright.txt` and `LICENSES/vtk-data-LICENSE-Apache-2.0.txt`.
 No endorsement by the VTK authors is implied.
 
+**pt_fran_dir_rough_940** uses the same scan, closed into a solid by
+`experiments/scenes/meshes/close_fran.py` (`fran_closed.ply`: the scan turned to look
+along +z, scaled to millimetres, and closed behind by a cone of triangles from its rim
+to a point inside; the scan's own triangles are unchanged, its texture is not used).
+
 **leeperrysmith, flat_card and the path-traced pt_face_940, pt_face_940_turned,
-pt_face_skin1** use "Infinite, 3D Head Scan" by Lee Perry-Smith
+pt_face_skin1, pt_face_ear_backlit_940, pt_face_rough_area_940** use "Infinite, 3D Head Scan" by Lee Perry-Smith
 (Infinite-Realities, www.ir-ltd.net), based on a work at www.triplegangers.com, licensed
 under Creative Commons Attribution 3.0 Unported
 (https://creativecommons.org/licenses/by/3.0/); the licence note asks that users always
@@ -793,6 +800,9 @@ their textures were multiplied by synthetic noise and the targets add synthetic 
 scattering, a colour mix and noise; the path-traced pairs use the untextured mesh as the
 boundary of a scattering medium. The flat card shows a crop of
 the Lee Perry-Smith colour map as a flat picture.
+
+**pt_proc_area_940, pt_proc_lowpoly_dir_940** use no outside data: their head is made
+by `invsss.scenes.procedural` (a signed distance field meshed by marching cubes).
 """
 
 LICENCE_FILES = {
@@ -857,23 +867,33 @@ PATH_TRACED = {
 PATH_TRACED_HEAD = """
 ## Path-traced pairs
 
-`pt_face_940`, `pt_face_940_turned` and `pt_face_skin1` are not made by invsss's model:
-their targets are Mitsuba 3 volumetric path traces of a homogeneous scattering medium in
-the shape of the Lee Perry-Smith scan (`invsss scene experiments/scenes/<name>.toml`, see
-`docs/README.md`). Each folder holds what `invsss scene` writes: `source.exr` (Lambertian,
-albedo calibrated to the medium's total reflectance), `target.exr` (the mean of two
-independently seeded half renders), `depth.exr` (eye z in mm, 0 off the head), `mask.png`,
-`normal.exr`, `coverage.exr`, `light.exr` (camera-space unit vectors towards the key
-light, the buffer of the `shift` light term), `key.exr` (the source lit by the key light
-alone, same spp and seed, the buffer of the `law` light term; `source - key` is the fill
-light's part, with Monte Carlo noise of both passes) and `scene.json` (the resolved scene, seeds, spp, render times and the
-noise estimate). There are no true screen-space parameters: these pairs
-measure how well the model can match real light transport (`experiments/fidelity.py`).
-The boundary is index-matched (no refraction or Fresnel reflection): with a rough
-dielectric boundary the path tracer needs about 50 times the samples for the same noise.
+The `pt_*` pairs are not made by invsss's model: their targets are Mitsuba 3 volumetric
+path traces of a homogeneous scattering medium (`invsss scene experiments/scenes/<file>.toml`,
+see `docs/scenes.md`) in the shape of the Lee Perry-Smith scan, of the VTK 'fran' scan
+closed into a solid, or of a procedural head. Each folder holds what `invsss scene`
+writes: `source.exr` (Lambertian, albedo calibrated to the medium's total reflectance),
+`target.exr` (the mean of two independently seeded half renders), `depth.exr` (eye z in
+mm, 0 off the head), `mask.png`, `normal.exr` (the shading normals a renderer would
+have), `coverage.exr`, `light.exr` (camera-space unit vectors towards the key light, the
+buffer of the `shift` light term), `key.exr` (the source lit by the key light alone, same
+spp and seed, the buffer of the `law` light term; `source - key` is the fill light's
+part, with Monte Carlo noise of both passes) and `scene.json` (the resolved scene, seeds,
+spp, render times and the noise estimate). There are no true screen-space parameters:
+these pairs measure how well the model can match real light transport
+(`experiments/fidelity.py`).
 
-| pair | medium | sigma_s' (1/mm) | sigma_a (1/mm) | size | spp | noise ceiling (dB) |
-|---|---|---|---|---|---|---|
+**Tuning and held-out pairs.** `SPLIT.toml` says which pairs a method may be tuned on
+(`tuning`) and which are only measured on (`held-out`); it was committed before any fit
+was made on the new pairs. Choose nothing by looking at a held-out pair's results
+(docs/scenes.md).
+
+A rough-dielectric boundary (refraction and Fresnel reflection at the surface, the
+reflection subtracted from the target) converges far more slowly than an index-matched
+one, so those targets have more noise for their samples: the noise ceiling column is
+the best PSNR any noise-free prediction can reach against the target.
+
+| pair | split | object | key light | boundary | medium | size | spp | noise ceiling (dB) | render (min) |
+|---|---|---|---|---|---|---|---|---|---|
 """
 
 
@@ -886,8 +906,21 @@ def make_path_traced(name: str, out: Path) -> None:
           f"{result.info['noise']['noise_ceiling_db']:.1f} dB", flush=True)
 
 
+def _object_label(info: dict) -> str:
+    obj = info["config"]["object"]
+    if obj.get("primitive") == "face":
+        return f"procedural head, {obj.get('cell') or 1.0:g} mm grid" + (", ears" if obj.get("ears") is not False else "")
+    if obj.get("primitive"):
+        return obj["primitive"]
+    name = Path(obj["mesh"]).name
+    return {"LeePerrySmith.glb": "Lee Perry-Smith", "fran_closed.ply": "fran (closed)"}.get(name, name)
+
+
 def path_traced_section(out: Path) -> str:
-    """The README section on the path-traced pairs, from the scene.json files in ``out``."""
+    """The README section on the path-traced pairs, from the scene.json files in ``out`` and SPLIT.toml."""
+    from invsss.scenes.split import read_split
+
+    split = read_split(out / "SPLIT.toml") if (out / "SPLIT.toml").is_file() else {}
     rows = []
     for name, config in PATH_TRACED.items():
         info_path = out / name / "scene.json"
@@ -898,9 +931,9 @@ def path_traced_section(out: Path) -> str:
         camera = info["config"]["camera"]
         preset = info["config"]["medium"].get("preset") or "custom"
         rows.append(
-            f"| `{name}` | {preset} ({medium['boundary']}) | {medium['sigma_s_prime']} | {medium['sigma_a']} | "
-            f"{camera['width']}x{camera['height']} | {info['spp']['target']} | "
-            f"{info['noise']['noise_ceiling_db']:.1f} |"
+            f"| `{name}` | {split.get(name, '-')} | {_object_label(info)} | {info['config']['lights'][0]['type']} | "
+            f"{medium['boundary']} | {preset} | {camera['width']}x{camera['height']} | {info['spp']['target']} | "
+            f"{info['noise']['noise_ceiling_db']:.1f} | {info['render_seconds']['total'] / 60:.1f} |"
         )
     return PATH_TRACED_HEAD + "\n".join(rows) + "\n" if rows else ""
 

@@ -430,3 +430,126 @@ def test_with_warp_keeps_the_camera_where_the_warp_is_the_identity():
     np.testing.assert_allclose(same.up, config.camera.frame()[2], atol=1e-12)
     assert same.principal_offset_px == [0.0, 0.0]
     assert same.focal_px == pytest.approx(config.camera.focal_length_px, rel=1e-12)
+
+
+# ------------------------------------------------- procedural face, bumps, closed fran
+
+
+@pytest.mark.parametrize(("object_", "message"), [
+    ({"primitive": "sphere", "radius": 40.0, "cell": 4.0}, 'object: cell: only for primitive "face"'),
+    ({"primitive": "slab", "size": [10.0, 10.0, 1.0], "ears": False}, 'object: ears: only for primitive "face"'),
+    ({"primitive": "face", "size": [10.0, 10.0, 1.0]}, 'object: primitive "face" has a fixed size'),
+    ({"primitive": "face", "cell": 0.5}, "object.cell: input should be greater than or equal to 1"),
+    ({"primitive": "face", "ears": 1}, "object.ears: expected true or false, got 1"),
+    ({"primitive": "face", "wrinkle": False}, "object.wrinkle: unknown key, did you mean 'wrinkles'?"),
+    ({"primitive": "sphere", "radius": 40.0, "bumps": 10.0}, "object: bumps: only for a mesh or primitive"),
+    ({"primitive": "face", "bumps": 60.0}, "object.bumps: input should be less than 60"),
+])
+def test_face_and_bump_keys_are_checked_in_one_line(object_, message):
+    with pytest.raises(invsss.InvalidInputError) as err:
+        _config(object=object_)
+    assert str(err.value).count("\n") == 0
+    assert str(err.value).startswith(f"test scene: {message}")
+
+
+def test_procedural_face_is_closed_deterministic_and_has_its_parts():
+    from invsss.scenes.procedural import face_mesh, face_sdf
+
+    fine = face_mesh(2.0)
+    assert fine.is_watertight and fine.is_winding_consistent and fine.volume > 0
+    again = face_mesh(2.0)
+    np.testing.assert_array_equal(fine.vertices, again.vertices)
+    np.testing.assert_array_equal(fine.faces, again.faces)
+    # The ears stand out beyond the head's 72 mm half-width; without them it is the head alone.
+    bare = face_mesh(2.0, ears=False)
+    assert fine.bounds[1][0] > 79.0 and bare.bounds[1][0] < 73.0
+    # The nose is the front: 100 mm ahead of the head's centre.
+    assert 98.0 < fine.bounds[1][2] < 101.0
+    # The furrows move the forehead's surface by their depth and nowhere else.
+    y = np.linspace(35.0, 60.0, 400)
+    forehead = face_sdf(0.0, y, 75.0) - face_sdf(0.0, y, 75.0, wrinkles=False)
+    cheek = face_sdf(50.0, -20.0, 60.0) - face_sdf(50.0, -20.0, 60.0, wrinkles=False)
+    assert 0.25 < np.abs(forehead).max() <= 0.35 + 1e-6 and float(cheek) == 0.0
+    # A coarse grid is a low-poly head: a hundredth of the triangles.
+    low = face_mesh(9.0, ears=False, wrinkles=False)
+    assert low.is_watertight and len(low.faces) < len(face_mesh(1.0).faces) / 50
+
+
+def test_face_primitive_renders_and_scene_json_pins_its_mesh():
+    config = _config(object={"primitive": "face", "cell": 9.0, "ears": False, "wrinkles": False},
+                     camera={"position": [0.0, 0.0, 600.0], "look_at": [0.0, 0.0, 0.0], "fov": 24.0,
+                             "width": 16, "height": 16},
+                     lights=[{"type": "directional", "direction": [0.0, 0.0, -1.0], "irradiance": 1.0}])
+    result = render_scene(config)
+    record = result.info["mesh"]
+    assert record["procedural"] == "face" and record["cell_mm"] == 9.0 and not record["ears"]
+    assert 1000 < record["triangles"] < 10000 and len(record["sha256"]) == 64
+    assert result.mask.sum() > 0.3 * result.mask.size
+    # The nose, 100 mm in front of the centre, is the nearest point: about 500 mm away.
+    assert 495.0 < float(result.depth[result.mask > 0].min()) < 515.0
+
+
+def test_bumps_tilt_the_shading_normals_and_leave_the_surface():
+    sphere_mesh = {"mesh": None, "mm_per_unit": 1.0}
+    import tempfile
+
+    import trimesh
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = os.path.join(folder, "ball.ply")
+        trimesh.creation.icosphere(subdivisions=4, radius=40.0).export(path)
+        sphere_mesh["mesh"] = path
+        camera = {**CAMERA, "width": 24, "height": 24}
+        plain = render_scene(_config(object=sphere_mesh, camera=camera), target=False)
+        bumped = render_scene(_config(object={**sphere_mesh, "bumps": 30.0}, camera=camera), target=False)
+    np.testing.assert_array_equal(plain.mask, bumped.mask)
+    np.testing.assert_allclose(plain.depth, bumped.depth, atol=1e-3)
+    inside = plain.coverage > 0.999
+    angle = np.degrees(np.arccos(np.clip(np.sum(plain.normal * bumped.normal, axis=-1), -1.0, 1.0)))[inside]
+    # Tilted by up to 30 degrees (a pixel averages a little of its neighbours' tilt), not everywhere alike.
+    assert 12.0 < angle.max() < 31.0 and np.median(angle) > 3.0
+    assert not np.allclose(plain.source, bumped.source)
+
+
+def test_closed_fran_is_the_scan_closed_by_its_script():
+    import importlib.util
+
+    import trimesh
+
+    folder = os.path.join(EXAMPLES, "meshes")
+    spec = importlib.util.spec_from_file_location("close_fran", os.path.join(folder, "close_fran.py"))
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    scan = trimesh.load(os.path.join(folder, "fran_cut.ply"), process=False)
+    scan.merge_vertices(merge_tex=True, merge_norm=True)
+    closed, apex = script.close(scan)
+    script.check(closed, apex, scan)
+    shipped = trimesh.load(os.path.join(folder, "fran_closed.ply"), process=False)
+    np.testing.assert_allclose(shipped.vertices, closed.vertices, atol=1e-4)
+    np.testing.assert_array_equal(shipped.faces, closed.faces)
+    assert shipped.is_watertight and shipped.volume > 0
+    # Its front (the nose tip) at z = 0, looking along +z: the scan's triangles face +z on the whole.
+    assert abs(shipped.bounds[1][2]) < 1e-6
+    face = shipped.face_normals[: len(scan.faces)]
+    assert np.average(face[:, 2], weights=shipped.area_faces[: len(scan.faces)]) > 0.3
+
+
+# ------------------------------------------------------------------- split
+
+
+def test_split_file_errors_are_one_line(tmp_path):
+    from invsss.scenes.split import read_split
+
+    cases = {
+        'tuning = ["a"]\n': "held-out: missing",
+        'tuning = ["a"]\nheld-out = ["b"]\nheldout = []\n': "heldout: unknown key",
+        'tuning = "a"\nheld-out = ["b"]\n': "tuning: expected a list of pair folder names",
+        'tuning = ["a"]\nheld-out = ["b", "a"]\n': "a is listed as tuning and as held-out",
+        'tuning = [\n': "not valid TOML",
+    }
+    for text, message in cases.items():
+        path = tmp_path / "SPLIT.toml"
+        path.write_text(text)
+        with pytest.raises(invsss.InvalidInputError) as err:
+            read_split(path)
+        assert str(err.value).count("\n") == 0 and message in str(err.value), text
