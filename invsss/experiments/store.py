@@ -118,12 +118,24 @@ def _store_error(path: str, err: sqlite3.Error) -> StoreError:
     directory = os.path.dirname(path)
     reason = " ".join(str(err).split()) or type(err).__name__
     name = getattr(err, "sqlite_errorname", "")
-    if name == "SQLITE_FULL":
-        return StoreError(f"{path}: cannot write ({reason}); free some space, then run the same command "
+    if name == "SQLITE_FULL" or (name.startswith("SQLITE_IOERR") and _disk_full(directory)):
+        # (On a full disk SQLite often says "disk I/O error": its shared-memory file cannot grow.)
+        said = reason if name == "SQLITE_FULL" else f"{reason}: the disk is full"
+        return StoreError(f"{path}: cannot write ({said}); free some space, then run the same command "
                           "again to resume")
+    if name.startswith("SQLITE_IOERR"):
+        return StoreError(f"{path}: cannot read or write ({reason}); once the disk is usable, run the same "
+                          "command again to resume")
     if name in ("SQLITE_CORRUPT", "SQLITE_NOTADB") or not isinstance(err, sqlite3.OperationalError):
         return StoreError(f"{path}: damaged ({reason}); {_rebuild_hint(directory)}")
     return StoreError(f"{path}: {reason}")
+
+
+def _disk_full(directory: str) -> bool:
+    try:
+        return os.statvfs(directory or ".").f_bavail == 0
+    except OSError:
+        return False
 
 
 def _guarded(method):
