@@ -283,6 +283,15 @@ def _warn_entry(path: Path, what: str) -> None:
     warn_once(("entry", path.name), f"executable cache: {path.name} {what}; compiling it again")
 
 
+def _discard(path: Path, writable: bool) -> None:
+    """Remove a bad entry, so that no later run meets it, even where this run
+    does not get to store its replacement."""
+    if writable:
+        for doomed in (path, _record_path(path)):
+            with contextlib.suppress(OSError):
+                doomed.unlink()
+
+
 def _record_path(path: Path) -> Path:
     return path.with_suffix(".verified")
 
@@ -555,12 +564,14 @@ class persistent_jit:
         payload = _unseal(data)
         if payload is None:
             _warn_entry(path, "is damaged (its bytes do not match the checksum written with it)")
+            _discard(path, writable)
             return None
         digest = hashlib.sha256(data).hexdigest()
         if not _is_verified(path, digest):
             failure = _try_in_child(data, digest, leaves)
             if failure is not None:
                 _warn_entry(path, f"failed when a separate process tried it ({failure})")
+                _discard(path, writable)
                 return None
             if writable:
                 _record_verified(path, digest)

@@ -200,3 +200,40 @@ def test_compile_seconds_counts_a_new_compilation():
     before = _compile_seconds()
     jax.jit(lambda x: jnp.sin(x) * 3.0 + jnp.cos(x) ** 2)(jnp.arange(7.0)).block_until_ready()
     assert _compile_seconds() > before
+
+
+def test_cache_folders_are_created_for_you_alone(tmp_path):
+    session = os.environ["INVSSS_CACHE_DIR"]
+    previous = os.umask(0)  # what made them 0777 before
+    try:
+        assert enable_compile_cache(tmp_path / "new" / "jax") == tmp_path / "new" / "jax"
+    finally:
+        os.umask(previous)
+        enable_compile_cache(session)
+    for folder in (tmp_path / "new", tmp_path / "new" / "jax"):
+        assert folder.stat().st_mode & 0o777 == 0o700, folder
+
+
+@pytest.mark.parametrize("whose", ["writable by others", "someone else's"])
+def test_a_cache_folder_not_yours_alone_is_not_used(tmp_path, whose):
+    from invsss import compile_cache
+
+    folder = tmp_path / "shared"
+    folder.mkdir()
+    if whose == "writable by others":
+        folder.chmod(0o777)
+        reason = "writable by group and others (mode 0777)"
+    else:
+        if os.geteuid() != 0:
+            pytest.skip("giving a folder to another user needs root")
+        os.chown(folder, 4242, 4242)
+        reason = "owned by uid 4242, not by you"
+    before = jax.config.jax_compilation_cache_dir
+    getattr(compile_cache, "_warned", set()).clear()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert enable_compile_cache(folder) is None
+        assert enable_compile_cache(folder) is None
+    messages = [str(w.message) for w in caught]
+    assert len(messages) == 1 and f"compilation cache {folder}: not used, as it is {reason}" in messages[0]
+    assert jax.config.jax_compilation_cache_dir == before

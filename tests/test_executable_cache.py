@@ -42,6 +42,7 @@ print(json.dumps({
     "iterations": result.iterations,
     "traces": {f.__name__: f.traces for f in (solve._init, solve._step, problem._evaluate)},
     "warnings": [str(w.message) for w in caught if "executable cache" in str(w.message)],
+    "all_warnings": [str(w.message) for w in caught],
 }, default=str))
 """
 
@@ -356,4 +357,48 @@ def test_a_read_only_cache_is_used_for_reading_quietly(cache_dir, read_only):
         warnings.simplefilter("always")
         jax.jit(lambda x: jnp.tanh(x @ x.T) * 3.0)(jnp.ones((7, 7))).block_until_ready()
     assert warned == [] and [str(w.message) for w in caught] == []
+    assert sorted(str(p.relative_to(frozen)) for p in frozen.rglob("*")) == listing
+
+
+@pytest.fixture(scope="module")
+def warm(tmp_path_factory):
+    """A cache folder after one fit (copy it before changing it)."""
+    folder = tmp_path_factory.mktemp("warm") / "cache"
+    _fit(folder)
+    return folder
+
+
+@pytest.mark.slow  # two child processes, each fitting
+def test_a_fit_after_entries_were_damaged_gets_the_no_cache_estimate(tmp_path, warm, reference):
+    import shutil
+
+    cache = tmp_path / "cache"
+    shutil.copytree(warm, cache)
+    entries = sorted(_entries(cache), key=lambda p: p.stat().st_size)
+    assert len(entries) == 3
+    # A flipped bit in the compiled code of the largest (before checksums, this one
+    # aborted every later fit at this size) and a block of zeros in another.
+    data = bytearray(entries[-1].read_bytes())
+    data[len(data) * 65 // 100] ^= 0x10
+    entries[-1].write_bytes(bytes(data))
+    data = bytearray(entries[-2].read_bytes())
+    data[len(data) // 2:len(data) // 2 + 4096] = bytes(4096)
+    entries[-2].write_bytes(bytes(data))
+    again = _fit(cache)
+    assert again["fit"] == reference["fit"]  # bit for bit
+    assert sorted(again["warnings"]) == sorted(
+        f"executable cache: {entry.name} is damaged (its bytes do not match the checksum written with it); "
+        "compiling it again" for entry in entries[-2:])
+    healed = _fit(cache)  # the damaged entries are gone
+    assert healed["fit"] == reference["fit"] and healed["all_warnings"] == []
+
+
+@pytest.mark.slow  # one child process fitting
+def test_a_fit_from_a_read_only_cache_loads_it_without_a_word(warm, read_only, reference):
+    frozen = read_only(warm)
+    listing = sorted(str(p.relative_to(frozen)) for p in frozen.rglob("*"))
+    again = _fit(frozen)
+    assert again["fit"] == reference["fit"]
+    assert again["all_warnings"] == []
+    assert again["traces"] == {"_init": 0, "_step": 0, "_evaluate": 0}
     assert sorted(str(p.relative_to(frozen)) for p in frozen.rglob("*")) == listing
