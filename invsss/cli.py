@@ -9,7 +9,8 @@ Exit codes, all without a traceback:
 
 * 0: done;
 * 1: the work was done but its output could not be written (the fit's estimate
-  is then saved elsewhere and the message says where);
+  is then saved elsewhere and the message says where), or a sweep ran to its
+  end but some of its trials failed (each failure is in ``sweep-report``);
 * 2: bad input, reported as ``invsss: error: <message>`` (an
   :class:`~invsss.validation.InvalidInputError`), or an output directory that
   already holds a result (``--overwrite``) or is in use by another run;
@@ -57,7 +58,7 @@ from .profiles import PROFILE_NAMES
 from .result_dir import ResultDir, ResultWriteError
 from .screen_space import MODELS, render
 from .params import check_plausible
-from .light_terms import LIGHT_TERM_NAMES, NEEDED_BUFFERS, LightBuffers, LightTerms
+from .light_terms import LIGHT_TERM_FIELDS, LIGHT_TERM_NAMES, NEEDED_BUFFERS, LightBuffers, LightTerms
 from .pair import ImagePair, fill_background_depth
 from .validation import InvalidInputError, check_depth, check_same_frame
 
@@ -148,11 +149,12 @@ def _render_light_terms(args, extras, image):
     if not record:
         return None, None
     shape = image.shape[:2]
-    terms = LightTerms(**{term: record[term] for term in LIGHT_TERM_NAMES if term in record})
+    terms = LightTerms(**{term: record[term] for term in LIGHT_TERM_FIELDS if term in record})
     terms.check(f"{args.params}: light_terms")
     buffers = {}
-    for term in LIGHT_TERM_NAMES:
-        for flag in NEEDED_BUFFERS[term] if term in record else ():
+    # A term at its identity (a fit that fell back to the plain model) needs no buffer.
+    for term in terms.used:
+        for flag in NEEDED_BUFFERS[term]:
             path = getattr(args, flag)
             if path is None:
                 raise InvalidInputError(
@@ -214,7 +216,7 @@ def _run_render(args: argparse.Namespace, stop: StopSignals) -> int:
     write_image(args.out, np.asarray(out, dtype=np.float32))
     height, width, channels = image.shape
     extra = "" if terms is None else ", light terms " + ", ".join(
-        f"{term}={_term_value(terms, term)}" for term in LIGHT_TERM_NAMES if term in extras["light_terms"])
+        f"{term}={_term_value(terms, term)}" for term in LIGHT_TERM_FIELDS if term in extras["light_terms"])
     print(f"wrote {args.out} ({width}x{height}, {channels} channel(s), model {model}{extra})")
     return 0
 
@@ -792,6 +794,9 @@ def _add_sweep_parser(subparsers) -> None:
                         help="first make DIR/results.sqlite again from the trial folders DIR/trials/<id>/ "
                         "(after it was damaged; the old file is kept as results.sqlite.damaged-<time>), "
                         "then run the trials not done")
+    parser.add_argument("--max-trials", type=int, default=None, metavar="N",
+                        help="run an experiment of more trials than the limit "
+                        "(default 100000; counted before they are expanded)")
     _add_no_cache_argument(parser)
     parser.set_defaults(func=_run_sweep)
     # `invsss sweep-report` is the sweep's other half: registered with it.
@@ -800,8 +805,12 @@ def _add_sweep_parser(subparsers) -> None:
 
 def _run_sweep(args: argparse.Namespace, stop: StopSignals) -> int:
     from .experiments import load, run
+    from .experiments.experiment import MAX_TRIALS
 
-    experiment = load(args.experiment)
+    limit = MAX_TRIALS if args.max_trials is None else args.max_trials
+    if limit < 1:
+        raise InvalidInputError(f"--max-trials: expected a whole number >= 1, got {limit}")
+    experiment = load(args.experiment, max_trials=limit)
 
     def stopping(signum):
         print(f"invsss: {signal.Signals(signum).name}: no new trials will start; a fit running in "
@@ -812,11 +821,12 @@ def _run_sweep(args: argparse.Namespace, stop: StopSignals) -> int:
         summary = run(experiment, args.out, executor=args.executor, jobs=args.jobs,
                       scheduler=args.scheduler, stop=stop,
                       rebuild_store=args.rebuild_store)
-    print(f"sweep: {summary.done} done, {summary.failed} failed, {summary.remaining} not run "
-          f"({summary.ran} run now, {summary.seconds:.1f}s); report: invsss sweep-report {args.out}")
+    _print_out(f"sweep: {summary.done} done, {summary.failed} failed, {summary.remaining} not run "
+               f"({summary.ran} run now, {summary.seconds:.1f}s); report: invsss sweep-report {args.out}")
     if summary.interrupted:
         return stop.exit_status or 130
-    return 0
+    # A script must see that some trials have no result; their errors are in the report.
+    return 1 if summary.failed else 0
 
 
 def _add_sweep_report_parser(subparsers) -> None:
@@ -838,9 +848,20 @@ def _run_sweep_report(args: argparse.Namespace, stop: StopSignals) -> int:
     from .experiments.report import write_report
 
     table, written = write_report(args.out, plots=not args.no_plots, parquet=args.parquet)
-    print(table)
-    print(f"wrote {', '.join(written)}")
+    _print_out(table)
+    _print_out(f"wrote {', '.join(written)}")
     return 0
+
+
+def _print_out(text: str) -> None:
+    """Print ``text`` on stdout; a reader that went away (``| head``) is not an error."""
+    try:
+        print(text, flush=True)
+    except BrokenPipeError:
+        # Later writes, and Python's own flush at exit, go nowhere instead of failing.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
 
 
 # ------------------------------------------------------------- profile
@@ -910,12 +931,15 @@ def _run_profile(args: argparse.Namespace, stop: StopSignals) -> int:
         lit_radius_mm=args.lit_radius_mm, max_radius_mm=args.max_radius_mm,
         black_level=args.black_level,
     )
+    # Errors about either image name its file, not the library's argument names.
+    names = (args.skin, args.reference)
     centre = tuple(args.centre) if args.centre else None
     spot_area = args.spot_area_mm2
     if spot_area is None:
         # The lit area is only known after reading REF: a first pass measures it.
-        spot_area = measure_profile(skin, reference, centre, args.mm_per_pixel, **options).lit_area_mm2
-    measured = measure_profile(skin, reference, centre, args.mm_per_pixel,
+        spot_area = measure_profile(skin, reference, centre, args.mm_per_pixel, names=names,
+                                    **options).lit_area_mm2
+    measured = measure_profile(skin, reference, centre, args.mm_per_pixel, names=names,
                                spot_area_mm2=spot_area, **options)
     gaussians = measured.fit(args.gaussians)
     dipole = fit_dipole(measured.r_mm, measured.reflectance, eta=args.eta)

@@ -119,7 +119,8 @@ AFTER_BLUR = ("shift", "grazing", "incidence")
 #: average over its footprint while its normal is taken at the centre; near
 #: grazing the two disagree, and ``f_w`` divides by ``mu + mu0``, so an unfaded
 #: gain ran to 232 on one silhouette pixel of a scene the terms were not built on.
-#: With the fade the gain is at most about 11 (``w -> 0``), 4 at ``w = 0.9``.
+#: With the fade the gain is below ``1 + 1 / LAW_TRUST`` = 11 for any ``w`` (the
+#: bound is approached as ``w -> 0``, Lommel-Seeliger's law) and below 4 at ``w = 0.9``.
 LAW_TRUST = 0.1
 
 #: How far from unit length a buffer's vectors may be before it is refused
@@ -341,8 +342,9 @@ def reflectance_law(
 
     ``mu = clip(n_z, 0, 1)`` and ``mu0 = clip(n . l, 0, 1)``; ``albedo`` is one
     ``w`` or one per channel (the last axis of the result; 1 for one ``w``).
-    Bounded: at most about 11 for any ``w`` (the fade starts before
-    ``1 / (mu + mu0)`` grows).
+    Bounded: below ``1 + 1 / LAW_TRUST`` for any ``w`` (where ``t < 1``,
+    ``t (f_w / f_w(1, 1))`` is at most ``(x / LAW_TRUST) (1 / x)``); at least
+    about 0.73 (``w -> 1``, light arriving along the normal seen at grazing).
     """
     w = jnp.atleast_1d(albedo)
     mu = jnp.clip(normal[..., 2], 0.0, 1.0)[..., None]

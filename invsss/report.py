@@ -158,8 +158,16 @@ def _parameter_lines(result) -> list[str]:
             errs = [None] * len(values) if errs is None else np.atleast_1d(np.asarray(errs, object)).tolist()
             shown = "/".join(f"{w:.3f}" for w in values)
             spread = "/".join("?" if e is None else f"{e:.2g}" for e in errs)
-            parts.append(f"law albedo {shown} (stderr {spread})")
+            strength = terms.get("law_strength", 1.0)
+            s_err = terms["stderr"].get("law_strength")
+            parts.append(f"law albedo {shown} (stderr {spread}), strength {strength:.3g} "
+                         f"(stderr {'?' if s_err is None else f'{s_err:.2g}'})")
         lines.append("light terms: " + ", ".join(parts))
+        if "psnr_plain" in terms:
+            # Measured: the plain fit, and this fit with each term at its identity.
+            knocked = ", ".join(f"{term} {value:.2f}" for term, value in terms.get("psnr_without", {}).items())
+            lines.append(f"PSNR {result.psnr:.2f} dB with the terms, {terms['psnr_plain']:.2f} dB plain fit"
+                         + (f"; with one term at its identity: {knocked}" if knocked else ""))
     lines.extend(textwrap.wrap(_CONDITIONAL_NOTE, width=_TEXT_WIDTH, subsequent_indent="  "))
     for message in result.warnings:
         lines.extend(textwrap.wrap("! " + message, width=_TEXT_WIDTH, subsequent_indent="  "))

@@ -12,10 +12,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from scipy import ndimage
 
 import invsss
 from invsss.light_terms import LightBuffers, LightTerms, apply_law, reflectance_law
+
+from _lit_scenes import FIX, PROFILE, dome_with_two_lights, lit_target
 
 
 @pytest.fixture(autouse=True)
@@ -340,41 +341,11 @@ def test_only_the_law_exports_no_after_blur_constants():
 # ------------------------------------------------------------------ estimator
 
 
-def _dome_with_two_lights(size=40, seed=2):
-    """A textured dome lit by a key light from the upper left and a weaker fill
-    from the right, RGB: the source, the key light's part, and the buffers."""
-    rng = np.random.default_rng(seed)
-    texture = ndimage.gaussian_filter(rng.uniform(0.0, 1.0, (size, size)), 1.5) * 2.0 + 0.3
-    texture[:, 14:17] *= 0.3
-    albedo = np.stack([texture, 0.8 * texture, 0.6 * texture], axis=-1) / 3.0
-    y, x = (np.mgrid[0:size, 0:size] - (size - 1) / 2.0) / (size / 2.0)
-    r2 = np.minimum(x**2 + y**2, 0.9)
-    normal = _unit(np.stack([0.9 * x, -0.9 * y, np.sqrt(1.0 - 0.81 * r2)], axis=-1))
-    depth = 500.0 - 40.0 * np.sqrt(1.0 - 0.81 * r2)
-    to_key = _unit(np.array([-0.6, 0.3, 0.74]))
-    to_fill = _unit(np.array([0.5, 0.2, 0.84]))
-    key = albedo * 0.9 * np.clip(normal @ to_key, 0.0, 1.0)[..., None]
-    source = key + albedo * 0.4 * np.clip(normal @ to_fill, 0.0, 1.0)[..., None]
-    light = np.broadcast_to(to_key, normal.shape).copy()
-    mask = (x**2 + y**2 < 0.85).astype(float)
-    return source, depth, mask, LightBuffers(normal=normal, light=light, key=key)
-
-
-PROFILE = {"weights": [0.5, 0.5], "variances": [0.5, 2.0]}
-FIX = {"correction": 0.0, "maxdd": 1.0}
-TRUTH = invsss.SSSParams(600.0, 0.0, 1.0, [0.6, 0.4], [0.5, 2.0])
-
-
-def _target(source, depth, mask, buffers, terms, noise=0.002):
-    target = np.asarray(invsss.render(source, depth, mask, TRUTH, light_terms=terms, light_buffers=buffers))
-    return target + np.random.default_rng(1).normal(0.0, noise, target.shape)
-
-
 @pytest.mark.slow
 def test_fit_recovers_an_albedo_per_channel_and_the_blur():
-    source, depth, mask, buffers = _dome_with_two_lights()
+    source, depth, mask, buffers = dome_with_two_lights()
     truth = [0.95, 0.85, 0.7]
-    target = _target(source, depth, mask, buffers, LightTerms(law=truth))
+    target = lit_target(source, depth, mask, buffers, LightTerms(law=truth))
     fit = invsss.fit_pair(source, target, depth, mask, profile=PROFILE, fix=FIX, n_starts=2,
                           light_terms="law", light_buffers=buffers)
     assert fit.converged
@@ -396,9 +367,9 @@ def test_fit_recovers_an_albedo_per_channel_and_the_blur():
 
 @pytest.mark.slow
 def test_a_held_albedo_is_kept_and_a_grey_target_fits_one_per_source_channel():
-    source, depth, mask, buffers = _dome_with_two_lights(32)
+    source, depth, mask, buffers = dome_with_two_lights(32)
     truth = [0.95, 0.85, 0.7]
-    target = _target(source, depth, mask, buffers, LightTerms(law=truth))
+    target = lit_target(source, depth, mask, buffers, LightTerms(law=truth))
     held = invsss.fit_pair(source, target, depth, mask, profile=PROFILE, fix=FIX, n_starts=1,
                            light_terms={"law": truth}, light_buffers=buffers)
     assert held.light_terms["law"] == pytest.approx(truth) and held.light_terms["fixed"] == ["law"]
@@ -417,8 +388,8 @@ def test_cli_fit_and_render_with_the_key_buffer(tmp_path, capsys):
     from _pair_files import pair_args, write_pair
     from invsss.cli import main
 
-    source, depth, mask, buffers = _dome_with_two_lights(32)
-    target = _target(source, depth, mask, buffers, LightTerms(law=[0.95, 0.85, 0.7]), noise=0.0)
+    source, depth, mask, buffers = dome_with_two_lights(32)
+    target = lit_target(source, depth, mask, buffers, LightTerms(law=[0.95, 0.85, 0.7]), noise=0.0)
     paths = write_pair(tmp_path, "lit", (source, target, depth, mask))
     files = {}
     for name in ("normal", "light", "key"):
@@ -469,8 +440,8 @@ def test_sweep_reads_the_key_only_for_trials_with_the_law(tmp_path):
     import invsss.experiments as ex
     from _pair_files import light_sweep_text, write_pair_folder
 
-    source, depth, mask, buffers = _dome_with_two_lights(32)
-    target = _target(source, depth, mask, buffers, LightTerms(law=[0.95, 0.85, 0.7]))
+    source, depth, mask, buffers = dome_with_two_lights(32)
+    target = lit_target(source, depth, mask, buffers, LightTerms(law=[0.95, 0.85, 0.7]))
     folder = tmp_path / "data" / "dome"
     write_pair_folder(folder, (source, target, depth, mask), buffers)
     text = light_sweep_text('["incidence", "law"]')
@@ -500,9 +471,9 @@ def test_an_aligned_fit_moves_the_key_with_the_source():
     # The photograph is misregistered by a fraction of a pixel; the aligned fit
     # resamples the source onto it, and the key light's part must move with it,
     # or the law would change the wrong pixels.
-    source, depth, mask, buffers = _dome_with_two_lights(40)
+    source, depth, mask, buffers = dome_with_two_lights(40)
     truth = [0.95, 0.85, 0.7]
-    target = _target(source, depth, mask, buffers, LightTerms(law=truth), noise=0.0)
+    target = lit_target(source, depth, mask, buffers, LightTerms(law=truth), noise=0.0)
     shifted = np.stack([ndimage.shift(target[..., k], (1.4, -0.8), order=5, mode="nearest") for k in range(3)], -1)
     # Two starts: from one, this dome has a second minimum at sss_level 746 (loss 2e-7),
     # with or without the warp.
