@@ -133,7 +133,7 @@ class ParamsFile(BaseModel):
     highlights: Any = None
     """Fit report: pixels left out as specular highlights (fit --highlights): method, excluded_pixels, fraction; or null."""
     light_terms: Any = None
-    """Fit report: the fitted light-aware terms (fit --light-terms; docs/model.md, section 8): shift (mm), grazing, incidence, law (an albedo per source channel), stderr, fixed; or null."""
+    """Fit report: the fitted light-aware terms (fit --light-terms; docs/model.md, section 8): shift (mm), grazing, incidence, law (an albedo per source channel), law_strength (0 Lambert, 1 the law; absent means 1), stderr, fixed, psnr_plain and psnr_without (dB, measured), fallback; or null."""
     warnings: Optional[list[str]] = None
     """Fit report: warnings the fit raised."""
 
@@ -261,10 +261,18 @@ def _validated(content: Mapping, name: str) -> ParamsFile:
 def _check_result_complete(path: str) -> None:
     """Refuse a params file whose result directory says its run did not finish."""
     # A hand-written file, or a result written before manifests, has no state to check.
-    if result_state(os.path.dirname(os.path.abspath(path))) == "incomplete":
+    directory = os.path.dirname(os.path.abspath(path))
+    state = result_state(directory)
+    if state == "incomplete":
         raise InvalidInputError(
             f"{path}: belongs to an incomplete result (the run that wrote it was "
             "interrupted); re-run it"
+        )
+    if state == "damaged":
+        # Not an interruption (manifests are written atomically): the file was changed.
+        raise InvalidInputError(
+            f"{path}: its result's manifest {os.path.join(directory, MANIFEST_NAME)} is damaged "
+            "(not a JSON object), so whether the result is whole is unknown; re-run it"
         )
 
 
