@@ -139,18 +139,19 @@ def _as_channels(image):
     return a[..., None] if a.ndim == 2 else a
 
 
-def _spectralon_reference(spectralon, black_level, lit_threshold, saturation, mm_per_pixel):
+def _spectralon_reference(spectralon, black_level, lit_threshold, saturation, mm_per_pixel,
+                          name="spectralon_image"):
     # Step 1: the lit area is where the Spectralon is at least lit_threshold of its peak.
     brightness = spectralon.mean(axis=-1) - black_level
     peak = brightness.max()
     if not peak > 0:
-        raise InvalidInputError("spectralon_image: has no lit pixel (nothing above black_level)")
+        raise InvalidInputError(f"{name}: has no lit pixel (nothing above black_level)")
     lit = brightness >= lit_threshold * peak
     if saturation is not None:
         clipped = int(np.count_nonzero(np.any(spectralon[lit] >= saturation, axis=-1)))
         if clipped:
             raise InvalidInputError(
-                f"spectralon_image: {clipped} lit pixel(s) at the saturation level {saturation:g}; "
+                f"{name}: {clipped} lit pixel(s) at the saturation level {saturation:g}; "
                 "the reference needs an exposure without overexposure (thesis 4.1.2)"
             )
     level = spectralon[lit].mean(axis=0) - black_level
@@ -185,6 +186,7 @@ def measure_profile(
     spectralon_reflectance: float = 1.0,
     black_level: float = 0.0,
     lit_threshold: float = 0.5,
+    names: tuple[str, str] = ("skin_image", "spectralon_image"),
 ) -> MeasuredProfile:
     """Diffusion profile from a point-lit skin photo and a Spectralon photo (thesis 4.1).
 
@@ -228,6 +230,8 @@ def measure_profile(
         Camera offset subtracted from both images first.
     lit_threshold : float
         Fraction of the Spectralon's peak that marks its lit area.
+    names : (str, str)
+        What error messages call the two images (``invsss profile`` gives their files).
 
     Returns
     -------
@@ -248,13 +252,14 @@ def measure_profile(
     >>> round(float(m.reflectance[0]), 6)  # 24.4 / (244 * 10)
     0.01
     """
-    check_image(skin_image, "skin_image")
-    check_image(spectralon_image, "spectralon_image")
+    skin_name, spectralon_name = names
+    check_image(skin_image, skin_name)
+    check_image(spectralon_image, spectralon_name)
     skin = _as_channels(skin_image)
     spectralon = _as_channels(spectralon_image)
     if spectralon.shape[-1] != skin.shape[-1]:
         raise InvalidInputError(
-            f"spectralon_image: expected {skin.shape[-1]} channel(s) like skin_image, "
+            f"{spectralon_name}: expected {skin.shape[-1]} channel(s) like {skin_name}, "
             f"got {spectralon.shape[-1]}"
         )
     mm_per_pixel = _positive(mm_per_pixel, "mm_per_pixel")
@@ -289,7 +294,7 @@ def measure_profile(
 
     # Step 1: the reference. Saturation is judged on raw values, before the black level.
     level, lit_area_mm2, lit_extent_mm = _spectralon_reference(
-        spectralon, black_level, lit_threshold, saturation, mm_per_pixel
+        spectralon, black_level, lit_threshold, saturation, mm_per_pixel, spectralon_name
     )
     skin_clipped = (
         np.any(skin >= saturation, axis=-1) if saturation is not None else np.zeros(skin.shape[:2], bool)
@@ -307,7 +312,7 @@ def measure_profile(
         raise InvalidInputError(f"centre: expected (row, column) or None, got {centre!r}") from None
     if not (0 <= cy <= h - 1 and 0 <= cx <= w - 1):
         raise InvalidInputError(
-            f"centre: ({cy:g}, {cx:g}) lies outside the {h}x{w} skin_image"
+            f"centre: ({cy:g}, {cx:g}) lies outside the {h}x{w} {skin_name}"
         )
 
     # Step 2: the band, in pixel units along and across its direction.
@@ -323,7 +328,7 @@ def measure_profile(
         usable &= radius_px * mm_per_pixel <= max_radius_mm
     if not np.any(usable):
         raise InvalidInputError(
-            "skin_image: no usable pixel in the sample band (all saturated, directly lit, "
+            f"{skin_name}: no usable pixel in the sample band (all saturated, directly lit, "
             "or outside the image); check centre, direction and lit_radius_mm"
         )
 

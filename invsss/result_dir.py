@@ -91,11 +91,12 @@ class ResultWriteError(OSError):
 
 
 def result_state(directory) -> str | None:
-    """What ``directory`` holds: ``"complete"``, ``"incomplete"``, ``"legacy"`` or None.
+    """What ``directory`` holds: ``"complete"``, ``"incomplete"``, ``"damaged"``, ``"legacy"`` or None.
 
-    ``"legacy"`` is a ``params.json`` without a manifest (an invsss older than
-    the manifest); None is no result at all (a missing or empty directory, or
-    only the user's own files).
+    ``"damaged"`` is a manifest that cannot be read as a JSON object (not a sign
+    of an interrupted run: the commit writes it atomically); ``"legacy"`` is a
+    ``params.json`` without a manifest (an invsss older than the manifest); None
+    is no result at all (a missing or empty directory, or only the user's own files).
 
     Examples
     --------
@@ -106,7 +107,8 @@ def result_state(directory) -> str | None:
     path = os.fspath(directory)
     manifest = _read_manifest(path)
     if manifest is not None:
-        return "complete" if manifest.get("state") == "complete" else "incomplete"
+        state = manifest.get("state")
+        return "complete" if state == "complete" else "damaged" if state == "unreadable" else "incomplete"
     if os.path.isfile(os.path.join(path, "params.json")):
         return "legacy"
     return None
@@ -313,7 +315,8 @@ class ResultDir:
         path = self.path
         state = result_state(path)
         if state is not None and not self.overwrite:
-            what = {"complete": "a result", "legacy": "a result", "incomplete": "an incomplete result"}
+            what = {"complete": "a result", "legacy": "a result", "incomplete": "an incomplete result",
+                    "damaged": "a result whose manifest is damaged"}
             listed = ", ".join(n for n in _result_files(path) if os.path.exists(os.path.join(path, n)))
             raise InvalidInputError(
                 f"{path}: already holds {what.get(state, 'a result')} ({listed or MANIFEST_NAME}); "

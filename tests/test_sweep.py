@@ -267,7 +267,7 @@ def test_a_failing_trial_is_recorded_and_the_sweep_goes_on(root, capsys):
     text = RENDER.replace('pairs = ["data/*/"]', 'pairs = ["data/a/", "broken/"]')
     path = _experiment(root, "failing.toml", text)
     out = root / "failing"
-    assert invsss.cli.main(["sweep", str(path), "--out", str(out)]) == 0
+    assert invsss.cli.main(["sweep", str(path), "--out", str(out)]) == 1  # some trials failed
     err = capsys.readouterr().err
     assert "4 failed" in err and "FAILED" in err
     rows = _rows(out)

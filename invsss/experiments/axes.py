@@ -25,7 +25,7 @@ import numpy as np
 from ..validation import InvalidInputError
 from .schema import SampleSpec
 
-__all__ = ["flatten", "grid_rows", "zip_rows", "sample_rows", "combine", "set_path"]
+__all__ = ["flatten", "grid_rows", "zip_rows", "sample_rows", "combine", "set_path", "row_count"]
 
 
 def flatten(table: dict, prefix: str = "") -> dict:
@@ -150,6 +150,34 @@ def combine(parts: list[list[dict]], name: str) -> list[dict]:
                 raise InvalidInputError(f"{name}: {key!r} is varied twice (in two of grid, zip, sample)")
             owner[key] = index
     return [dict(itertools.chain.from_iterable(r.items() for r in combo)) for combo in itertools.product(*parts)]
+
+
+def row_count(grid: dict, zipped: dict, sample: SampleSpec | None) -> tuple[int, list[str]]:
+    """How many rows :func:`combine` would make of the three tables, without making them.
+
+    Returns the count and its factors as text (``["grid 1000 x 1000", "sample 8"]``),
+    so that a sweep too large to run is refused before its rows take minutes to
+    build (about 1 ms a trial). A value that is not a list counts as one: the
+    expansion reports it.
+
+    Examples
+    --------
+    >>> row_count({"a": [1, 2], "b": [1, 2, 3]}, {"c": [1, 2]}, SampleSpec(n=5, ranges={"d": [0, 1]}))
+    (60, ['grid 2 x 3', 'zip 2', 'sample 5'])
+    """
+    sizes = [len(v) if isinstance(v, list) else 1 for v in flatten(grid).values()]
+    zipped_sizes = [len(v) if isinstance(v, list) else 1 for v in flatten(zipped).values()]
+    factors, count = [], 1
+    if sizes:
+        count *= math.prod(sizes)
+        factors.append("grid " + " x ".join(str(n) for n in sizes))
+    if zipped_sizes:
+        count *= max(zipped_sizes)
+        factors.append(f"zip {max(zipped_sizes)}")
+    if sample is not None:
+        count *= sample.n
+        factors.append(f"sample {sample.n}")
+    return count, factors
 
 
 def set_path(options: dict, path: str, value) -> None:

@@ -18,12 +18,17 @@ import tomllib
 from pydantic import ValidationError
 
 from ..validation import InvalidInputError
-from .axes import combine, grid_rows, sample_rows, zip_rows
+from .axes import combine, flatten, grid_rows, row_count, sample_rows, zip_rows
 from .data import resolve_pairs
 from .schema import ExperimentSpec, check_keys, first_error
 from .trials import Trial, check_option_key, resolve_options, task_options_model, trial_id
 
-__all__ = ["Experiment", "load"]
+__all__ = ["Experiment", "load", "MAX_TRIALS"]
+
+#: The most trials :func:`load` expands unless told otherwise (``max_trials``,
+#: ``invsss sweep --max-trials``): a sweep this large runs for days, and
+#: expanding 10**6 trials alone took about 15 minutes without a word.
+MAX_TRIALS = 100_000
 
 
 @dataclasses.dataclass(frozen=True)
@@ -125,12 +130,26 @@ def _check_trial(trial: Trial, name: str, label: str) -> None:
                 )
 
 
+def _check_trial_count(spec: ExperimentSpec, pairs: list[dict], name: str, max_trials: int) -> None:
+    """Refuse an experiment of more than ``max_trials`` trials, counted before expanding it."""
+    count, factors = row_count(spec.grid, spec.zip, spec.sample)
+    varies_pair = "pair" in flatten(spec.grid) or "pair" in flatten(spec.zip)
+    if spec.task != "fit-joint" and not varies_pair:
+        count *= len(pairs)
+        factors.append(f"{len(pairs)} pair(s)")
+    if count > max_trials:
+        raise InvalidInputError(
+            f"{name}: {count:,} trials ({' x '.join(factors)}), more than the limit of {max_trials:,}; "
+            f"vary fewer values, or raise the limit with --max-trials {count} (max_trials= in load)"
+        )
+
+
 def _label(index: int, row: dict) -> str:
     shown = ", ".join(f"{k}={v!r}" for k, v in row.items())
     return f"trial {index + 1}" + (f" ({shown})" if shown else "")
 
 
-def load(path) -> Experiment:
+def load(path, *, max_trials: int = MAX_TRIALS) -> Experiment:
     """Read, check and expand an experiment file.
 
     Parameters
@@ -138,6 +157,9 @@ def load(path) -> Experiment:
     path : str or os.PathLike
         A TOML experiment file (format: :mod:`invsss.experiments.schema`). Data
         paths in it are relative to its folder.
+    max_trials : int
+        Refuse a file of more trials than this (default :data:`MAX_TRIALS`),
+        counted before they are expanded.
 
     Returns
     -------
@@ -148,7 +170,8 @@ def load(path) -> Experiment:
     InvalidInputError
         Unreadable or invalid TOML, an unknown key (the message names the
         nearest valid one), a value of the wrong type, pairs that cannot be
-        found, or a trial whose options the task refuses; one line each.
+        found, a trial whose options the task refuses, or more than
+        ``max_trials`` trials; one line each.
 
     Examples
     --------
@@ -166,6 +189,8 @@ def load(path) -> Experiment:
     >>> experiment.trials[0].axes
     {'sss_level': 300, 'correction': 800, 'pair': 'face'}
     """
+    if isinstance(max_trials, bool) or not isinstance(max_trials, int) or max_trials < 1:
+        raise InvalidInputError(f"max_trials: expected a whole number >= 1, got {max_trials!r}")
     path = os.path.abspath(os.fspath(path))
     name = os.fspath(path)
     text, content = _read_toml(path)
@@ -177,6 +202,7 @@ def load(path) -> Experiment:
     _check_axis_keys(spec, name)
     root = os.path.dirname(path)
     pairs = resolve_pairs(spec.data, root, name)
+    _check_trial_count(spec, pairs, name, max_trials)
     sampled = frozenset(sample_rows(spec.sample, name)[0])
     rows = combine([grid_rows(spec.grid, name), zip_rows(spec.zip, name), sample_rows(spec.sample, name)], name)
     rows = _pair_rows(spec, rows, pairs, name)

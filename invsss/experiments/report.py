@@ -17,7 +17,11 @@ Written into ``OUT/report/``:
   rendered images laid out on those axes with the PSNR under each (the
   thesis's sssLevel x correction matrix, made from the results).
 
-The table :func:`write_report` returns is plain text, one line per trial.
+The table :func:`write_report` returns is plain text, one line per trial. A
+folder that holds the trials of experiments with different tasks (a render
+matrix and a fit written into one ``--out``) gets one table per task, each
+under a ``task <name>: N trial(s)`` line, and each task's plots in
+``OUT/report/<task>/``: their columns and metrics differ.
 """
 
 from __future__ import annotations
@@ -222,8 +226,6 @@ def write_report(out, *, plots: bool = True, parquet: bool = False) -> tuple[str
     rows, meta = flat_rows(out)
     if not rows:
         raise InvalidInputError(f"{out}: the sweep has no trials")
-    meta_axes = list(meta.get("axes", []))
-    axes = [a for a in dict.fromkeys([*meta_axes, "pair"]) if any(a in r for r in rows)]
     folder = os.path.join(out, "report")
     os.makedirs(folder, exist_ok=True)
     written = [os.path.join(folder, "results.csv")]
@@ -231,20 +233,46 @@ def write_report(out, *, plots: bool = True, parquet: bool = False) -> tuple[str
     if parquet:
         written.append(os.path.join(folder, "results.parquet"))
         _write_parquet(rows, written[-1])
+    tasks: dict = {}
+    for row in rows:
+        tasks.setdefault(row["task"], []).append(row)
+    if len(tasks) == 1:
+        meta_axes = list(meta.get("axes", []))
+        axes = [a for a in dict.fromkeys([*meta_axes, "pair"]) if any(a in r for r in rows)]
+        written.extend(_task_plots(rows, axes, rows[0]["task"], out, folder) if plots else [])
+        return format_table(rows, axes), written
+    # Trials of several experiments: a fit's and a render's rows share no columns
+    # worth comparing, so each task has its own table and plots.
+    tables = []
+    for task, task_rows in tasks.items():
+        # The pair last, as in a folder of one experiment.
+        axes = [a for a in (*(a for a in meta["row_axes"] if a != "pair"), "pair")
+                if any(r.get(a) is not None for r in task_rows)]
+        tables.append(f"task {task}: {len(task_rows)} trial(s)\n{format_table(task_rows, axes)}")
+        if plots:
+            written.extend(_task_plots(task_rows, axes, task, out, os.path.join(folder, task)))
+    return "\n\n".join(tables), written
+
+
+def _task_plots(rows: list[dict], axes: list[str], task: str, out: str, folder: str) -> list[str]:
+    """The plots of the done trials of one task (module docstring) in ``folder``."""
     done = [r for r in rows if r["status"] == "done"]
-    if plots and done:
-        import matplotlib
+    if not done:
+        return []
+    import matplotlib
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
 
-        numeric = _numeric_axes(done, axes)
-        for axis in numeric:
-            written.append(_plot_metrics(plt, done, axis, folder))
-            if meta.get("task") != "render":
-                written.append(_plot_params(plt, done, axis, folder))
-        if meta.get("task") == "fit" and len({r.get("pair") for r in done}) > 1:
-            written.append(_plot_spread(plt, done, folder))
-        if meta.get("task") == "render" and len(numeric) >= 2:
-            written.extend(_contact_sheets(plt, done, numeric, out, folder))
-    return format_table(rows, axes), written
+    os.makedirs(folder, exist_ok=True)
+    written = []
+    numeric = _numeric_axes(done, axes)
+    for axis in numeric:
+        written.append(_plot_metrics(plt, done, axis, folder))
+        if task != "render":
+            written.append(_plot_params(plt, done, axis, folder))
+    if task == "fit" and len({r.get("pair") for r in done}) > 1:
+        written.append(_plot_spread(plt, done, folder))
+    if task == "render" and len(numeric) >= 2:
+        written.extend(_contact_sheets(plt, done, numeric, out, folder))
+    return written

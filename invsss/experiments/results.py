@@ -1,7 +1,7 @@
 """Reading a sweep's results back: :func:`results`.
 
 One flat row per trial, the shape a table or a plot wants: ``id``,
-``status``, one column per varied key (``sss_level``, ``fix.maxdd``, ``pair``),
+``status``, ``task`` (a folder may hold the trials of several experiments), one column per varied key (``sss_level``, ``fix.maxdd``, ``pair``),
 the metrics (``loss``, ``psnr``, ``ssim``, and for fits ``sigma``,
 ``converged``, ``iterations``), the parameters (``param.sss_level``,
 ``param.weights``...; ``param.light_shift``, ``param.grazing``, ``param.incidence`` and
@@ -29,7 +29,11 @@ __all__ = ["results", "flat_rows"]
 
 
 def flat_rows(out) -> tuple[list[dict], dict]:
-    """The trials of the sweep in ``out`` as flat dicts, and the sweep's metadata."""
+    """The trials of the sweep in ``out`` as flat dicts, and the sweep's metadata.
+
+    The metadata is that of the last experiment run into ``out``, plus
+    ``"row_axes"``: the varied keys of every trial, in the order of the columns.
+    """
     out = os.fspath(out)
     if not os.path.isfile(os.path.join(out, DATABASE_NAME)):
         raise InvalidInputError(f"{out}: no sweep results here (no {DATABASE_NAME}); run invsss sweep first")
@@ -42,7 +46,7 @@ def flat_rows(out) -> tuple[list[dict], dict]:
     light = [name for name in LIGHT_PARAMS if any(name in (row["params"] or {}) for row in stored)]
     rows = []
     for row in stored:
-        flat = {"id": row["id"], "status": row["status"]}
+        flat = {"id": row["id"], "status": row["status"], "task": row["task"]}
         flat.update({key: row["axes"].get(key) for key in axes})
         metrics = row["metrics"] or {}
         fit_only = () if row["task"] == "render" else ("sigma", "converged", "iterations")
@@ -65,7 +69,7 @@ def flat_rows(out) -> tuple[list[dict], dict]:
         flat["warnings"] = row["warnings"] or []
         flat["error"] = row["error"]
         rows.append(flat)
-    return rows, meta
+    return rows, {**meta, "row_axes": axes}
 
 
 def results(out, *, frame: bool | None = None):

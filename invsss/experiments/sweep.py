@@ -135,8 +135,14 @@ class _Progress:
         self.start = time.monotonic()
 
     def say(self, text: str) -> None:
-        if self.log is not None:
+        if self.log is None:
+            return
+        try:
             print(f"sweep: {text}", file=self.log, flush=True)
+        except (BrokenPipeError, ValueError):
+            # A reader that went away (`invsss sweep ... 2>&1 | head`) or a closed
+            # file ends the progress lines, not the sweep: its trials go on.
+            self.log = None
 
     def finished(self, outcome: dict, previous: str) -> None:
         self.ran += 1
@@ -200,7 +206,8 @@ def run(
         ``stop() -> bool``, polled between trials; True ends the run early.
     log : file, "stderr" or None
         Where progress lines go: a file, ``sys.stderr`` as it is when the run
-        starts (default), or nowhere.
+        starts (default), or nowhere. If it is closed under the run (a pipe whose
+        reader left), the lines stop and the trials go on.
     rebuild_store : bool
         First make ``results.sqlite`` again from the trial folders (the old
         file is moved aside to ``results.sqlite.damaged-<time>``); see
