@@ -637,7 +637,7 @@ def load_pair(
     --------
     >>> import numpy as np, tempfile, os, invsss
     >>> d = tempfile.mkdtemp(); p = lambda n: os.path.join(d, n)
-    >>> invsss.write_image(p("s.exr"), np.ones((4, 6, 3), np.float32))
+    >>> invsss.write_image(p("s.exr"), np.ones((4, 6, 3), np.float32) * np.float32([1.0, 0.5, 0.25]))
     >>> invsss.write_image(p("t.exr"), np.ones((4, 6), np.float32))
     >>> np.save(p("d.npy"), np.full((4, 6), 500.0)); np.save(p("m.npy"), np.eye(4, 6))
     >>> pair = invsss.load_pair(p("s.exr"), p("t.exr"), p("d.npy"), p("m.npy"))
