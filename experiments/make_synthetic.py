@@ -859,6 +859,7 @@ PATH_TRACED = {
     "pt_face_skin1": "face_skin1.toml",
     "pt_proc_area_940": "proc_area_940.toml",
     "pt_face_ear_backlit_940": "face_ear_backlit_940.toml",
+    "pt_fran_dir_940": "fran_dir_940.toml",
     "pt_fran_dir_rough_940": "fran_dir_rough_940.toml",
     "pt_proc_lowpoly_dir_940": "proc_lowpoly_dir_940.toml",
     "pt_face_rough_area_940": "face_rough_area_940.toml",
