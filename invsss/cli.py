@@ -181,8 +181,9 @@ def _read_light_buffer(path, flag: str, shape):
 def _read_key_buffer(path, source, linear_codes: bool):
     """A --key image (the source lit by the key light alone), read as the source is,
     of the source's size and channels."""
-    key = read_image(path, linear=linear_codes)
     source = np.asarray(source)
+    # A grey source stored as RGB was read as one channel before a grey target: its key too.
+    key = read_image(path, linear=linear_codes, grey=source.ndim == 2 or source.shape[-1] == 1)
     wanted = source.shape if source.ndim == 3 else (*source.shape, 1)
     key = key if key.ndim == 3 else key[..., None]
     if key.shape != wanted:

@@ -292,3 +292,31 @@ def test_fit_of_fran_front_with_a_0_1_mask_or_a_grey_rgb_target_is_the_reference
     assert ("mask codes are 0 and 1" if case == "mask01" else "its three channels are identical") in err
     fitted = json.loads((out / "params.json").read_text())
     assert fitted["sss_level"] == pytest.approx(598.1, abs=0.1)
+
+
+def test_the_key_light_image_follows_a_grey_source_stored_as_rgb(tmp_path):
+    """The law's key buffer must have the source's channels: one, when load_pair read a
+    grey source stored as RGB as one channel (before a grey target)."""
+    from invsss.cli import _read_key_buffer
+    from invsss.experiments.runner import _load
+    from invsss.experiments.trials import Trial
+
+    grey_source, key = tmp_path / "source.exr", tmp_path / "key.exr"
+    invsss.write_image(grey_source, np.repeat(_grey(7)[..., None], 3, 2))
+    invsss.write_image(key, np.repeat(0.5 * _grey(7)[..., None], 3, 2))
+    one, _ = _grey_files(tmp_path, ".exr")
+    files = _pair_files(tmp_path, grey_source, one)
+    pair, _ = _notices(lambda: invsss.load_pair(*files))
+    assert pair.source.shape == (H, W, 1)
+    read, notes = _notices(lambda: _read_key_buffer(key, pair.source, False))
+    np.testing.assert_array_equal(read[..., 0], 0.5 * _grey(7))
+    assert notes == [f"{key}: its three channels are identical (a grey image stored as RGB); read as one grey channel"]
+    # A sweep's trial reads it the same way.
+    roles = dict(zip(("source", "target", "depth", "mask"), files), key=key)
+    trial = Trial("t", 0, "fit", {"light_terms": "law"}, ({"name": "p", **{k: os.path.basename(v) for k, v in roles.items()}},),
+                  {}, str(tmp_path))
+    (loaded,), _ = _notices(lambda: _load(trial))
+    assert loaded.source.shape == loaded.key.shape == (H, W, 1)
+    # A colour image stays as it is, asked or not.
+    colour = _rgb_source(tmp_path)
+    assert invsss.read_image(colour, grey=True).shape == (H, W, 3)

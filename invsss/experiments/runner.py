@@ -55,9 +55,12 @@ def _load(trial: Trial) -> list:
                          depth_scale=trial.depth_scale, linear_codes=trial.linear_codes)
         if trial.options.get("light_terms"):
             # Only a trial with light terms reads the buffers it uses; the fit checks
-            # them. The key light's image is read as the source is.
+            # them. The key light's image is read as the source is (one channel for
+            # a grey source stored as RGB, which load_pair read as one).
+            grey = data.source.shape[-1] == 1
             buffers = {role: read_image(os.path.join(trial.root, pair[role]),
-                                        linear=trial.linear_codes if role == "key" else True)
+                                        linear=trial.linear_codes if role == "key" else True,
+                                        grey=grey and role == "key")
                        for role in trial.buffer_roles if role in pair}
             data = dataclasses.replace(data, **buffers)
         pairs.append(data)

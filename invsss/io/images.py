@@ -254,7 +254,7 @@ def _decode_colour(raster: _Raster, linear: bool = False) -> tuple[np.ndarray, s
     return decoded.astype(np.float32), encoding
 
 
-def read_image(path, *, linear: bool = False) -> np.ndarray:
+def read_image(path, *, linear: bool = False, grey: bool = False) -> np.ndarray:
     """Read a colour or grey image as linear float32.
 
     Parameters
@@ -265,6 +265,10 @@ def read_image(path, *, linear: bool = False) -> np.ndarray:
         The file's integer codes already hold linear values (e.g. an 8-bit PNG
         of raw sensor data): divide them by their maximum and nothing else,
         whatever the file declares. Float files are unaffected.
+    grey : bool
+        Read a grey stored as three identical channels (to within the file's
+        precision, as :func:`load_pair` judges it) as one channel, with a notice:
+        for an image that must match a one-channel source.
 
     Returns
     -------
@@ -284,7 +288,8 @@ def read_image(path, *, linear: bool = False) -> np.ndarray:
     -----
     InputNotice
         Integer codes were decoded as sRGB (say ``linear=True`` if they are
-        linear), or an alpha channel with non-opaque pixels was dropped.
+        linear), an alpha channel with non-opaque pixels was dropped, or
+        (``grey=True``) three identical channels were read as one.
 
     Examples
     --------
@@ -295,7 +300,11 @@ def read_image(path, *, linear: bool = False) -> np.ndarray:
     >>> image.shape, round(float(image[0, 0, 0]), 2)
     ((4, 4, 1), 0.5)
     """
-    return _read_colour(path, linear)[0]
+    image, is_grey = _read_colour(path, linear)
+    if grey and is_grey:
+        _note_grey(os.fspath(path), "")
+        return _one_channel(image)
+    return image
 
 
 def _read_colour(path, linear: bool) -> tuple[np.ndarray, bool]:
