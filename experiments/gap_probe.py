@@ -1,0 +1,204 @@
+"""What is left of the gap to the noise ceiling, and where does it come from? (issue 29, item 5)
+
+On the path-traced *tuning* pairs (data_synthetic/SPLIT.toml) this replaces the
+screen-space model's 7-tap separable passes by two dense references and scores
+each against the target the way ``experiments/fidelity.py`` does (best gain and
+offset per channel, PSNR on the mask eroded by 2 px):
+
+``7-tap passes``
+    the model as invsss renders it (docs/model.md, sections 2-5);
+``dense, screen distance``
+    the same sum of Gaussians with the same stretch, as a dense 2D convolution:
+    every pixel of a window gathered with the weight
+    ``exp(-((dx / s_x)^2 + (dy / s_y)^2) / (2 v))``, ``s_x``, ``s_y`` the output
+    pixel's stretch factors, normalised over the window. It differs from the
+    passes only by their sampling (7 taps a pass, linear interpolation between
+    them, the second pass reading the first at its own stretch);
+``dense, surface distance``
+    the weight of the distance between the two pixels' points on the surface,
+    back-projected from the depth buffer with the camera's focal length ``F``
+    (``|P(y) - P(x)| F / L`` in the profile's units: equal to the screen distance
+    on a surface that faces the camera, longer where it turns away). It needs no
+    ``correction`` or ``maxdd``: the depth buffer's geometry replaces them.
+
+Each variant gets its own best ``sss_level`` (a golden-section search over its
+logarithm) with the profile's weights and an offset solved by least squares on
+the mask, as the fit solves them; the other parameters are the fit's. This is
+done for the plain fit and for the fit with ``shift,law`` (the law applied to the
+source, the shift to each blurred layer, both held at the fit's values).
+
+    python experiments/gap_probe.py [PAIR_DIR ...] [--terms shift,law]
+
+Without PAIR_DIR, the tuning pairs of data_synthetic/SPLIT.toml.
+"""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+import sys
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import invsss
+from invsss.light_terms import light_transport, propagation_offsets
+from invsss.stretch import stretch_factors
+
+sys.path.insert(0, str(pathlib.Path(__file__).parent))
+from fidelity import eroded, load_scene_pair, score  # noqa: E402
+
+#: The window's half-width: three standard deviations of the widest Gaussian, at most.
+MAX_RADIUS_PX = 12
+VARIANTS = ("7-tap passes", "dense, screen distance", "dense, surface distance")
+
+
+def _shifted(image: np.ndarray, dy: int, dx: int) -> np.ndarray:
+    """``image`` read at ``(y + dy, x + dx)``, clamped to the edge (the passes' addressing)."""
+    h, w = image.shape[:2]
+    rows = np.clip(np.arange(h) + dy, 0, h - 1)
+    cols = np.clip(np.arange(w) + dx, 0, w - 1)
+    return image[rows][:, cols]
+
+
+def _points(depth: np.ndarray, focal_px: float, dy: int = 0, dx: int = 0) -> np.ndarray:
+    """Camera-space points (H, W, 3) in mm of the pixels ``(y + dy, x + dx)``, pinhole at
+    the image centre. Past the edge the depth is the edge's (as the image is) but the
+    pixel keeps its own position, so a clamped sample is as far as its offset says."""
+    h, w = depth.shape
+    rows, cols = np.mgrid[0:h, 0:w].astype(np.float64)
+    d = _shifted(depth, dy, dx)
+    return np.stack([(cols + dx - (w - 1) / 2.0) * d / focal_px, (rows + dy - (h - 1) / 2.0) * d / focal_px, d],
+                    axis=-1)
+
+
+def dense_layers(image, depth, mask, params, distance: str, focal_px: float) -> np.ndarray:
+    """One dense blurred image per Gaussian of ``params``, (K, H, W, C)."""
+    s_x, s_y = (np.asarray(s, np.float64) for s in stretch_factors(
+        depth, float(params.sss_level), float(params.correction), float(params.maxdd)))
+    variances = np.asarray(params.variances, np.float64)
+    widest = float(np.sqrt(variances.max()) * max(s_x.max(), s_y.max()))
+    radius = int(min(MAX_RADIUS_PX, np.ceil(3.0 * widest)))
+    points = _points(depth, focal_px) if distance == "surface" else None
+    to_model = focal_px / float(params.sss_level)  # scene mm -> the profile's units at this L
+    layers = []
+    for v in variances:
+        total = np.zeros(image.shape, np.float64)
+        norm = np.zeros(depth.shape, np.float64)
+        for dy in range(-radius, radius + 1):
+            for dx in range(-radius, radius + 1):
+                if distance == "screen":
+                    d2 = (dx / s_x) ** 2 + (dy / s_y) ** 2
+                else:
+                    d2 = np.sum((_points(depth, focal_px, dy, dx) - points) ** 2, axis=-1) * to_model**2
+                weight = np.exp(-d2 / (2.0 * v))
+                total += weight[..., None] * _shifted(image, dy, dx)
+                norm += weight
+        blurred = total / norm[..., None]
+        layers.append(image + mask[..., None] * (blurred - image))
+    return np.stack(layers)
+
+
+def pass_layers(image, depth, mask, params) -> np.ndarray:
+    """The model's own layers: each Gaussian rendered alone (a one-hot weight)."""
+    k = len(np.atleast_1d(params.variances))
+    out = []
+    for i in range(k):
+        one = invsss.SSSParams(params.sss_level, params.correction, params.maxdd, np.eye(k)[i], params.variances)
+        out.append(np.asarray(invsss.render(image, depth, mask, one, model="sog"), np.float64))
+    return np.stack(out)
+
+
+def predict(layers: np.ndarray, target: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``sum_i c_i layer_i + b`` per channel, least squares on the mask (weights and gain, as the fit)."""
+    on = mask > 0
+    out = np.empty(target.shape, np.float64)
+    for c in range(target.shape[-1]):
+        design = np.concatenate([layers[..., min(c, layers.shape[-1] - 1)][:, on].T, np.ones((int(on.sum()), 1))],
+                                axis=1)
+        coef, *_ = np.linalg.lstsq(design, target[..., c][on], rcond=None)
+        full = np.concatenate([layers[..., min(c, layers.shape[-1] - 1)].reshape(len(layers), -1).T,
+                               np.ones((target[..., 0].size, 1))], axis=1)
+        out[..., c] = (full @ coef).reshape(target.shape[:2])
+    return out
+
+
+def variant_psnr(pair, fit, variant: str, level: float, scored: np.ndarray) -> float:
+    """PSNR of one variant at ``sss_level = level``, the rest of the fit held."""
+    params = invsss.SSSParams(level, float(fit.values["correction"]),
+                              float(fit.values["maxdd"]), np.asarray(fit.values["weights"]),
+                              np.asarray(fit.values["variances"]))
+    source, depth, mask = pair["source"].astype(np.float64), pair["depth"].astype(np.float64), pair["mask"]
+    terms = fit.light_terms_params()
+    buffers = pair["buffers"]
+    if terms is not None and "law" in terms.used:
+        source = np.asarray(invsss.apply_law(source, mask, np.asarray(terms.law), buffers,
+                                             float(terms.law_strength)), np.float64)
+    if variant == VARIANTS[0]:
+        layers = pass_layers(source, depth, mask, params)
+    else:
+        layers = dense_layers(source, depth, mask, params, "screen" if variant == VARIANTS[1] else "surface",
+                              pair["info"]["focal_px"])
+    if terms is not None and float(terms.shift) != 0.0:
+        stretch = stretch_factors(depth, level, params.correction, params.maxdd)
+        offsets = propagation_offsets(np.asarray(buffers.light, np.float64))
+        layers = np.stack([np.asarray(light_transport(jnp.asarray(x), jnp.asarray(mask), stretch, terms, offsets))
+                           for x in layers])
+    prediction = predict(layers, pair["target"].astype(np.float64), pair["mask"])
+    return score(prediction, pair, scored)["psnr"]
+
+
+def best_level(pair, fit, variant: str, scored: np.ndarray, evaluations: int = 14) -> tuple[float, float]:
+    """Golden-section search of log sss_level within a factor 3 of the fit's; ``(level, psnr)``."""
+    centre = float(fit.values["sss_level"])
+    a, b = np.log(centre / 3.0), np.log(centre * 3.0)
+    ratio = (np.sqrt(5.0) - 1.0) / 2.0
+    c, d = b - ratio * (b - a), a + ratio * (b - a)
+    fc, fd = (variant_psnr(pair, fit, variant, float(np.exp(x)), scored) for x in (c, d))
+    for _ in range(evaluations):
+        if fc > fd:
+            b, d, fd = d, c, fc
+            c = b - ratio * (b - a)
+            fc = variant_psnr(pair, fit, variant, float(np.exp(c)), scored)
+        else:
+            a, c, fc = c, d, fd
+            d = a + ratio * (b - a)
+            fd = variant_psnr(pair, fit, variant, float(np.exp(d)), scored)
+    x, f = (c, fc) if fc > fd else (d, fd)
+    return float(np.exp(x)), float(f)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("pairs", nargs="*", type=pathlib.Path)
+    parser.add_argument("--terms", default="shift,law", help="the term set probed beside the plain fit")
+    parser.add_argument("--erode", type=int, default=2)
+    args = parser.parse_args()
+    folders = args.pairs
+    if not folders:
+        from invsss.scenes.split import read_split  # the tuning pairs only: this probe chooses what to build
+
+        split = read_split(pathlib.Path("data_synthetic/SPLIT.toml"))
+        folders = sorted(pathlib.Path("data_synthetic") / name for name, part in split.items() if part == "tuning")
+    print("| pair | fit | ceiling | " + " | ".join(VARIANTS) + " | sss_level (each) |")
+    print("|---|---|---|" + "---|" * len(VARIANTS) + "---|")
+    for folder in folders:
+        pair = load_scene_pair(folder)
+        scored = eroded(pair["mask"], args.erode)
+        ceiling = pair["info"]["noise"]["noise_ceiling_db"]
+        for terms in ((), tuple(args.terms.split(","))):
+            started = time.perf_counter()
+            fit = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"],
+                                  light_terms=terms, light_buffers=pair["buffers"] if terms else None)
+            found = [best_level(pair, fit, variant, scored) for variant in VARIANTS]
+            label = "plain" if not terms else "+ " + " + ".join(terms)
+            print(f"| {folder.name} | {label} | {ceiling:.2f} | " + " | ".join(f"{p:.2f}" for _, p in found)
+                  + " | " + ", ".join(f"{lv:.0f}" for lv, _ in found)
+                  + f" |  ({time.perf_counter() - started:.0f} s)", flush=True)
+
+
+if __name__ == "__main__":
+    with jax.enable_x64(True):
+        main()
