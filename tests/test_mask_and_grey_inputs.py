@@ -320,3 +320,16 @@ def test_the_key_light_image_follows_a_grey_source_stored_as_rgb(tmp_path):
     # A colour image stays as it is, asked or not.
     colour = _rgb_source(tmp_path)
     assert invsss.read_image(colour, grey=True).shape == (H, W, 3)
+
+
+def test_a_jpeg_grey_may_differ_by_one_code_a_png_grey_not_at_all():
+    """The tolerances themselves: a decoder that rounds each channel on its own may put a
+    JPEG's grey one code apart (libjpeg does not; see JPEG_GREY_CODES)."""
+    from invsss.io.images import _is_grey_rgb, _Raster
+
+    codes = np.repeat(np.arange(H * W, dtype=np.int64).reshape(H, W, 1) % 250, 3, axis=2)
+    codes[3, 4, 1] += 1
+    assert _is_grey_rgb(_Raster(codes.astype(np.uint8), "srgb", "jpeg"))
+    assert not _is_grey_rgb(_Raster(codes.astype(np.uint8), "srgb", "png"))
+    codes[3, 4, 1] += 1
+    assert not _is_grey_rgb(_Raster(codes.astype(np.uint8), "srgb", "jpeg"))
