@@ -142,6 +142,7 @@ def test_a_closed_stdout_and_stderr_do_not_stop_the_sweep(root):
 # ------------------------------------------------------------- report
 
 
+@pytest.mark.slow  # two fit trials: 35 s on two cores, mostly compiling the fit
 def test_the_report_separates_the_tasks_of_one_folder(root, capsys):
     out = root / "mixed"
     render = _experiment(root, "mixed_render.toml", RENDER)
