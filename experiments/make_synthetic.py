@@ -777,13 +777,14 @@ files were changed, keep the attribution notices). Both texts are copied unchang
 `LICENSES/vtk-data-Copyright.txt` and `LICENSES/vtk-data-LICENSE-Apache-2.0.txt`.
 No endorsement by the VTK authors is implied.
 
-**pt_fran_dir_rough_940** uses the same scan, closed into a solid by
+**pt_fran_dir_940, pt_fran_dir_rough_940** use the same scan, closed into a solid by
 `experiments/scenes/meshes/close_fran.py` (`fran_closed.ply`: the scan turned to look
 along +z, scaled to millimetres, and closed behind by a cone of triangles from its rim
 to a point inside; the scan's own triangles are unchanged, its texture is not used).
 
 **leeperrysmith, flat_card and the path-traced pt_face_940, pt_face_940_turned,
-pt_face_skin1, pt_face_ear_backlit_940, pt_face_rough_area_940** use "Infinite, 3D Head Scan" by Lee Perry-Smith
+pt_face_skin1, pt_face_ear_backlit_940, pt_face_rough_area_940** use "Infinite, 3D Head
+Scan" by Lee Perry-Smith
 (Infinite-Realities, www.ir-ltd.net), based on a work at www.triplegangers.com, licensed
 under Creative Commons Attribution 3.0 Unported
 (https://creativecommons.org/licenses/by/3.0/); the licence note asks that users always
@@ -886,12 +887,16 @@ these pairs measure how well the model can match real light transport
 **Tuning and held-out pairs.** `SPLIT.toml` says which pairs a method may be tuned on
 (`tuning`) and which are only measured on (`held-out`); it was committed before any fit
 was made on the new pairs. Choose nothing by looking at a held-out pair's results
-(docs/scenes.md).
+(docs/scenes.md, which also says what each pair varies and how much of its mask has
+normals facing away from the camera).
 
 A rough-dielectric boundary (refraction and Fresnel reflection at the surface, the
 reflection subtracted from the target) converges far more slowly than an index-matched
 one, so those targets have more noise for their samples: the noise ceiling column is
-the best PSNR any noise-free prediction can reach against the target.
+the best PSNR any noise-free prediction can reach against the target, and the two
+rough-dielectric pairs (about 21.5 dB at 2048 spp) are noise-limited. Render times are
+the wall times `scene.json` records (the pairs added for issue 29 on two cores shared with
+other work).
 
 | pair | split | object | key light | boundary | medium | size | spp | noise ceiling (dB) | render (min) |
 |---|---|---|---|---|---|---|---|---|---|

@@ -3,8 +3,10 @@
 These pairs are the project's stand-in for real photographs: targets made by a
 volumetric path tracer, not by invsss's model. The tests check that each folder is
 reproducible from its shipped scene description, that its noise is low enough to
-measure the model against, and that a fit on one beats both the unscattered source
-and the thesis's hand-set values (issue 7; the full table is experiments/fidelity.py).
+measure the model against, that data_synthetic/SPLIT.toml puts each pair in the
+tuning or the held-out part as docs/scenes.md says, that the set varies what it
+claims to vary, and that a fit on one beats both the unscattered source and the
+thesis's hand-set values (issue 7; the full table is experiments/fidelity.py).
 """
 
 import json
@@ -18,20 +20,105 @@ import invsss
 from invsss.estimator.diagnostics import masked_psnr
 from invsss.scenes import load_config, parse_config
 from invsss.scenes.render import SCENE_FILES
+from invsss.scenes.split import read_split
 
 REPO = Path(__file__).resolve().parent.parent
 DATA = REPO / "data_synthetic"
 PAIRS = sorted(p.name for p in DATA.iterdir() if (p / "scene.json").is_file())
 #: Folder name -> the scene description it was rendered from (experiments/make_synthetic.py).
 CONFIGS = {"pt_face_940": "face_940.toml", "pt_face_940_turned": "face_940_turned.toml",
-           "pt_face_skin1": "face_skin1.toml"}
+           "pt_face_skin1": "face_skin1.toml", "pt_proc_area_940": "proc_area_940.toml",
+           "pt_face_ear_backlit_940": "face_ear_backlit_940.toml",
+           "pt_fran_dir_940": "fran_dir_940.toml", "pt_fran_dir_rough_940": "fran_dir_rough_940.toml",
+           "pt_proc_lowpoly_dir_940": "proc_lowpoly_dir_940.toml",
+           "pt_face_rough_area_940": "face_rough_area_940.toml"}
+#: The pairs bundled before the split (issue 29): every one of them is a tuning pair.
+FIRST_PAIRS = ("pt_face_940", "pt_face_940_turned", "pt_face_skin1")
+#: Each pair folder stays about as small as the first ones (about 400 KB; 600 KB at most).
+MAX_FOLDER_BYTES = 600_000
+#: The lowest noise ceiling a rough-dielectric target may have: at 2048 spp (what the
+#: render time allowed) they are noise-limited, about 21.5 dB (docs/scenes.md).
+ROUGH_MIN_CEILING_DB = 20.0
+#: The same for an index-matched target (32 dB for pt_proc_area_940 at 1024 spp, 38-43 dB for the others).
+INDEX_MATCHED_MIN_CEILING_DB = 30.0
+#: The median skin value over the target's per-pixel noise, at least: index-matched, rough.
+MIN_MEDIAN_TO_NOISE = {"index-matched": 8.0, "rough-dielectric": 3.0}
+
+
+def _info(name: str) -> dict:
+    return json.loads((DATA / name / "scene.json").read_text())
 
 
 def test_the_documented_path_traced_pairs_are_bundled():
     assert set(PAIRS) == set(CONFIGS)
     readme = (DATA / "README.md").read_text()
+    docs = (REPO / "docs" / "scenes.md").read_text()
+    split = read_split(DATA / "SPLIT.toml")
     for name in PAIRS:
-        assert f"`{name}`" in readme
+        assert f"`{name}`" in readme and f"`{name}`" in docs
+        # The README's table row names the pair's part of the split.
+        row = next(line for line in readme.splitlines() if line.startswith(f"| `{name}` |"))
+        assert row.split("|")[2].strip() == split[name]
+    # One command remakes every pair: make_synthetic.py knows each of them.
+    import importlib.util
+
+    import sys
+
+    spec = importlib.util.spec_from_file_location("make_synthetic", REPO / "experiments" / "make_synthetic.py")
+    make_synthetic = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = make_synthetic  # its dataclasses look their module up while it loads
+    try:
+        spec.loader.exec_module(make_synthetic)
+    finally:
+        del sys.modules[spec.name]
+    assert make_synthetic.PATH_TRACED == CONFIGS
+
+
+def test_split_puts_every_pair_in_one_part_and_holds_out_the_most_different():
+    split = read_split(DATA / "SPLIT.toml")
+    assert set(split) == set(PAIRS)
+    tuning = [n for n in PAIRS if split[n] == "tuning"]
+    held_out = [n for n in PAIRS if split[n] == "held-out"]
+    assert all(split[n] == "tuning" for n in FIRST_PAIRS)
+    assert len(held_out) >= 3 and len(PAIRS) >= 8
+
+    def kinds(names, what):
+        return {what(_info(n)) for n in names}
+
+    key = lambda info: info["config"]["lights"][0]["type"]  # noqa: E731
+    boundary = lambda info: info["medium"]["boundary"]  # noqa: E731
+    shape = lambda info: (info["mesh"].get("file") or info["mesh"].get("procedural"))  # noqa: E731
+    # The held-out part has what no tuning pair has: another face, a rough dielectric, a directional key.
+    assert kinds(held_out, shape) - kinds(tuning, shape)
+    assert "rough-dielectric" in kinds(held_out, boundary) - kinds(tuning, boundary)
+    assert "directional" in kinds(held_out, key) - kinds(tuning, key)
+    # And the whole set has point, area and directional keys, both boundaries, a procedural head.
+    assert {"point", "area", "directional"} <= kinds(PAIRS, key)
+    assert {"index-matched", "rough-dielectric"} <= kinds(PAIRS, boundary)
+    assert "face" in kinds(PAIRS, shape)
+
+
+def test_the_set_has_low_poly_normals_facing_away_and_a_backlit_thin_part():
+    # A low-poly head: its smoothed normals disagree with its flat triangles.
+    low = _info("pt_proc_lowpoly_dir_940")["mesh"]
+    assert low["procedural"] == "face" and low["triangles"] < 10000
+    # Pixels whose shading normal faces away from the camera, on the mask, in the set.
+    facing_away = 0
+    for name in PAIRS:
+        normal = invsss.read_image(DATA / name / "normal.exr")
+        facing_away += int(np.count_nonzero(normal[..., 2][invsss.read_mask(DATA / name / "mask.png") > 0] <= 0.0))
+    assert facing_away >= 10
+    # The backlit ear: the key light is behind the head (further from the camera than the head's centre).
+    info = _info("pt_face_ear_backlit_940")
+    key = np.asarray(info["config"]["lights"][0]["position"])
+    camera = np.asarray(info["config"]["camera"]["position"])
+    assert np.linalg.norm(key - camera) > np.linalg.norm(camera) + 200.0
+
+
+@pytest.mark.parametrize("name", PAIRS)
+def test_pair_folder_is_small(name):
+    size = sum(f.stat().st_size for f in (DATA / name).iterdir())
+    assert size < MAX_FOLDER_BYTES, f"{name}: {size} bytes"
 
 
 @pytest.mark.parametrize("name", PAIRS)
@@ -43,13 +130,24 @@ def test_pair_is_reproducible_from_its_scene_description(name, monkeypatch):
     # the repository (where make_synthetic runs) and mesh bytes pinned by hash.
     monkeypatch.chdir(REPO)
     config = load_config(os.path.join("experiments", "scenes", CONFIGS[name])).model_dump()
-    config["object"]["mesh"] = os.path.relpath(config["object"]["mesh"])
+    if config["object"]["mesh"] is not None:
+        config["object"]["mesh"] = os.path.relpath(config["object"]["mesh"])
     # Read back with today's parser: a key added since, at its default, is no difference.
     assert parse_config(info["config"], "scene.json").model_dump() == config
     import hashlib
 
-    mesh_bytes = (REPO / config["object"]["mesh"]).read_bytes()
-    assert info["mesh"]["sha256"] == hashlib.sha256(mesh_bytes).hexdigest()
+    if config["object"]["mesh"] is not None:
+        mesh_bytes = (REPO / config["object"]["mesh"]).read_bytes()
+        assert info["mesh"]["sha256"] == hashlib.sha256(mesh_bytes).hexdigest()
+    else:
+        # A procedural head: today's code must still make the mesh it was rendered with.
+        import tempfile
+
+        from invsss.scenes.procedural import write_face_ply
+
+        with tempfile.TemporaryDirectory() as folder:
+            _, record = write_face_ply(parse_config(info["config"], "scene.json").object, folder)
+        assert record == info["mesh"]
 
 
 @pytest.mark.parametrize("name", PAIRS)
@@ -67,10 +165,25 @@ def test_pair_images_agree_with_scene_json(name):
     # Renderer-style depth: eye z in mm on the head, 0 elsewhere.
     assert np.all(depth[skin] > 0) and np.all(depth[~skin & (depth > 0)] > 0)
     assert 500.0 < float(np.median(depth[skin])) < 900.0
-    # A usable reference: the Monte Carlo noise of the target is far below the
-    # differences the table measures (the fits miss the target by 10 dB and more).
-    assert info["noise"]["noise_ceiling_db"] > 35.0
-    assert np.all(np.isfinite(target)) and float(np.median(target[skin])) > 20 * info["noise"]["noise_rms"]
+    # A usable reference: the Monte Carlo noise of the target is well below the
+    # differences the table measures (the plain fits miss the target by 10 dB and more).
+    # A rough dielectric converges far more slowly: its ceiling is lower (docs/scenes.md).
+    rough = info["medium"]["boundary"] == "rough-dielectric"
+    assert info["noise"]["noise_ceiling_db"] > (ROUGH_MIN_CEILING_DB if rough else INDEX_MATCHED_MIN_CEILING_DB)
+    # And per pixel: the median skin pixel stands above the noise (index-matched: 10 times in
+    # pt_face_ear_backlit_940, whose face has the weak fill light only, 20-50 times in the
+    # others; rough dielectric: 4-5 times).
+    floor = MIN_MEDIAN_TO_NOISE[info["medium"]["boundary"]] * info["noise"]["noise_rms"]
+    assert np.all(np.isfinite(target)) and float(np.median(target[skin])) > floor
+    # Small renders, every file a renderer's buffer of the same size.
+    assert max(camera["width"], camera["height"]) <= 160
+    for buffer in ("normal.exr", "light.exr"):
+        vectors = invsss.read_image(folder / buffer)
+        assert vectors.shape == (camera["height"], camera["width"], 3)
+        np.testing.assert_allclose(np.linalg.norm(vectors[skin], axis=-1), 1.0, atol=1e-3)
+    assert invsss.read_image(folder / "key.exr").shape == source.shape
+    coverage = invsss.read_image(folder / "coverage.exr")[..., 0]
+    np.testing.assert_array_equal(coverage >= 0.5, skin)
 
 
 @pytest.mark.slow
