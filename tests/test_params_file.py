@@ -189,7 +189,12 @@ def test_params_of_an_incomplete_result_are_refused(tmp_path, state):
     manifest = {"state": state} if state != "garbage" else "not an object"
     (tmp_path / MANIFEST_NAME).write_text(json.dumps(manifest))
     message = _error(tmp_path, PARAMS)
-    assert message == "belongs to an incomplete result (the run that wrote it was interrupted); re-run it"
+    if state == "garbage":
+        # A manifest that is not a JSON object is damaged, not "interrupted" (issue 30).
+        assert message == (f"its result's manifest {tmp_path / MANIFEST_NAME} is damaged (not a JSON object), "
+                           "so whether the result is whole is unknown; re-run it")
+    else:
+        assert message == "belongs to an incomplete result (the run that wrote it was interrupted); re-run it"
     assert os.path.exists(path)
 
 
