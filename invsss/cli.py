@@ -677,18 +677,23 @@ def _add_export_parser(subparsers) -> None:
                         help="separable only: blend of the kernel with the identity (default: 1)")
     parser.add_argument("--out", default=None, metavar="FILE",
                         help="output file (default: standard output)")
+    parser.add_argument("--with-shader", action="store_true",
+                        help="with --format hlsl and --out: also write the reference shader "
+                        "(invsss_*.hlsl, docs/renderer.md) beside FILE, including it")
     parser.set_defaults(func=_run_export)
 
 
 def _run_export(args: argparse.Namespace, stop: StopSignals) -> int:
     text = export_params(
         args.params, args.out, args.format, model=args.model, tap_weights=args.tap_weights,
-        taps=args.taps, strength=args.strength,
+        taps=args.taps, strength=args.strength, with_shader=args.with_shader,
     )
     if args.out is None:
         sys.stdout.write(text)
     else:
         print(f"wrote {args.out} ({args.format})")
+        if args.with_shader:
+            print("wrote the reference shader beside it (docs/renderer.md)")
     return 0
 
 

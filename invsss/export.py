@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 
 import jax
 import numpy as np
@@ -43,7 +44,8 @@ from .passes import tap_weights as tap_weight_set
 from .screen_space import separable_kernel
 from .validation import InvalidInputError
 
-__all__ = ["EXPORT_FORMATS", "shader_constants", "to_hlsl", "to_json", "export_params"]
+__all__ = ["EXPORT_FORMATS", "shader_constants", "to_hlsl", "to_json", "export_params", "write_shader",
+           "scale_to_resolution"]
 
 #: Output formats of :func:`export_params` and ``invsss export``.
 EXPORT_FORMATS = ("json", "hlsl")
@@ -393,9 +395,57 @@ def to_json(constants: dict) -> str:
     return json.dumps(constants, indent=2) + "\n"
 
 
+def scale_to_resolution(constants: dict, factor: float) -> dict:
+    """The constants for an image ``factor`` times as wide and high as the one the fit saw.
+
+    The stretch factors are per pixel (docs/renderer.md, "Another resolution"): at
+    ``factor`` times the resolution a length on the skin covers ``factor`` times
+    the pixels and a depth slope per pixel is ``1 / factor`` times as steep, so
+    ``sssLevel`` and ``correction`` are multiplied by ``factor`` and ``maxdd``
+    divided by it; then every footprint in pixels is ``factor`` times the
+    fitted one. Pass widths, taps, weights, kernels and the light terms are in
+    scene units or dimensionless and stay as they are.
+
+    Examples
+    --------
+    >>> c = scale_to_resolution({"sssLevel": 600.0, "correction": 800.0, "maxdd": 0.5}, 2.0)
+    >>> c["sssLevel"], c["correction"], c["maxdd"]
+    (1200.0, 1600.0, 0.25)
+    """
+    factor = float(factor)
+    if not math.isfinite(factor) or factor <= 0:
+        raise InvalidInputError(f"factor: expected a positive number, got {factor!r}")
+    out = dict(constants)
+    out["sssLevel"] = constants["sssLevel"] * factor
+    out["correction"] = constants["correction"] * factor
+    out["maxdd"] = constants["maxdd"] / factor
+    return out
+
+
+def write_shader(constants_path) -> list:
+    """Write the reference shader (``invsss/shaders/*.hlsl``, docs/renderer.md) beside a constants file.
+
+    The shader files include the constants as ``invsss_constants.hlsl``; written
+    here, they include ``constants_path``'s file name instead. Returns the paths
+    written (each atomically).
+    """
+    from .shaders import shader_sources
+
+    constants_path = os.fspath(constants_path)
+    folder = os.path.dirname(os.path.abspath(constants_path))
+    written = []
+    for name, text in shader_sources(os.path.basename(constants_path)).items():
+        path = os.path.join(folder, name)
+        if os.path.abspath(path) == os.path.abspath(constants_path):
+            raise InvalidInputError(f"{constants_path}: has the name of a shader file; choose another name")
+        write_text_atomic(path, text)
+        written.append(path)
+    return written
+
+
 def export_params(
     params_json_path, out_path=None, format: str = "json", *, model: str | None = None,
-    tap_weights=None, taps: int = 17, strength: float = 1.0,
+    tap_weights=None, taps: int = 17, strength: float = 1.0, with_shader: bool = False,
 ) -> str:
     """Read a params JSON file and export its shader constants.
 
@@ -409,6 +459,9 @@ def export_params(
     format : {"json", "hlsl"}
     model, tap_weights, taps, strength
         As in :func:`shader_constants`; ``model`` and ``tap_weights`` override the file.
+    with_shader : bool
+        Also write the reference shader beside ``out_path`` (:func:`write_shader`);
+        needs ``format="hlsl"`` and ``out_path``.
 
     Returns
     -------
@@ -427,6 +480,8 @@ def export_params(
     """
     if format not in EXPORT_FORMATS:
         raise InvalidInputError(f"format: expected one of {', '.join(EXPORT_FORMATS)}, got {format!r}")
+    if with_shader and (format != "hlsl" or out_path is None):
+        raise InvalidInputError("with_shader: the shader needs format 'hlsl' and an output file (--out) to sit beside")
     # Read in float64 so the file's numbers reach the constants unrounded.
     with jax.enable_x64(True):
         params, extras = read_params(params_json_path)
@@ -437,4 +492,6 @@ def export_params(
     text = to_json(constants) if format == "json" else to_hlsl(constants)
     if out_path is not None:
         write_text_atomic(out_path, text)
+    if with_shader:
+        write_shader(out_path)
     return text
