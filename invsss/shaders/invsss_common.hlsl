@@ -16,8 +16,8 @@
 //
 // A bilinear SamplerState at uv = (pixel + 0.5) / size gives the same
 // interpolation, but GPUs compute the interpolation weight with only 8 bits
-// of sub-texel precision (Vulkan's minimum is 4), an error of up to 0.2-3 % of
-// the difference between neighbours; this reference therefore interpolates by
+// of sub-texel precision (Vulkan's minimum is 4), an error of up to 1/256 (1/16)
+// of the difference between neighbours; this reference therefore interpolates by
 // hand from two Load()s, which is exact in float32. Use SampleLevel in
 // production if that error is acceptable for your content.
 //
