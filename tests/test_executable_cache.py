@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 
+from invsss import executable_cache
 from invsss.executable_cache import _prune
 
 _TESTS = Path(__file__).resolve().parent
@@ -101,8 +102,9 @@ def test_a_stored_init_without_its_step_starts_the_solve_afresh(tmp_path, refere
     # The step's result is the tuple (z, state, loss, dof, done, ok); the init's
     # is a solver state and _evaluate's a dict. (The step compiles on a second
     # thread, so the order the entries were stored in does not tell them apart.)
+    # An entry is sealed with its checksum; the payload is the pickle.
     steps = [entry for entry in _entries(tmp_path)
-             if isinstance(pickle.loads(entry.read_bytes())["outline"], tuple)]
+             if isinstance(pickle.loads(executable_cache._unseal(entry.read_bytes()))["outline"], tuple)]
     assert len(steps) == 1
     steps[0].unlink()
     assert len(_entries(tmp_path)) == 2

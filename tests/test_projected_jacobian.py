@@ -103,7 +103,7 @@ def test_difference_jacobian_matches_forward_mode_for_every_kind_of_unknown():
     problem = build_problem(pairs, options)
     blocks = problem.param.layout()
     assert set(blocks) == {"sss_level", "correction", "maxdd", "mix", "gain_ratio", "vignetting",
-                           "light_shift", "grazing", "incidence", "law"}
+                           "light_shift", "grazing", "incidence", "law", "law_strength"}
     with jax.enable_x64(True):
         z = problem.z0 + jnp.asarray(np.random.default_rng(3).uniform(-0.1, 0.1, problem.param.size))
 
@@ -116,7 +116,7 @@ def test_difference_jacobian_matches_forward_mode_for_every_kind_of_unknown():
         residual_d, _ = jax.jit(lambda u: problem.objective.difference_jacobian(u, 1e-5))(z)
     np.testing.assert_allclose(np.asarray(residual_d), np.asarray(residual), rtol=0, atol=1e-10)
     for name, (first, stop) in blocks.items():
-        tolerance = 1e-3 if name in ("sss_level", "correction", "maxdd", "law") else 1e-9
+        tolerance = 1e-3 if name in ("sss_level", "correction", "maxdd", "law", "law_strength") else 1e-9
         for k in range(first, stop):
             assert np.linalg.norm(exact[:, k]) > 0, name
             error = np.linalg.norm(approx[:, k] - exact[:, k]) / np.linalg.norm(exact[:, k])

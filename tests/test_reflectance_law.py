@@ -12,6 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from scipy import ndimage
 
 import invsss
 from invsss.light_terms import LightBuffers, LightTerms, apply_law, reflectance_law
@@ -401,8 +402,12 @@ def test_cli_fit_and_render_with_the_key_buffer(tmp_path, capsys):
               "--normal", files["normal"], "--light", files["light"]]
     assert main(["fit", *common, "--key", files["key"], "--light-terms", "law", "--out", str(tmp_path / "fit")]) == 0
     stored = json.loads((tmp_path / "fit" / "params.json").read_text())["light_terms"]
-    assert stored["law"] == pytest.approx([0.95, 0.85, 0.7], abs=0.01)
+    # The strength trades against the albedos' common level (docs/model.md, section
+    # 8): the truth lies within 4 of their standard errors.
     assert len(stored["stderr"]["law"]) == 3
+    for w, err, true in zip(stored["law"], stored["stderr"]["law"], [0.95, 0.85, 0.7]):
+        assert abs(w - true) < 4 * err
+    assert abs(stored["law_strength"] - 1.0) < 0.1
     capsys.readouterr()
     # The law without --key: one line naming the buffer, nothing written.
     assert main(["fit", *common, "--light-terms", "law", "--out", str(tmp_path / "bad")]) != 0
@@ -424,7 +429,8 @@ def test_cli_fit_and_render_with_the_key_buffer(tmp_path, capsys):
     fitted, _ = invsss.read_params(params_path)
     read = {name: invsss.read_image(path) for name, path in files.items()}
     expected = np.asarray(invsss.render(invsss.read_image(paths["source"]), depth, mask, fitted,
-                                        light_terms=LightTerms(law=stored["law"]),
+                                        light_terms=LightTerms(law=stored["law"],
+                                                               law_strength=stored["law_strength"]),
                                         light_buffers=LightBuffers(read["normal"], read["light"], read["key"])))
     np.testing.assert_allclose(invsss.read_image(tmp_path / "lit.exr"), expected, atol=1e-5)
     assert main(["render", *scene, "--out", str(tmp_path / "bad.exr")]) != 0
@@ -462,8 +468,9 @@ def test_sweep_reads_the_key_only_for_trials_with_the_law(tmp_path):
     ex.run(path, tmp_path / "out")
     rows = {r["light_terms"]: r for r in ex.results(tmp_path / "out", frame=False)}
     assert all(r["status"] == "done" for r in rows.values())
-    assert rows["law"]["param.law"] == pytest.approx([0.95, 0.85, 0.7], abs=0.01)
     assert len(rows["law"]["stderr.law"]) == 3 and rows["incidence"]["param.law"] is None
+    for w, err, true in zip(rows["law"]["param.law"], rows["law"]["stderr.law"], [0.95, 0.85, 0.7]):
+        assert abs(w - true) < 4 * err
 
 
 @pytest.mark.slow
