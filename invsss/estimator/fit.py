@@ -418,13 +418,17 @@ def _without_light_terms(options: FitOptions) -> FitOptions:
     return dataclasses.replace(options, light_terms=(), light_fixed={}, highlights=False)
 
 
+def _mean_psnr(fitted, targets, masks) -> float:
+    """PSNR of every pair on its mask, averaged with the masks' sizes as weights."""
+    size = np.array([m.sum() for m in masks])
+    return float(np.average([masked_psnr(f, t, m) for f, t, m in zip(fitted, targets, masks)], weights=size))
+
+
 def _psnr(problem, predictions) -> float:
     """PSNR over the pairs where the residual counted, at each pair's own size."""
     fitted = [crop(np.asarray(q), shape) for q, shape in zip(predictions, problem.shapes)]
-    masks = [np.asarray(p.residual_weight) for p in problem.given]
-    size = np.array([m.sum() for m in masks])
-    return float(np.average(
-        [masked_psnr(f, np.asarray(p.target), m) for f, p, m in zip(fitted, problem.given, masks)], weights=size))
+    return _mean_psnr(fitted, [np.asarray(p.target) for p in problem.given],
+                      [np.asarray(p.residual_weight) for p in problem.given])
 
 
 def _against_plain(problem, path, result, plain) -> FitResult:
@@ -1111,7 +1115,7 @@ def _report(problem, path, single, steps, nuisance=None) -> FitResult:
     masks = [np.asarray(p.residual_weight) for p in problem.given]
     targets = [np.asarray(p.target) for p in problem.given]
     size = np.array([m.sum() for m in masks])
-    psnr = float(np.average([masked_psnr(f, t, m) for f, t, m in zip(fitted, targets, masks)], weights=size))
+    psnr = _mean_psnr(fitted, targets, masks)
     ssim = float(np.average([masked_ssim(f, t, m) for f, t, m in zip(fitted, targets, masks)], weights=size))
     messages.extend(_concentrated_residual(fitted, targets, masks, single))
     for i, (f, t, m) in enumerate(zip(fitted, targets, masks)):
