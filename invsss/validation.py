@@ -31,6 +31,8 @@ __all__ = [
     "check_target_channels",
     "check_mask_background",
     "is_concrete",
+    "one_line",
+    "error_line",
 ]
 
 
@@ -44,6 +46,39 @@ class InputNotice(UserWarning):
     Not an error: the input is used, but the user may have meant something else.
     Filter it with ``warnings.simplefilter("ignore", invsss.InputNotice)``.
     """
+
+
+def one_line(text) -> str:
+    r"""``text`` (or ``str(text)``) with every run of whitespace, newlines included, as one space.
+
+    Messages from libraries (OpenImageIO, ``json``, the OS) may span lines; an
+    invsss error is one line, so they are folded into it with this.
+
+    Examples
+    --------
+    >>> one_line("cannot open\n  file.png:  no such file ")
+    'cannot open file.png: no such file'
+    """
+    return " ".join(str(text).split())
+
+
+def error_line(err: BaseException) -> str:
+    r"""One line saying what went wrong in ``err``, led by its type unless it is an
+    :class:`InvalidInputError` (whose message already names the input).
+
+    Examples
+    --------
+    >>> error_line(InvalidInputError("mask.png: mask is empty"))
+    'mask.png: mask is empty'
+    >>> error_line(ZeroDivisionError("division\nby zero"))
+    'ZeroDivisionError: division by zero'
+    >>> error_line(KeyError())
+    'KeyError'
+    """
+    text = one_line(err)
+    if isinstance(err, InvalidInputError):
+        return text or type(err).__name__
+    return f"{type(err).__name__}: {text}" if text else type(err).__name__
 
 
 def _shown(value) -> str:

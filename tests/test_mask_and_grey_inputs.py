@@ -325,7 +325,8 @@ def test_the_key_light_image_follows_a_grey_source_stored_as_rgb(tmp_path):
 def test_a_jpeg_grey_may_differ_by_one_code_a_png_grey_not_at_all():
     """The tolerances themselves: a decoder that rounds each channel on its own may put a
     JPEG's grey one code apart (libjpeg does not; see JPEG_GREY_CODES)."""
-    from invsss.io.images import _is_grey_rgb, _Raster
+    from invsss.io.images import _is_grey_rgb
+    from invsss.io.rasters import Raster as _Raster
 
     codes = np.repeat(np.arange(H * W, dtype=np.int64).reshape(H, W, 1) % 250, 3, axis=2)
     codes[3, 4, 1] += 1

@@ -29,8 +29,8 @@ from ..forward.params import PARAM_NAMES, SSSParams
 from ..forward.passes import TAP_WEIGHTS
 from .result_dir import MANIFEST_NAME, result_state
 from ..forward.screen_space import MODELS
-from ..validation import InvalidInputError, number_array
-from .images import _one_line, write_text_atomic
+from ..validation import InvalidInputError, number_array, one_line
+from .writing import write_text_atomic
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -360,7 +360,7 @@ def read_params(path) -> tuple[SSSParams, dict]:
     except FileNotFoundError:
         raise InvalidInputError(f"{name}: params file not found") from None
     except (OSError, UnicodeDecodeError) as err:
-        raise InvalidInputError(f"{name}: cannot read params file ({_one_line(err)})") from None
+        raise InvalidInputError(f"{name}: cannot read params file ({one_line(err)})") from None
     try:
         content = json.loads(text)
     except json.JSONDecodeError as err:
@@ -436,7 +436,7 @@ def write_params(path, mapping) -> None:
         # Through JSON and back: what gets checked is exactly what gets written.
         content = json.loads(json.dumps(dict(mapping), default=_to_json))
     except (TypeError, ValueError) as err:
-        raise InvalidInputError(f"{name}: cannot write params ({_one_line(err)})") from None
+        raise InvalidInputError(f"{name}: cannot write params ({one_line(err)})") from None
     content = {"schema_version": SCHEMA_VERSION, **content}
     _validated(content, name)
     write_text_atomic(name, json.dumps(content, indent=2) + "\n")

@@ -56,6 +56,7 @@ import time
 from collections.abc import Callable, Iterable, Mapping
 
 from ..validation import InvalidInputError
+from .writing import write_text_atomic
 
 __all__ = [
     "MANIFEST_NAME",
@@ -151,9 +152,6 @@ def _fsync_directory(directory: str) -> None:
 
 
 def _write_json_atomic(path: str, content: Mapping) -> None:
-    # Imported here, not at the top: invsss.io's params reader imports this module.
-    from .images import write_text_atomic
-
     write_text_atomic(path, json.dumps(content, indent=2) + "\n")
 
 
