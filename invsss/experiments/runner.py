@@ -27,7 +27,7 @@ import time
 import warnings
 
 from ..io.result_dir import ResultDir
-from ..validation import InvalidInputError
+from ..validation import error_line
 from .tasks import TrialInterrupted, run_task
 from .trials import Trial
 
@@ -37,13 +37,6 @@ __all__ = ["execute", "trial_folder"]
 def trial_folder(out: str, trial_id: str) -> str:
     """Where a trial's files go: ``OUT/trials/<id>``."""
     return os.path.join(os.fspath(out), "trials", trial_id)
-
-
-def _one_line(err: BaseException) -> str:
-    text = " ".join(str(err).split())
-    if isinstance(err, InvalidInputError):
-        return text or type(err).__name__
-    return f"{type(err).__name__}: {text}" if text else type(err).__name__
 
 
 def _load(trial: Trial) -> list:
@@ -145,7 +138,7 @@ def execute(trial: dict, out: str, stop=None) -> dict:
     except TrialInterrupted:
         outcome.update(status="interrupted", error="interrupted")
     except Exception as err:  # noqa: BLE001 -- any failure is the trial's, recorded, not raised
-        outcome.update(params=None, stderr=None, metrics=None, error=_one_line(err))
+        outcome.update(params=None, stderr=None, metrics=None, error=error_line(err))
     if outcome["status"] != "done":  # a done trial's times were fixed when its files were
         outcome["finished"] = time.time()
         timings["total"] = outcome["finished"] - started

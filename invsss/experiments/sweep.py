@@ -39,10 +39,10 @@ import socket
 import sys
 import time
 
-from ..validation import InvalidInputError
+from ..validation import InvalidInputError, error_line
 from .executors import make_executor
 from .experiment import Experiment, load
-from .runner import _one_line, execute, trial_folder
+from .runner import execute, trial_folder
 from .store import ResultsStore, StoreError, rebuild
 
 __all__ = ["SweepSummary", "run"]
@@ -347,7 +347,7 @@ def _drive(executor, store, out, queue, statuses, stop, progress, running) -> bo
             try:
                 outcome = executor.outcome(future)
             except Exception as err:  # noqa: BLE001 -- a lost worker fails its trial, not the sweep
-                outcome = {"id": trial_id, "status": "failed", "error": f"worker: {_one_line(err)}",
+                outcome = {"id": trial_id, "status": "failed", "error": f"worker: {error_line(err)}",
                            "timings": {}, "finished": time.time()}
             _record(store, out, outcome)
             running.remove(trial_id)

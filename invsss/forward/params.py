@@ -5,11 +5,10 @@ from __future__ import annotations
 import warnings
 
 import equinox as eqx
-import jax
-import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .arrays import float_array
 from .profiles import SumOfGaussians, check_profile_arrays
 from ..validation import InputNotice, InvalidInputError, is_concrete, number_array
 
@@ -27,11 +26,8 @@ __all__ = [
 PARAM_NAMES = ("sss_level", "correction", "maxdd", "weights", "variances")
 
 
-def _as_float(x, dtype=None) -> Array:
-    # jnp.asarray with a float type, by default JAX's: float32, or float64 under x64.
-    # Host values are converted by NumPy: a conversion on the device compiles.
-    dtype = dtype or jnp.result_type(float)
-    return jnp.asarray(x, dtype=dtype) if isinstance(x, jax.Array) else jax.device_put(np.asarray(x, dtype))
+# The name light_terms.py and passes.py import; the converter itself is arrays.float_array.
+_as_float = float_array
 
 
 class SSSParams(eqx.Module):
@@ -59,11 +55,11 @@ class SSSParams(eqx.Module):
     2
     """
 
-    sss_level: Float[Array, ""] = eqx.field(converter=_as_float)
-    correction: Float[Array, ""] = eqx.field(converter=_as_float)
-    maxdd: Float[Array, ""] = eqx.field(converter=_as_float)
-    weights: Float[Array, "K *C"] = eqx.field(converter=_as_float)
-    variances: Float[Array, " K"] = eqx.field(converter=_as_float)
+    sss_level: Float[Array, ""] = eqx.field(converter=float_array)
+    correction: Float[Array, ""] = eqx.field(converter=float_array)
+    maxdd: Float[Array, ""] = eqx.field(converter=float_array)
+    weights: Float[Array, "K *C"] = eqx.field(converter=float_array)
+    variances: Float[Array, " K"] = eqx.field(converter=float_array)
 
     @property
     def num_gaussians(self) -> int:

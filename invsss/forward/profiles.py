@@ -27,6 +27,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..validation import InvalidInputError, is_concrete, number_array
+from .arrays import float_array
 
 __all__ = [
     "gaussian",
@@ -327,10 +328,6 @@ JENSEN_SKIN1_SOG = MappingProxyType(
 # --------------------------------------------------------------------------- type
 
 
-def _as_float(x) -> Array:
-    return jnp.asarray(x, dtype=jnp.result_type(float))
-
-
 _PROFILE_KEYS = ("weights", "variances")
 _OPTIONAL_KEYS = ("source", "fit")
 
@@ -399,8 +396,8 @@ class SumOfGaussians(eqx.Module):
     [1.0, 1.0, 1.0]
     """
 
-    weights: Float[Array, "K *C"] = eqx.field(converter=_as_float)
-    variances: Float[Array, " K"] = eqx.field(converter=_as_float)
+    weights: Float[Array, "K *C"] = eqx.field(converter=float_array)
+    variances: Float[Array, " K"] = eqx.field(converter=float_array)
     source: str = eqx.field(static=True, default="")
 
     def __call__(self, r: Float[Array, "*N"]) -> Float[Array, "*N *C"]:
