@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from invsss.runtime import executable_cache
-from invsss.runtime.executable_cache import _prune
+from invsss.runtime import executable_entries
+from invsss.runtime.executable_entries import prune as _prune
 
 _TESTS = Path(__file__).resolve().parent
 
@@ -104,7 +104,7 @@ def test_a_stored_init_without_its_step_starts_the_solve_afresh(tmp_path, refere
     # thread, so the order the entries were stored in does not tell them apart.)
     # An entry is sealed with its checksum; the payload is the pickle.
     steps = [entry for entry in _entries(tmp_path)
-             if isinstance(pickle.loads(executable_cache._unseal(entry.read_bytes()))["outline"], tuple)]
+             if isinstance(pickle.loads(executable_entries.unseal(entry.read_bytes()))["outline"], tuple)]
     assert len(steps) == 1
     steps[0].unlink()
     assert len(_entries(tmp_path)) == 2
@@ -166,7 +166,7 @@ def _double(x, factor):
 @pytest.fixture
 def cache_dir(tmp_path):
     """A fresh cache switched on in this process (the session's is put back afterwards)."""
-    from invsss import compile_cache, executable_cache
+    from invsss.runtime import compile_cache, executable_cache
     from invsss.runtime.compile_cache import enable_compile_cache
 
     def forget():  # what this process has warned about and checked
@@ -201,9 +201,9 @@ def _entry_files(cache: Path) -> list[Path]:
 
 def _sealed(payload: bytes) -> bytes:
     """``payload`` as an entry file holds it (a pickle, after the checksum)."""
-    from invsss.runtime import executable_cache
+    from invsss.runtime.executable_entries import seal
 
-    return getattr(executable_cache, "_seal", lambda data: data)(payload)
+    return seal(payload)
 
 
 class _Bomb:
@@ -217,7 +217,7 @@ class _Bomb:
 
 
 def test_a_checksum_is_written_with_each_entry_and_checked():
-    from invsss.runtime.executable_cache import _seal, _unseal
+    from invsss.runtime.executable_entries import seal as _seal, unseal as _unseal
 
     sealed = _seal(b"payload bytes")
     assert _unseal(sealed) == b"payload bytes"

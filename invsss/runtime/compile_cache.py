@@ -59,6 +59,7 @@ __all__ = [
     "enable_compile_cache",
     "enabled_directory",
     "make_private_folder",
+    "ownership_problem",
     "private_folder_problem",
     "warn_once",
 ]
@@ -175,10 +176,11 @@ def private_folder_problem(path: str | os.PathLike) -> str | None:
         return f"unreadable ({err.strerror})"
     if not stat.S_ISDIR(info.st_mode):
         return "not a folder"
-    return _ownership_problem(info)
+    return ownership_problem(info)
 
 
-def _ownership_problem(info: os.stat_result) -> str | None:
+def ownership_problem(info: os.stat_result) -> str | None:
+    """Why a file or folder with status ``info`` is not this user's alone, or None if it is."""
     if info.st_uid != os.getuid():
         return f"owned by uid {info.st_uid}, not by you (uid {os.getuid()})"
     who = {0o020: "group", 0o002: "others", 0o022: "group and others"}.get(info.st_mode & 0o022)

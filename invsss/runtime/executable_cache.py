@@ -50,31 +50,41 @@ before these checks, in this order:
 A folder you can read but not write is used for reading only, without a word
 (its entries still pass the three checks; a child process then tries each
 entry on every run, as no record can be written).
+
+The entry files and the checks' code are in :mod:`invsss.runtime.executable_entries`;
+this module keys, compiles, stores and loads them.
 """
 
 from __future__ import annotations
 
 import contextlib
-import errno
 import functools
 import hashlib
 import io
-import json
 import os
 import pickle
-import stat
-import signal
-import subprocess
-import sys
-import tempfile
 import threading
-import warnings
 from importlib import metadata
 from pathlib import Path
 
 import equinox as eqx
 import jax
 from jax.extend.core import ClosedJaxpr, Jaxpr
+
+from .executable_entries import (
+    Refused,
+    discard,
+    is_verified,
+    prepare_runtime,
+    prune,
+    read_private,
+    record_verified,
+    seal,
+    try_in_child,
+    unseal,
+    warn_entry,
+    write_atomic,
+)
 
 __all__ = ["MAX_EXECUTABLE_BYTES", "StaleStatics", "persistent_jit"]
 
@@ -84,14 +94,6 @@ MAX_EXECUTABLE_BYTES = 512 * 1024**2
 
 _LIBRARIES = ("jax", "jaxlib", "equinox", "optimistix", "lineax", "jaxtyping")
 _FORMAT = 2  # of the entry files; bump when their layout changes
-
-#: An entry file: this, the SHA-256 digest of the rest (32 bytes), the pickle.
-_MAGIC = b"invsss-executable-2\n"
-_DIGEST_BYTES = 32
-
-#: How long the child process that tries an entry may take (it loads the entry
-#: and runs one call) before the entry counts as failed.
-VERIFY_SECONDS = 600
 
 
 @functools.lru_cache(maxsize=1)
@@ -187,21 +189,6 @@ def _aval(x) -> tuple:
     return tuple(aval.shape), str(aval.dtype), bool(getattr(aval, "weak_type", False))
 
 
-@functools.lru_cache(maxsize=1)
-def _prepare_runtime() -> None:
-    """Set up what lowering would have: an executable loaded without lowering
-    finds jaxlib's LAPACK table empty (its first linear solve then crashes the
-    process), since jaxlib fills it only when a linear-algebra call is lowered."""
-    try:
-        from jax._src.lax.linalg import initialize_lapack
-    except ImportError:  # a JAX without the hook: lowering a tiny solve fills it too
-        import jax.numpy as jnp
-
-        jax.jit(jnp.linalg.solve).lower(jnp.eye(2), jnp.ones(2))
-    else:
-        initialize_lapack()
-
-
 _checked_folders: dict = {}
 
 
@@ -234,169 +221,6 @@ def _writable(folder: Path) -> bool:
 
     target = folder if folder.exists() else folder.parent
     return not read_only() and os.access(target, os.W_OK)
-
-
-class _Refused(Exception):
-    """A file that is not this user's alone."""
-
-
-def _seal(payload: bytes) -> bytes:
-    """An entry file's bytes: the magic line, the payload's SHA-256 digest, the payload."""
-    return _MAGIC + hashlib.sha256(payload).digest() + payload
-
-
-def _unseal(data: bytes) -> bytes | None:
-    """The payload of an entry file's bytes, or None if they do not match their checksum."""
-    head = len(_MAGIC) + _DIGEST_BYTES
-    if len(data) < head or not data.startswith(_MAGIC):
-        return None
-    payload = data[head:]
-    return payload if hashlib.sha256(payload).digest() == data[len(_MAGIC):head] else None
-
-
-def _read_private(path: Path) -> bytes:
-    """The bytes of ``path``; :class:`_Refused` unless it is a regular file (not a
-    symbolic link) owned by this user and writable by nobody else."""
-    from .compile_cache import _ownership_problem
-
-    try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
-    except OSError as err:
-        if err.errno == errno.ELOOP:
-            raise _Refused("a symbolic link") from None
-        raise
-    try:
-        info = os.fstat(fd)
-        problem = "not a regular file" if not stat.S_ISREG(info.st_mode) else _ownership_problem(info)
-        if problem is not None:
-            raise _Refused(problem)
-        with os.fdopen(os.dup(fd), "rb") as file:
-            return file.read()
-    finally:
-        os.close(fd)
-
-
-def _warn_entry(path: Path, what: str) -> None:
-    """One warning per entry and run: ``executable cache: NAME <what>; compiling it again``."""
-    from .compile_cache import warn_once
-
-    warn_once(("entry", path.name), f"executable cache: {path.name} {what}; compiling it again")
-
-
-def _discard(path: Path, writable: bool) -> None:
-    """Remove a bad entry, so that no later run meets it, even where this run
-    does not get to store its replacement."""
-    if writable:
-        for doomed in (path, _record_path(path)):
-            with contextlib.suppress(OSError):
-                doomed.unlink()
-
-
-def _record_path(path: Path) -> Path:
-    return path.with_suffix(".verified")
-
-
-def _is_verified(path: Path, digest: str) -> bool:
-    """Whether a child process has already run the entry whose file has SHA-256 ``digest``."""
-    try:
-        return _read_private(_record_path(path)).decode("ascii", "replace").strip() == digest
-    except (OSError, _Refused):
-        return False
-
-
-def _record_verified(path: Path, digest: str) -> None:
-    _write_atomic(_record_path(path), (digest + "\n").encode())
-
-
-def _write_atomic(path: Path, data: bytes) -> bool:
-    """Write ``data`` to ``path`` through a temporary file and a rename; False if the disk refused."""
-    temporary = None
-    try:
-        handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=".writing-")
-        with os.fdopen(handle, "wb") as file:
-            file.write(data)
-        os.replace(temporary, path)
-        return True
-    except OSError:
-        # A full or read-only disk costs the next process a compilation.
-        if temporary is not None and os.path.exists(temporary):
-            with contextlib.suppress(OSError):
-                os.unlink(temporary)
-        return False
-
-
-# The child process that tries an entry: argv[1] the entry's bytes (a copy of what
-# the parent checked), argv[2] its SHA-256, argv[3] the call's arguments (.npz),
-# argv[4] options (JSON). It prints "ok" after the call has finished.
-_TRY = """
-import sys
-from invsss.runtime.executable_cache import _try_entry
-_try_entry(*sys.argv[1:5])
-print("ok", flush=True)
-"""
-
-
-def _try_in_child(data: bytes, digest: str, leaves) -> str | None:
-    """None if a child process loaded the entry ``data`` and ran it on ``leaves``; else what went wrong."""
-    import numpy as np
-
-    env = dict(os.environ, INVSSS_NO_CACHE="1")
-    package_root = str(Path(__file__).resolve().parents[2])  # the folder holding invsss/
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
-    weak = [bool(getattr(jax.typeof(leaf), "weak_type", False)) for leaf in leaves]
-    options = json.dumps({"x64": bool(jax.config.jax_enable_x64), "weak": weak})
-    with tempfile.TemporaryDirectory(prefix="invsss-try-entry-") as scratch:
-        entry_file = os.path.join(scratch, "entry")
-        arguments = os.path.join(scratch, "arguments.npz")
-        try:
-            with open(entry_file, "wb") as file:
-                file.write(data)
-            np.savez(arguments, *[np.asarray(leaf) for leaf in leaves])
-        except OSError as err:
-            return f"its arguments could not be written for the trial ({err.strerror})"
-        try:
-            child = subprocess.run([sys.executable, "-c", _TRY, entry_file, digest, arguments, options],
-                                   env=env, capture_output=True, timeout=VERIFY_SECONDS)
-        except subprocess.TimeoutExpired:
-            return f"no answer within {VERIFY_SECONDS} s"
-        except OSError as err:
-            return f"the process could not start ({err.strerror})"
-    if child.returncode == 0 and child.stdout.split()[-1:] == [b"ok"]:
-        return None
-    if child.returncode < 0:
-        try:
-            return f"the process was killed by {signal.Signals(-child.returncode).name}"
-        except ValueError:
-            return f"the process was killed by signal {-child.returncode}"
-    lines = child.stderr.decode(errors="replace").strip().splitlines()
-    return f"exit status {child.returncode}" + (f": {lines[-1][:100]}" if lines else "")
-
-
-def _try_entry(entry_file: str, digest: str, arguments: str, options: str) -> None:
-    """In the child process of :func:`_try_in_child`: load the entry, run it once."""
-    import numpy as np
-    from jax.experimental import serialize_executable
-
-    settings = json.loads(options)
-    jax.config.update("jax_enable_x64", settings["x64"])
-    data = Path(entry_file).read_bytes()
-    payload = _unseal(data)
-    if payload is None or hashlib.sha256(data).hexdigest() != digest:
-        sys.exit("the entry's bytes changed on their way to the trial")
-    _prepare_runtime()
-    entry = pickle.loads(payload)
-    executable = serialize_executable.deserialize_and_load(entry["executable"], entry["in_tree"], entry["out_tree"])
-    with np.load(arguments, allow_pickle=False) as stored:
-        leaves = [stored[f"arr_{i}"] for i in range(len(settings["weak"]))]
-    leaves = [_weak(value) if weak else jax.numpy.asarray(value) for value, weak in zip(leaves, settings["weak"])]
-    jax.block_until_ready(executable(*leaves))
-
-
-def _weak(value):
-    """``value`` as a weakly typed array (as a Python scalar argument is traced)."""
-    from jax._src.lax import lax as lax_internal
-
-    return lax_internal._convert_element_type(jax.numpy.asarray(value), value.dtype, weak_type=True)
 
 
 class _Slot:
@@ -509,7 +333,7 @@ class persistent_jit:
             out = jax.block_until_ready(compiled(leaves))
         except jax.errors.JaxRuntimeError as err:
             path = compiled.loaded_from
-            _warn_entry(path, f"could not run ({str(err).splitlines()[0][:80]})")
+            warn_entry(path, f"could not run ({str(err).splitlines()[0][:80]})")
             with self._lock:
                 compiled = self._compile_and_store(path if _writable(path.parent) else None,
                                                    leaves, in_tree, static)
@@ -551,32 +375,32 @@ class persistent_jit:
         from .compile_cache import warn_once
 
         try:
-            data = _read_private(path)
-        except _Refused as err:
+            data = read_private(path)
+        except Refused as err:
             warn_once("refused entry", f"executable cache: {path.name}: not used, as it is {err}; "
                       "compiling it (and any other such entry) as usual")
             return None
         except FileNotFoundError:  # pruned by another process meanwhile
             return None
         except OSError as err:
-            _warn_entry(path, f"could not be read ({err.strerror})")
+            warn_entry(path, f"could not be read ({err.strerror})")
             return None
-        payload = _unseal(data)
+        payload = unseal(data)
         if payload is None:
-            _warn_entry(path, "is damaged (its bytes do not match the checksum written with it)")
-            _discard(path, writable)
+            warn_entry(path, "is damaged (its bytes do not match the checksum written with it)")
+            discard(path, writable)
             return None
         digest = hashlib.sha256(data).hexdigest()
-        if not _is_verified(path, digest):
-            failure = _try_in_child(data, digest, leaves)
+        if not is_verified(path, digest):
+            failure = try_in_child(data, digest, leaves)
             if failure is not None:
-                _warn_entry(path, f"failed when a separate process tried it ({failure})")
-                _discard(path, writable)
+                warn_entry(path, f"failed when a separate process tried it ({failure})")
+                discard(path, writable)
                 return None
             if writable:
-                _record_verified(path, digest)
+                record_verified(path, digest)
         try:
-            _prepare_runtime()
+            prepare_runtime()
             entry = pickle.loads(payload)
             executable = serialize_executable.deserialize_and_load(
                 entry["executable"], entry["in_tree"], entry["out_tree"]
@@ -585,7 +409,7 @@ class persistent_jit:
             # equinox's tree nodes do not survive pickling.
             out_tree = jax.tree_util.tree_structure(entry["outline"])
         except Exception as err:  # noqa: BLE001 - any unreadable entry means: compile again
-            _warn_entry(path, f"could not be loaded ({type(err).__name__})")
+            warn_entry(path, f"could not be loaded ({type(err).__name__})")
             return None
         if writable:
             with contextlib.suppress(OSError):
@@ -644,30 +468,7 @@ class persistent_jit:
             make_private_folder(folder)
         except OSError:
             return
-        if _write_atomic(path, _seal(data)):
-            _prune(folder, MAX_EXECUTABLE_BYTES)
+        if write_atomic(path, seal(data)):
+            prune(folder, MAX_EXECUTABLE_BYTES)
 
 
-def _prune(folder: Path, limit: int) -> None:
-    """Delete the least recently used entries until the folder holds at most ``limit`` bytes."""
-    entries = []
-    for path in folder.glob("*.executable"):
-        try:
-            stat = path.stat()
-        except OSError:
-            continue  # removed by another process meanwhile
-        entries.append((stat.st_mtime, stat.st_size, path))
-    total = sum(size for _, size, _ in entries)
-    for _, size, path in sorted(entries):
-        if total <= limit:
-            break
-        try:
-            path.unlink()
-        except OSError:
-            pass
-        total -= size
-    # The records of entries that are gone (pruned, or replaced by another process).
-    for record in folder.glob("*.verified"):
-        if not record.with_suffix(".executable").exists():
-            with contextlib.suppress(OSError):
-                record.unlink()
