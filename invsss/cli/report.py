@@ -7,7 +7,10 @@
 and below them the solver's convergence (every start's loss curve and the
 refinement rounds, on one axis of all the fit's steps), the fitted diffusion
 profile ``R(r)`` against the one the fit started from, and the fitted parameters
-with their standard errors (conditional on the profile, as the page says). Images are stretched linearly between their 1st and 99th
+with their standard errors (conditional on the profile, as the page says; an
+entry the data did not determine shows its point estimate marked with a dagger,
+explained under the table). Loss tick labels carry the digits that tell them
+apart (a fit's loss often moves by less than a decade). Images are stretched linearly between their 1st and 99th
 percentiles on the mask (the blur lowers contrast; a fixed white point would show
 a blurred target as flat grey), the fitted image and the target with the
 target's stretch, so a brightness or contrast mismatch stays visible; the mask's
@@ -83,7 +86,9 @@ def _format_value(value, error=None, unknown=None) -> str:
     """``902.2±3.3`` for a scalar, ``[a±e, b±f]`` (rows as tuples) for an array.
 
     ``unknown`` (bool, the value's shape) marks entries the data did not
-    determine: they print as ``--``, as params.json writes them as null.
+    determine: they print as the point estimate with :data:`_UNDETERMINED` after
+    it and no standard error (params.json writes them as null): the value the
+    fitted image used, which the data would not have moved.
     """
     value = np.asarray(value, dtype=np.float64)
     rows = value.reshape(value.shape[0], -1) if value.ndim else value.reshape(1, 1)
@@ -94,7 +99,7 @@ def _format_value(value, error=None, unknown=None) -> str:
 
     def one(v, e, flag):
         if flag:
-            return "--"
+            return f"{v:.4g}{_UNDETERMINED}"
         return f"{v:.4g}" if not np.isfinite(e) else f"{v:.4g}±{e:.2g}"
 
     cells = [[one(v, e, f) for v, e, f in zip(*row)] for row in zip(rows, errors, flags)]
@@ -103,21 +108,33 @@ def _format_value(value, error=None, unknown=None) -> str:
     return "[" + ", ".join(c[0] if len(c) == 1 else "(" + ", ".join(c) + ")" for c in cells) + "]"
 
 
+#: The mark after an undetermined entry's point estimate, explained under the table.
+_UNDETERMINED = "\u2020"  # a dagger
+_UNDETERMINED_NOTE = (
+    f"{_UNDETERMINED} undetermined: the data did not fix this value; it is where the fit "
+    "stopped (the value the fitted image used), with no standard error, and null in params.json."
+)
+
+
 def _parameter_lines(result) -> list[str]:
     """One line per parameter: value ± standard error, and what is fixed or undetermined."""
     params = result.params
     stderr = dict(result.stderr or {})
     fixed = dict(result.fixed or {})
     lines = []
+    any_unknown = False
     for name in PARAM_NAMES:
         unknown = np.asarray(result.is_undetermined(name))
+        any_unknown = any_unknown or bool(unknown.any())
         flags = ["fixed"] if name in fixed else []
         if unknown.all():
-            flags.append("undetermined")
+            flags.append(f"undetermined {_UNDETERMINED}")
         elif unknown.any():
-            flags.append(f"{int(unknown.sum())} undetermined (--)")
+            flags.append(f"{int(unknown.sum())} undetermined {_UNDETERMINED}")
         value = _format_value(getattr(params, name), None if name in fixed else stderr.get(name), unknown)
         lines.append(f"{name:<11} {value}" + (f"  [{', '.join(flags)}]" if flags else ""))
+    if any_unknown:
+        lines.extend(textwrap.wrap(_UNDETERMINED_NOTE, width=_TEXT_WIDTH, subsequent_indent="  "))
     lines.append("")
     status = "interrupted" if getattr(result, "interrupted", False) else (
         "converged" if result.converged else "NOT converged")
@@ -245,11 +262,32 @@ def _plot_profile(ax, result) -> None:
     ax.legend(fontsize=7, loc="upper right")
 
 
+class _DistinctLogFormatter(LogFormatter):
+    """:class:`~matplotlib.ticker.LogFormatter` whose labels on one axis differ.
+
+    Over less than a decade a log axis falls back to linear ticks (2.05e-4,
+    2.10e-4, ...), which the log formatter's one significant digit labels all
+    ``2e-04``. Where its labels repeat, these carry as many significant digits
+    (up to six) as it takes to tell them apart.
+    """
+
+    def format_ticks(self, values):
+        labels = super().format_ticks(values)
+        for digits in range(2, 7):
+            shown = [label for label in labels if label]
+            if len(set(shown)) == len(shown):
+                break
+            labels = [self.fix_minus(f"{value:.{digits - 1}e}") if label else ""
+                      for value, label in zip(values, labels)]
+        return labels
+
+
 def _plain_log_labels(ax) -> None:
-    """Tick labels such as ``1e-05``: matplotlib's default ``10^{-5}`` goes through
-    its mathtext parser, whose first use in a process costs about 0.3 s."""
-    ax.yaxis.set_major_formatter(LogFormatter())
-    ax.yaxis.set_minor_formatter(LogFormatter(labelOnlyBase=False))
+    """Distinct tick labels such as ``1e-05`` or ``2.05e-04``: matplotlib's default
+    ``10^{-5}`` goes through its mathtext parser, whose first use in a process costs
+    about 0.3 s."""
+    ax.yaxis.set_major_formatter(_DistinctLogFormatter())
+    ax.yaxis.set_minor_formatter(_DistinctLogFormatter(labelOnlyBase=False))
 
 
 def _residual_limit(residuals) -> float:
@@ -292,6 +330,11 @@ def plot_fit_report(result, pairs, path) -> None:
     >>> os.path.getsize(path) > 0
     True
     """
+    _report_figure(result, pairs).savefig(os.fspath(path), dpi=_DPI)
+
+
+def _report_figure(result, pairs) -> Figure:
+    """The page of :func:`plot_fit_report`, drawn on an Agg canvas, not yet saved."""
     pairs = [
         (p.source, p.target, p.depth, p.mask) if hasattr(p, "source") else tuple(p) for p in pairs
     ]
@@ -321,7 +364,7 @@ def plot_fit_report(result, pairs, path) -> None:
     # measured every text box twice and took a third of the page's 0.55 s.
     grid = fig.add_gridspec(
         rows + 2, 4, height_ratios=[_PANEL_INCHES] * rows + [3.0, text_inches],
-        left=0.8 / width, right=1.0 - 1.0 / width, top=1.0 - 0.3 / height, bottom=0.1 / height,
+        left=1.0 / width, right=1.0 - 1.0 / width, top=1.0 - 0.3 / height, bottom=0.1 / height,
         wspace=0.32, hspace=0.3,
     )
 
@@ -360,8 +403,11 @@ def plot_fit_report(result, pairs, path) -> None:
         # size of the other image panels.
         fig.colorbar(image, cax=ax.inset_axes([1.04, 0.08, 0.05, 0.84]), format="%.2g")
 
-    _plot_convergence(fig.add_subplot(grid[rows, 0:2]), result)
-    _plot_profile(fig.add_subplot(grid[rows, 2:4]), result)
+    # The profile's tick labels and its ylabel sit between the two plots: they get a
+    # gap of their own (1.2 in, the image panels' is 0.7 in), clear of the loss plot.
+    plots = grid[rows, 0:4].subgridspec(1, 2, wspace=0.25)
+    _plot_convergence(fig.add_subplot(plots[0]), result)
+    _plot_profile(fig.add_subplot(plots[1]), result)
 
     text = fig.add_subplot(grid[rows + 1, 0:4])
     text.axis("off")
@@ -371,4 +417,4 @@ def plot_fit_report(result, pairs, path) -> None:
         bbox={"boxstyle": "round", "facecolor": "0.96", "edgecolor": "0.7"},
     )
     box.set_in_layout(False)  # long lines must not squeeze the panels above
-    fig.savefig(os.fspath(path), dpi=_DPI)
+    return fig
