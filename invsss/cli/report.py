@@ -296,6 +296,45 @@ def _residual_limit(residuals) -> float:
     return limit if limit > 0 else 1.0
 
 
+def _draw_pair_rows(fig, grid, pairs, fitted) -> None:
+    """One row per pair in ``grid``'s first rows: source, fitted, target, residual."""
+    rows = len(pairs)
+    residuals, residual_axes = [], []
+    for k, (source, target, _depth, mask) in enumerate(pairs):
+        source, target = _hwc(source), _hwc(target)
+        mask = np.ones(target.shape[:2]) if mask is None else np.asarray(mask, dtype=np.float64)
+        pred = _hwc(fitted[k])
+        if pred.shape != target.shape:
+            raise InvalidInputError(
+                f"pairs[{k}].target: shape {target.shape} differs from the fitted image's {pred.shape}"
+            )
+        limits = _display_range(target, mask)
+        psnr, ssim = masked_psnr(pred, target, mask), masked_ssim(pred, target, mask)
+        label = f"pair {k}: " if rows > 1 else ""
+        _show(fig.add_subplot(grid[k, 0]), _display(source, _display_range(source, mask)),
+              f"{label}source", mask)
+        _show(fig.add_subplot(grid[k, 1]), _display(pred, limits),
+              f"fitted  PSNR {psnr:.2f} dB  SSIM {ssim:.3f}", mask)
+        _show(fig.add_subplot(grid[k, 2]), _display(target, limits), "target", mask)
+        residual = np.mean(target - pred, axis=-1)
+        residual[mask <= 0] = np.nan
+        residuals.append(residual)
+        residual_axes.append(fig.add_subplot(grid[k, 3]))
+
+    # One colour scale for every residual panel, so the pairs compare.
+    limit = _residual_limit(residuals)
+    channel_note = " (channel mean)" if _hwc(pairs[0][1]).shape[-1] > 1 else ""
+    for ax, residual in zip(residual_axes, residuals):
+        image = ax.imshow(residual, cmap="RdBu_r", vmin=-limit, vmax=limit, interpolation="nearest")
+        ax.set_facecolor("0.85")  # outside the mask
+        ax.set_title(f"residual  target - fitted{channel_note}", fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+        # The colour bar sits in the gutter beside the panel, which keeps the
+        # size of the other image panels.
+        fig.colorbar(image, cax=ax.inset_axes([1.04, 0.08, 0.05, 0.84]), format="%.2g")
+
+
 def plot_fit_report(result, pairs, path) -> None:
     """Draw a fit's report page and save it as an image.
 
@@ -368,40 +407,7 @@ def _report_figure(result, pairs) -> Figure:
         wspace=0.32, hspace=0.3,
     )
 
-    residuals, residual_axes = [], []
-    for k, (source, target, _depth, mask) in enumerate(pairs):
-        source, target = _hwc(source), _hwc(target)
-        mask = np.ones(target.shape[:2]) if mask is None else np.asarray(mask, dtype=np.float64)
-        pred = _hwc(fitted[k])
-        if pred.shape != target.shape:
-            raise InvalidInputError(
-                f"pairs[{k}].target: shape {target.shape} differs from the fitted image's {pred.shape}"
-            )
-        limits = _display_range(target, mask)
-        psnr, ssim = masked_psnr(pred, target, mask), masked_ssim(pred, target, mask)
-        label = f"pair {k}: " if rows > 1 else ""
-        _show(fig.add_subplot(grid[k, 0]), _display(source, _display_range(source, mask)),
-              f"{label}source", mask)
-        _show(fig.add_subplot(grid[k, 1]), _display(pred, limits),
-              f"fitted  PSNR {psnr:.2f} dB  SSIM {ssim:.3f}", mask)
-        _show(fig.add_subplot(grid[k, 2]), _display(target, limits), "target", mask)
-        residual = np.mean(target - pred, axis=-1)
-        residual[mask <= 0] = np.nan
-        residuals.append(residual)
-        residual_axes.append(fig.add_subplot(grid[k, 3]))
-
-    # One colour scale for every residual panel, so the pairs compare.
-    limit = _residual_limit(residuals)
-    channel_note = " (channel mean)" if _hwc(pairs[0][1]).shape[-1] > 1 else ""
-    for ax, residual in zip(residual_axes, residuals):
-        image = ax.imshow(residual, cmap="RdBu_r", vmin=-limit, vmax=limit, interpolation="nearest")
-        ax.set_facecolor("0.85")  # outside the mask
-        ax.set_title(f"residual  target - fitted{channel_note}", fontsize=9)
-        ax.set_xticks([])
-        ax.set_yticks([])
-        # The colour bar sits in the gutter beside the panel, which keeps the
-        # size of the other image panels.
-        fig.colorbar(image, cax=ax.inset_axes([1.04, 0.08, 0.05, 0.84]), format="%.2g")
+    _draw_pair_rows(fig, grid, pairs, fitted)
 
     # The profile's tick labels and its ylabel sit between the two plots: they get a
     # gap of their own (1.2 in, the image panels' is 0.7 in), clear of the loss plot.
