@@ -362,13 +362,16 @@ def breakdown_child(pair_dir: str, cache_dir: str) -> None:
     """One process: import, read, fit twice; print the stages as JSON."""
     from jax import monitoring
 
+    import invsss.estimator.core as core_module
     import invsss.estimator.fit as fit_module
     import invsss.estimator.problem as problem_module
+    import invsss.estimator.search as search_module
+    import invsss.estimator.summary as summary_module
     from invsss.runtime.compile_cache import enable_compile_cache
     import invsss.io  # noqa: F401  (loaded before the reading stage is timed)
 
     imported = time.perf_counter() - _T_START
-    from invsss.cli import _covered_seconds  # the union of compile intervals, as the CLI counts it
+    from invsss.cli.progress import covered_seconds as _covered_seconds  # the union of compile intervals, as the CLI counts it
 
     enable_compile_cache(cache_dir)
     compiles: dict = defaultdict(lambda: defaultdict(float))
@@ -389,13 +392,14 @@ def breakdown_child(pair_dir: str, cache_dir: str) -> None:
 
     monitoring.register_event_duration_secs_listener(on_duration)
     stages = _Stages()
-    stages.wrap(fit_module, "build_problem", "build problem (with start scan)")
+    stages.wrap(core_module, "build_problem", "build problem (with start scan)")
     stages.wrap(problem_module, "choose_starts", "  start scan")
-    stages.wrap(fit_module, "run_solver", _solve_label)
-    stages.wrap(fit_module, "_evaluate",
-                lambda objective, z, flag: "evaluate + linearise" if bool(flag) else "evaluate")
-    stages.wrap(fit_module, "gauss_newton_uncertainty", "covariance")
-    stages.wrap(fit_module, "_report", "report (all)")
+    stages.wrap(search_module, "run_solver", _solve_label)
+    for module in (search_module, summary_module):
+        stages.wrap(module, "_evaluate",
+                    lambda objective, z, flag: "evaluate + linearise" if bool(flag) else "evaluate")
+    stages.wrap(summary_module, "gauss_newton_uncertainty", "covariance")
+    stages.wrap(core_module, "summarise", "report (all)")
 
     t0 = time.perf_counter()
     pair = read_pair_folder(pair_dir)
@@ -556,9 +560,9 @@ def read_pair_folder(pair_dir: str):
 
 def _compare(pair_dirs, title: str, settings: dict) -> None:
     """Each pair fitted with the CLI defaults under each of ``settings`` (name ->
-    ``{fit.py constant: value}``), in one process; a short warm-up fit per pair
-    and setting comes first so that no column pays for compilation."""
-    import invsss.estimator.fit as fit_module
+    ``{invsss.estimator.search constant: value}``), in one process; a short warm-up
+    fit per pair and setting comes first so that no column pays for compilation."""
+    import invsss.estimator.search as fit_module
 
     defaults = {k: getattr(fit_module, k) for values in settings.values() for k in values}
     print(f"bench_fit {title}: fit_pair with the CLI defaults; "

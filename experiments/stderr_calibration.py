@@ -31,7 +31,7 @@ import numpy as np
 import invsss
 from scipy import ndimage
 
-from invsss.estimator import fit as fit_module
+from invsss.estimator.stages import alignment as alignment_stage
 from invsss.estimator import uncertainty
 from make_synthetic import CameraMove
 from photo_robustness import Row, clean_target, photograph
@@ -50,7 +50,7 @@ def fit_variant(variant: str, pair, photo, level, starts: int):
                          f"or one of {ALIGNS}")
     align = next((a for a in ALIGNS if a in parts), "none")
     if "rim" in parts:
-        inner = ndimage.binary_erosion(np.asarray(pair.mask) > 0, iterations=fit_module.ALIGN_RIM_PX)
+        inner = ndimage.binary_erosion(np.asarray(pair.mask) > 0, iterations=alignment_stage.ALIGN_RIM_PX)
         item = invsss.ImagePair(pair.source, photo, pair.depth, pair.mask, fit_weight=inner.astype(np.float64))
         return invsss.fit_pairs([item], n_starts=starts, saturation=level, align=align,
                                 vignetting="vignetting" in parts)

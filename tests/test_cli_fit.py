@@ -12,7 +12,8 @@ import pytest
 from scipy.ndimage import gaussian_filter
 
 import invsss
-from invsss.cli import _ProgressLine, main
+from invsss.cli import main
+from invsss.cli.progress import ProgressLine
 from _pair_files import pair_args, write_pair
 
 SIZE = 40
@@ -190,7 +191,7 @@ class _Terminal(io.StringIO):
 
 def test_progress_rewrites_one_line_on_a_terminal():
     stream = _Terminal()
-    progress = _ProgressLine(stream)
+    progress = ProgressLine(stream)
     progress(1, 2.5e-3)
     progress.show("fit: a longer line than the first one")
     progress.show("fit: short")
@@ -205,7 +206,7 @@ def test_progress_rewrites_one_line_on_a_terminal():
 
 def test_progress_shows_the_stage_when_given():
     stream = io.StringIO()
-    _ProgressLine(stream)(17, 1.234e-3, "start 2/4")
+    ProgressLine(stream)(17, 1.234e-3, "start 2/4")
     assert stream.getvalue() == "fit: start 2/4  iter 17  loss 1.234e-03\n"
 
 

@@ -181,25 +181,25 @@ def test_cli_switches_the_cache_on_or_off(tmp_path, monkeypatch):
 
 
 def test_fit_progress_says_how_long_compiling_took_once():
-    from invsss.cli import _ProgressLine
+    from invsss.cli.progress import ProgressLine
 
     stream = io.StringIO()
-    progress = _ProgressLine(stream, lambda: 3.14)
+    progress = ProgressLine(stream, lambda: 3.14)
     progress(1, 1e-3)
     progress(2, 5e-4)
     lines = stream.getvalue().splitlines()
     assert lines == ["fit: compiling ... 3.1 s", "fit: iter 1  loss 1.000e-03"]
     warm = io.StringIO()
-    _ProgressLine(warm, lambda: 0.01)(1, 1e-3)
+    ProgressLine(warm, lambda: 0.01)(1, 1e-3)
     assert warm.getvalue().splitlines() == ["fit: compiled code loaded from the cache", "fit: iter 1  loss 1.000e-03"]
 
 
 def test_compile_seconds_counts_a_new_compilation():
-    from invsss.cli import _compile_seconds
+    from invsss.cli.progress import compile_seconds
 
-    before = _compile_seconds()
+    before = compile_seconds()
     jax.jit(lambda x: jnp.sin(x) * 3.0 + jnp.cos(x) ** 2)(jnp.arange(7.0)).block_until_ready()
-    assert _compile_seconds() > before
+    assert compile_seconds() > before
 
 
 def test_cache_folders_are_created_for_you_alone(tmp_path):

@@ -24,7 +24,7 @@ import invsss
 from invsss import InvalidInputError
 from invsss import FitResult, fit_pair, fit_pairs
 from invsss.estimator import FitInterrupted, FitOptions
-from invsss.estimator.fit import HALVING_STEPS
+from invsss.estimator.search import HALVING_STEPS
 
 from _estimator_scenes import make_pair
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import invsss
-from invsss.estimator.fit import _highlight_map
+from invsss.estimator.stages.highlights import highlight_map
 from _estimator_scenes import make_pair
 
 PROFILE3 = {"weights": [0.3, 0.45, 0.25], "variances": [0.25, 1.2, 5.0]}
@@ -34,14 +34,14 @@ def test_highlight_map_finds_bright_blobs_and_little_else(scene):
     source, target, photo, depth, mask, specular = scene
     _, _, _, _, clean = make_pair("face", TRUTH, size=SIZE, contrast=3.0, seed=6)
     region = mask > 0
-    found = _highlight_map(photo, clean, region)
+    found = highlight_map(photo, clean, region)
     assert all(found[cy, cx] for cy, cx in SPOTS)
     # Away from the blobs (their tails reach the noise level at about 7 px) hardly
     # anything is taken.
     y, x = np.mgrid[0:SIZE, 0:SIZE]
     distance = np.min([np.hypot(y - cy, x - cx) for cy, cx in SPOTS], axis=0)
     assert found[(distance > 8) & region].mean() < 0.01
-    assert _highlight_map(target, clean, region).sum() < 0.01 * region.sum()
+    assert highlight_map(target, clean, region).sum() < 0.01 * region.sum()
 
 
 @pytest.mark.slow

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import invsss
-from invsss.estimator import fit as fit_module
+from invsss.estimator.stages import light_terms as light_terms_stage
 from invsss.forward.light_terms import LAW_TRUST, LightBuffers, LightTerms, reflectance_law
 
 from _lit_scenes import FIX, PROFILE, dome_with_two_lights, lit_target
@@ -153,17 +153,17 @@ def test_a_few_wrong_pixels_carrying_the_loss_are_warned_about():
 
 def test_terms_at_the_edge_of_their_range_are_warned_about():
     quiet = {"law": [0.93], "law_strength": 0.98, "grazing": 0.2, "stderr": {"law_strength": 0.05}, "fixed": []}
-    assert fit_module._term_bounds(quiet) == []
+    assert light_terms_stage.term_bounds(quiet) == []
     at_edge = dict(quiet, law=[0.99993])
-    assert "light_terms.law: the albedo ended at 0.99993" in fit_module._term_bounds(at_edge)[0]
+    assert "light_terms.law: the albedo ended at 0.99993" in light_terms_stage.term_bounds(at_edge)[0]
     beyond = dict(quiet, law_strength=1.4)
-    assert "light_terms.law_strength: 1.4 is outside [0, 1]" in fit_module._term_bounds(beyond)[0]
+    assert "light_terms.law_strength: 1.4 is outside [0, 1]" in light_terms_stage.term_bounds(beyond)[0]
     # Within two standard errors of [0, 1] it is noise, not extrapolation.
-    assert fit_module._term_bounds(dict(quiet, law_strength=1.08, stderr={"law_strength": 0.17})) == []
+    assert light_terms_stage.term_bounds(dict(quiet, law_strength=1.08, stderr={"law_strength": 0.17})) == []
     darkened = dict(quiet, grazing=-0.995)
-    assert "light_terms.grazing: -0.995 is at its bound -1" in fit_module._term_bounds(darkened)[0]
+    assert "light_terms.grazing: -0.995 is at its bound -1" in light_terms_stage.term_bounds(darkened)[0]
     held = dict(at_edge, fixed=["law"])
-    assert fit_module._term_bounds(held) == []
+    assert light_terms_stage.term_bounds(held) == []
 
 
 @pytest.mark.slow
@@ -172,12 +172,12 @@ def test_a_term_fit_below_the_plain_fit_falls_back_to_it(monkeypatch):
     target = lit_target(source, depth, mask, buffers, LightTerms(law=0.9))
     # Make the plain fit look better than any fit with the terms can be: the
     # comparison, not the solve, decides what is returned.
-    original = fit_module._against_plain
+    original = light_terms_stage.against_plain
 
     def plain_scores_higher(problem, path, result, plain):
         return original(problem, path, result, dataclasses.replace(plain, psnr=result.psnr + 1.0))
 
-    monkeypatch.setattr(fit_module, "_against_plain", plain_scores_higher)
+    monkeypatch.setattr(light_terms_stage, "against_plain", plain_scores_higher)
     fit = _fit(source, target, depth, mask, light_terms="shift,law", light_buffers=buffers)
     record = fit.light_terms
     assert record["fallback"] is True and record["law_strength"] == 0.0 and record["shift"] == 0.0

@@ -297,7 +297,7 @@ def test_fit_of_fran_front_with_a_0_1_mask_or_a_grey_rgb_target_is_the_reference
 def test_the_key_light_image_follows_a_grey_source_stored_as_rgb(tmp_path):
     """The law's key buffer must have the source's channels: one, when load_pair read a
     grey source stored as RGB as one channel (before a grey target)."""
-    from invsss.cli import _read_key_buffer
+    from invsss.cli.arguments import read_key_buffer
     from invsss.experiments.runner import _load
     from invsss.experiments.trials import Trial
 
@@ -308,7 +308,7 @@ def test_the_key_light_image_follows_a_grey_source_stored_as_rgb(tmp_path):
     files = _pair_files(tmp_path, grey_source, one)
     pair, _ = _notices(lambda: invsss.load_pair(*files))
     assert pair.source.shape == (H, W, 1)
-    read, notes = _notices(lambda: _read_key_buffer(key, pair.source, False))
+    read, notes = _notices(lambda: read_key_buffer(key, pair.source, False))
     np.testing.assert_array_equal(read[..., 0], 0.5 * _grey(7))
     assert notes == [f"{key}: its three channels are identical (a grey image stored as RGB); read as one grey channel"]
     # A sweep's trial reads it the same way.

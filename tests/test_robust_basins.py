@@ -22,7 +22,7 @@ from PIL import Image
 from scipy import ndimage
 
 import invsss
-from invsss.estimator.fit import _choose_basin, _Path
+from invsss.estimator.search import SolvePath, choose_basin
 from invsss.estimator.options import FitOptions
 from invsss.estimator.problem import _evaluate, build_problem
 from invsss.estimator.robust import robust_loss, robust_scale
@@ -82,7 +82,7 @@ def _noisy_card_problem():
 
 
 def _candidate(problem, level):
-    path = _Path(problem.objective, problem.param.unknowns({"sss_level": level}))
+    path = SolvePath(problem.objective, problem.param.unknowns({"sss_level": level}))
     preds = _evaluate(path.objective, path.z, jnp.asarray(False))["predictions"]
     residuals = [np.asarray(p.target) - np.asarray(q) for p, q in zip(problem.data, preds)]
     path.delta = robust_scale(residuals, [np.asarray(p.residual_weight) for p in problem.data], "pseudo-huber")
@@ -93,9 +93,9 @@ def test_a_second_basin_that_fits_as_well_within_the_noise_is_reported():
     with jax.enable_x64(True):
         problem = _noisy_card_problem()
         tied = [_candidate(problem, 375.0), _candidate(problem, 420.0)]
-        chosen = _choose_basin(problem, tied, "pseudo-huber")
+        chosen = choose_basin(problem, tied, "pseudo-huber")
         clear = [_candidate(problem, 375.0), _candidate(problem, 900.0)]
-        clear_choice = _choose_basin(problem, clear, "pseudo-huber")
+        clear_choice = choose_basin(problem, clear, "pseudo-huber")
     assert chosen is tied[0]
     assert any("another basin fits as well" in m and "420" in m for m in chosen.messages)
     assert clear_choice is clear[0]

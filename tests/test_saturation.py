@@ -17,7 +17,8 @@ import pytest
 from scipy import ndimage
 
 import invsss
-from invsss.cli import _saturation_level, main
+from invsss.cli import main
+from invsss.cli.fit import saturation_level
 from _pair_files import pair_args, write_pair
 
 SHAPE = (40, 48)
@@ -129,10 +130,10 @@ def test_saturation_auto_sets_no_level_when_a_target_holds_floats(tmp_path):
     paths, _ = _card_on_disk(tmp_path, ".png")
     exr = tmp_path / "card_target.exr"
     with pytest.warns(invsss.InputNotice, match=rf"saturation auto: no clipping level set, as a float target \({exr}\)"):
-        assert _saturation_level("auto", [str(paths["target"]), str(exr)]) is None
-    assert _saturation_level("auto", [str(paths["target"])] * 2) == 1.0
-    assert _saturation_level("0.5", [str(exr)]) == 0.5
-    assert _saturation_level("none", [str(paths["target"])]) is None
+        assert saturation_level("auto", [str(paths["target"]), str(exr)]) is None
+    assert saturation_level("auto", [str(paths["target"])] * 2) == 1.0
+    assert saturation_level("0.5", [str(exr)]) == 0.5
+    assert saturation_level("none", [str(paths["target"])]) is None
 
 
 def test_a_bad_saturation_word_is_a_one_line_error(tmp_path):

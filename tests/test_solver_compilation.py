@@ -13,7 +13,7 @@ import pytest
 import invsss
 from invsss.runtime import executable_cache
 from invsss.estimator import FitOptions, build_problem
-from invsss.estimator.fit import SOLVER_JACOBIAN
+from invsss.estimator.search import SOLVER_JACOBIAN
 from invsss.estimator.solve import NOISE_TOL, RTOL, SCREEN_TOL, compile_solver, make_solver, run_solver
 from invsss.runtime.executable_cache import persistent_jit
 

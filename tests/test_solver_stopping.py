@@ -19,7 +19,7 @@ import optimistix as optx
 import pytest
 
 import invsss
-import invsss.estimator.fit as fit_module
+import invsss.estimator.search as search_module
 from invsss.estimator.solve import gauss_newton_distance, run_solver, stalled
 
 from _estimator_scenes import make_pair
@@ -135,7 +135,7 @@ def test_starts_that_reach_a_known_basin_end_there(monkeypatch, n_starts):
         return invsss.fit_pair(source, target, depth, mask, profile=profile, robust=None, n_starts=n_starts)
 
     ended = fit()
-    monkeypatch.setattr(fit_module, "SAME_BASIN", 0.0)
+    monkeypatch.setattr(search_module, "SAME_BASIN", 0.0)
     walked = fit()
     starts = lambda r: sum(b - a for label, a, b in r.stages if label.startswith("start"))  # noqa: E731
     # The same starts, the same basin: only the later starts' tails are cut.

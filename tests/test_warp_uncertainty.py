@@ -18,7 +18,7 @@ from scipy import ndimage
 
 import invsss
 from invsss.estimator import FitOptions, build_problem
-from invsss.estimator.fit import _WarpSensitivity
+from invsss.estimator.stages.alignment import WarpSensitivity
 from invsss.estimator.uncertainty import gauss_newton_uncertainty, linearise
 from invsss.forward.pair import ImagePair
 from invsss.estimator.registration import Warp, align_source
@@ -102,7 +102,7 @@ def test_the_shift_columns_are_the_gradient_of_the_prediction():
     with jax.enable_x64(True):
         z = problem.z0
         _, _, _, coef, offset = problem.objective.linear(z)
-        columns = _WarpSensitivity(checked, [warp]).columns(problem.objective, z, coef, offset)
+        columns = WarpSensitivity(checked, [warp]).columns(problem.objective, z, coef, offset)
         prediction = np.asarray(problem.objective.predictions(z)[0])[..., 0]
     weight = np.sqrt(np.asarray(problem.objective.weights()[0])[..., 0]) / float(problem.objective.scale)
     # Moving the source side by +t moves the prediction by +t (the blur follows the

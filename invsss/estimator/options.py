@@ -18,10 +18,12 @@ import jax
 import numpy as np
 
 from ..forward.light_terms import LIGHT_TERM_NAMES
-from ..forward.models import get_model
+from ..forward.models import MODEL_NAMES, get_model
 from ..forward.passes import tap_weights as tap_weight_set
+from ..forward.profiles import PROFILE_NAMES
 from ..validation import InvalidInputError
 from .parametrisation import GAUGES, assign_roles, check_fix, resolve_profile
+from .option_text import canvas_from_text, fix_from_text, saturation_from_text
 from .robust import check_robust
 from .solve import SOLVERS
 
@@ -49,53 +51,118 @@ def check_canvas(canvas) -> tuple[int, int]:
     return int(canvas[0]), int(canvas[1])
 
 
+def _option(default, help: str, *, flag: str | None = "", parse=None, cli_default=dataclasses.MISSING,
+            choices=None, **argparse_keywords):
+    """A :class:`FitOptions` field: its default, and how the command line spells it.
+
+    ``flag``: the command line's flag ("" for ``--`` and the field's name with
+    dashes, None for a field the command line does not offer); ``parse``: text ->
+    the field's value; ``cli_default``: the command line's default where its text
+    differs from the field's; ``choices``: a callable giving the allowed values;
+    the rest goes to :meth:`argparse.ArgumentParser.add_argument`.
+    """
+    metadata = {"help": help, "flag": flag, "parse": parse, "choices": choices,
+                "cli_default": default if cli_default is dataclasses.MISSING else cli_default,
+                "argparse": argparse_keywords}
+    return dataclasses.field(default=default, metadata=metadata)
+
+
+def _align_kinds() -> tuple[str, ...]:
+    # Imported when first needed: registration pulls in scikit-image.
+    from .registration import ALIGN_KINDS
+
+    return ALIGN_KINDS
+
+
 # eq=False: ``fix`` holds arrays, whose == is elementwise, so value equality
 # would raise for a fixed weight or variance list; options compare by identity.
 @dataclasses.dataclass(frozen=True, eq=False)
 class FitOptions:
-    """How to fit: the keyword options of :func:`invsss.fit_pair`, checked once.
+    """How to fit: the options of :func:`invsss.fit_pair`, checked once.
+
+    :func:`~invsss.fit_pair` and :func:`~invsss.fit_pairs` take these fields as
+    keywords or as one ``options=FitOptions(...)``; ``invsss fit`` as flags (each
+    field's metadata) and an experiment file as its fit options.
 
     Parameters
     ----------
     model : {"sog", "thesis", "separable"}
     profile : str, path, mapping or SumOfGaussians
-        The sum-of-Gaussians profile (its variances are held in the default gauge;
-        it gives the number of Gaussians and the starting weights).
-    fix : mapping, optional
-        Parameters held at given values, e.g. ``{"maxdd": 0.01}``. Stored as a
-        read-only mapping of float64 arrays.
+        Sum-of-Gaussians profile: in the default gauge its variances are fixed; it
+        also gives the number of Gaussians and the starting values.
+    fix : dict, optional
+        Parameters to hold at given values, e.g. ``{"maxdd": 0.01}`` or
+        ``{"sss_level": 1200.0}``.
     gauge : {"variances", "sss_level"}
+        Which side of the ``L`` / variance-scale degeneracy is fixed: the profile's
+        variances (default), or ``sss_level`` (must be given in ``fix``; the
+        variances are then estimated).
     solver : {"lm", "gauss-newton", "bfgs"}
-    n_starts : int >= 1
-    max_steps : int >= 1
-        Solver steps per start and per refinement round.
-    tap_weights : {"jimenez", "thesis"}, 7 numbers or None
-        None picks the model's default set (:attr:`invsss.forward.models.ScreenSpaceModel.default_tap_weights`).
+    n_starts : int
+        Number of starting points (best grid points of a coarse search).
+    max_steps : int
+        Maximum solver steps per start and per refinement.
+    tap_weights : {"jimenez", "thesis"} or 7 numbers, optional
+        Default "thesis" for the thesis model, else "jimenez".
     robust : {"pseudo-huber", "cauchy"} or None
-        ``"none"`` and False are stored as None.
+        Robust loss by iterative reweighting (see :mod:`invsss.estimator.robust`).
     align : {"none", "translation", "similarity", "affine"}
-        Register the target onto the source inside the fit (:mod:`invsss.estimator.registration`).
+        Register the pair as part of the fit, for photographs that are not
+        pixel-aligned with their render. The warp (source pixels to target pixels)
+        is estimated against the photometrically matched source; the source, depth
+        and mask are resampled onto the target's grid (the noisy target never is:
+        see :mod:`invsss.estimator.registration`) and fitted; the warp is refined against
+        that fit's prediction (which carries the blur, so the blur does not bias
+        the warp), alternating (at most 4 rounds, each a one-start fit of at most
+        30 steps per solve from the previous round's estimate) until the warp
+        moves less than 0.01 px, and the pair fitted again. The warp is in
+        :attr:`FitResult.alignment` and the fitted images are on the target's grid.
+        The standard errors count the warp as estimated too (its parameters join the
+        covariance as nuisance unknowns; their own standard errors are in the
+        alignment record). Target pixels that come from
+        outside the source's frame leave the mask. Two to five times the time of a fit.
     vignetting : bool
-        Fit the camera's radial fall-off as a gain field (:mod:`invsss.estimator.vignetting`).
+        Fit the camera's fall-off toward the corners as a gain field
+        ``1 + a_1 rho^2 + a_2 rho^4`` about the frame's centre
+        (:mod:`invsss.estimator.vignetting`), for photographs; reported in
+        :attr:`FitResult.vignetting`, and the standard errors account for it.
     highlights : bool
-        Refit with the first fit's specular highlights left out (see :func:`invsss.fit_pair`).
-    saturation : float > 0 or None
-        Target level at or above which a pixel is clipped and left out of the fit.
-    light_terms : tuple of str
-        Light-aware terms in the model (:data:`invsss.forward.light_terms.LIGHT_TERM_NAMES`:
-        ``"shift"``, ``"grazing"``, ``"incidence"``, ``"law"``), stored as a tuple in
-        that order. Given as names (a list, or a comma-separated string), each term
-        is fitted; given as a mapping ``{name: value}`` (or ``"shift=1.3,grazing"``),
-        a term with a number is held at it and one with None is fitted (``law``
-        takes one albedo or one per source channel, ``"law=0.93/0.8/0.7"`` in a
-        string). Each needs its buffers on every pair.
+        Leave specular highlights out: after the fit, pixels where the target is
+        brighter than the prediction by more than :data:`~invsss.estimator.stages.highlights.HIGHLIGHT_SIGMAS` robust
+        standard deviations of the residual (smoothed over 1 px; dilated by 1 px)
+        are excluded from the comparison and the pair is fitted again. Reported in
+        :attr:`FitResult.highlights`.
+    saturation : float, optional
+        The target's clipping level (in the target's units, e.g. the decoded value
+        of an 8-bit file's code 255): masked pixels with any channel at or above it
+        are left out of the comparison, and their count is in
+        :attr:`FitResult.warnings`. A clipped pixel reads darker than the light that
+        reached it; about a hundred of them (0.4 % of a face) moved a photograph's
+        fit to a basin with sss_level 50 % high.
+    light_terms : sequence of {"shift", "grazing", "incidence", "law"}, a mapping, or a string
+        Add the light-aware terms of docs/model.md, section 8, to the blur: a
+        shift of the scattered light away from the light (``kappa``, mm), a
+        gain towards grazing view (``gamma``), a gain towards grazing
+        incidence of the key light (``beta``), and a multiple-scattering
+        reflectance law for the key light's part of the source (``w``, an
+        albedo in (0, 1) per source channel). Names are fitted; a mapping
+        ``{"shift": 1.3, "grazing": None}`` holds a term at a value (a value
+        measured on a registered pair, for an aligned fit of a photograph) and
+        fits one given None; a comma-separated string (``"shift=1.3,grazing"``,
+        ``"law=0.93/0.8/0.7"``) says the same. Stored as a tuple of names in
+        canonical order, the held values in ``light_fixed``. Each needs its
+        buffers on every pair (``light_buffers`` of :func:`~invsss.fit_pair`);
+        reported in :attr:`FitResult.light_terms`.
     light_fixed : mapping
         The held values (filled from ``light_terms``; read-only).
-    canvas : (int, int) or None
-        Pad every pair to this (height, width) before fitting, so that pairs of
-        different sizes share one compilation (:mod:`invsss.estimator.canvas`):
-        the estimate is the one at the pair's own size. A pair the padding
-        would change is fitted at its own size, with a warning.
+    canvas : (int, int), optional
+        Fit on a (height, width) canvas at least the pair's size: pairs of
+        different sizes fitted on one canvas share one compilation (a sweep, a
+        loop over photographs), and the estimate is the one at the pair's own
+        size. The pair is padded outside its mask; where the mask reaches its
+        last row or column, or with ``vignetting``, ``light_terms`` or ``align``,
+        it is fitted at its own size and the result warns
+        (:mod:`invsss.estimator.canvas`).
 
     Raises
     ------
@@ -114,26 +181,59 @@ class FitOptions:
     invsss.validation.InvalidInputError: solver: expected one of lm, gauss-newton, bfgs, got 'adam'
     """
 
-    model: str = "sog"
-    profile: object = "thesis-nir"
-    fix: object = None
-    gauge: str = "variances"
-    solver: str = "lm"
-    n_starts: int = 4
-    max_steps: int = 200
-    tap_weights: object = None
-    robust: str | None = "pseudo-huber"
-    align: str = "none"
-    vignetting: bool = False
-    highlights: bool = False
-    saturation: float | None = None
-    light_terms: tuple = ()
-    light_fixed: object = None
-    canvas: tuple | None = None
+    # Each field is the one declaration of its option: its default, and in its
+    # metadata the command line's flag, help and parser (invsss.cli.fit builds the
+    # fit command's arguments from them), and the sweep schema's fit options
+    # (invsss.experiments.schema) take their names and defaults from here.
+    model: str = _option("sog", "screen-space model", choices=lambda: MODEL_NAMES)
+    profile: object = _option(
+        "thesis-nir", f"sum-of-Gaussians profile ({', '.join(PROFILE_NAMES)}, or a JSON file); its variances "
+        "are fixed in the default gauge", metavar="NAME|FILE.json")
+    fix: object = _option(
+        None, "hold parameters at given values: sss_level, correction, maxdd take one number, weights and "
+        "variances a comma-separated list (e.g. --fix maxdd=0.05 variances=0.5,2,8)",
+        action="extend", nargs="+", cli_default=[], metavar="NAME=VALUE", parse=fix_from_text)
+    gauge: str = _option(
+        "variances", "which side of the sss_level/variance-scale degeneracy is fixed: the profile's "
+        "variances, or sss_level (then give --fix sss_level=VALUE)", choices=lambda: GAUGES)
+    solver: str = _option("lm", "nonlinear solver", choices=lambda: SOLVERS)
+    n_starts: int = _option(4, "starting points of the multi-start search", flag="--starts", type=int,
+                            metavar="N")
+    max_steps: int = _option(200, "solver steps per start and per refinement", type=int, metavar="N")
+    tap_weights: object = _option(None, "the 7 tap weights: a set's name or 7 numbers", flag=None)
+    robust: str | None = _option("pseudo-huber", "robust loss (pseudo-huber, cauchy or none)", flag=None)
+    align: str = _option(
+        "none", "register the target onto the source inside the fit, for photographs that are not "
+        "pixel-aligned with their render (two to five times the time; the warp goes into params.json)",
+        choices=lambda: ("none", *_align_kinds()))
+    vignetting: bool = _option(
+        False, "fit the camera's fall-off toward the corners as a gain field 1 + a1 rho^2 + a2 rho^4 "
+        "(for photographs; the field goes into params.json)", action="store_true")
+    highlights: bool = _option(
+        False, "refit with the specular highlights of a first fit's residual left out (for photographs "
+        "without cross-polarisation; their count goes into params.json)", action="store_true")
+    saturation: float | None = _option(
+        None, "the targets' clipping level in their decoded units: masked pixels at or above it are left "
+        "out of the fit, and their count is a warning in params.json. 'auto': 1.0, the top code, when every "
+        "target is an 8- or 16-bit file, and no level for float targets (EXR); 'none': keep every pixel",
+        cli_default="auto", metavar="LEVEL", parse=saturation_from_text)
+    light_terms: tuple = _option(
+        (), "fit light-aware terms on top of the blur (docs/model.md, section 8): 'shift' (light exits "
+        "displaced away from the light; needs --light), 'grazing' (brighter or darker at grazing view; needs "
+        "--normal), 'incidence' (brighter or darker where the key light grazes the skin or misses it; needs "
+        "--normal and --light), 'law' (the key light reflected by a scattering medium's law instead of "
+        "Lambert's, an albedo per source channel; needs --key, --normal and --light), or a list such as "
+        "'shift,law'; 'shift=1.3' holds kappa at a value measured on a registered pair (for --align), "
+        "'law=0.93/0.8/0.7' the albedos", cli_default="none", metavar="TERMS")
+    light_fixed: object = _option(None, "the held light-term values (filled from light_terms)", flag=None)
+    canvas: tuple | None = _option(
+        None, "fit on a canvas of HxW pixels at least every pair's size (e.g. 256x256): pairs of different "
+        "sizes then share their compiled functions, in this process and in the compilation cache, with the "
+        "estimate of a fit at the pair's own size (docs/model.md, section 7)", metavar="HxW",
+        parse=canvas_from_text)
 
     def __post_init__(self):
-        from .registration import ALIGN_KINDS
-
+        ALIGN_KINDS = _align_kinds()
         if self.canvas is not None:
             object.__setattr__(self, "canvas", check_canvas(self.canvas))
 

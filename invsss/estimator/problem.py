@@ -49,6 +49,9 @@ def _initial_weights(profile_weights, k, channels):
     return w / w.sum(axis=0)
 
 
+# Over 80 lines, kept whole: one short block per parameter block in the order of
+# the layout it builds, each reading the ones before it (fixed weights set the
+# variances' start, the light terms follow the buffers).
 def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, light_terms=(), light_fixed=None):
     """The parametrisation and the natural starting values of the free blocks."""
     c_src, c_tgt = pairs[0].channels

@@ -167,6 +167,9 @@ def linearise(objective, z, coef, offset) -> dict:
     }
 
 
+# Over 80 lines, kept whole: the steps of one covariance on shared intermediates -
+# the robust scale, the scaled normal matrix and its null directions, the
+# cluster-robust sandwich, the nuisance columns, the reported values' errors.
 def gauss_newton_uncertainty(
     objective, lin: dict, correction_ref: float, robust=None, nuisance=None, blocks: bool = True
 ) -> Uncertainty:

@@ -41,10 +41,11 @@ content (pydantic's own message for an extra key does not say what was meant).
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 from typing import Literal, Optional, Union
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator
 
 from ..validation import InvalidInputError
 
@@ -55,6 +56,7 @@ __all__ = [
     "SampleSpec",
     "ExperimentSpec",
     "FitTaskOptions",
+    "fit_options",
     "RenderTaskOptions",
     "FIX_NAMES",
     "check_keys",
@@ -127,9 +129,11 @@ class ExperimentSpec(BaseModel):
     sample: Optional[SampleSpec] = None
 
 
-class FitTaskOptions(BaseModel):
-    """Options of a ``fit`` / ``fit-joint`` trial: those of :func:`invsss.fit_pair`.
+class _FitTaskBase(BaseModel):
+    """Options of a ``fit`` / ``fit-joint`` trial: the fields of :class:`invsss.estimator.FitOptions`.
 
+    Each field's name and default come from ``FitOptions`` (its one declaration);
+    those whose value has no TOML form are spelled as :data:`_TOML_FORMS` says.
     ``robust = "none"`` turns the robust loss off (TOML has no null).
     ``light_terms`` takes the names as one string (``"shift,grazing"``, or
     ``"shift=1.3,grazing"`` to hold the shift) or a list of names; it needs
@@ -142,23 +146,8 @@ class FitTaskOptions(BaseModel):
     """
 
     model_config = _STRICT
-    model: str = "sog"
-    profile: _Profile = "thesis-nir"
-    fix: dict[str, Union[float, _Numbers, list[_Numbers]]] = {}
-    gauge: str = "variances"
-    solver: str = "lm"
-    n_starts: int = 4
-    max_steps: int = 200
-    tap_weights: _Taps = None
-    robust: str = "pseudo-huber"
-    align: str = "none"
-    vignetting: bool = False
-    highlights: bool = False
-    light_terms: str = ""
-    saturation: Union[Literal["auto"], float, None] = None
-    canvas: Optional[list[int]] = None
 
-    @field_validator("light_terms", mode="before")
+    @field_validator("light_terms", mode="before", check_fields=False)
     @classmethod
     def _one_string(cls, value):
         # One spelling per choice ("shift,grazing"), so that equal choices give
@@ -168,6 +157,62 @@ class FitTaskOptions(BaseModel):
         if isinstance(value, str) and value.strip().lower() in ("", "none"):
             return ""
         return value
+
+
+#: The TOML spelling (type, default) of the FitOptions fields whose Python value
+#: has none (TOML has no null or tuple); None keeps the field's own default.
+_TOML_FORMS = {
+    "profile": (_Profile, None),
+    "fix": (dict[str, Union[float, _Numbers, list[_Numbers]]], {}),
+    "tap_weights": (_Taps, None),
+    "robust": (str, None),
+    "light_terms": (str, ""),
+    "saturation": (Union[Literal["auto"], float, None], None),
+    "canvas": (Optional[list[int]], None),
+}
+#: FitOptions fields an experiment file does not set (filled from others).
+_NOT_IN_FILES = ("light_fixed",)
+#: The annotations of the plain fields, as options.py writes them.
+_PLAIN_TYPES = {"bool": bool, "int": int, "float": float, "str": str,
+                "float | None": Optional[float], "str | None": Optional[str], "int | None": Optional[int]}
+
+
+def _fit_task_fields() -> dict:
+    from ..estimator.options import FitOptions
+
+    out = {}
+    for field in dataclasses.fields(FitOptions):
+        if field.name in _NOT_IN_FILES:
+            continue
+        if field.name in _TOML_FORMS:
+            annotation, default = _TOML_FORMS[field.name]
+            out[field.name] = (annotation, field.default if default is None else default)
+        elif field.type in _PLAIN_TYPES:
+            out[field.name] = (_PLAIN_TYPES[field.type], field.default)
+        else:
+            # A new option whose type has no plain TOML form: say where to add it.
+            raise TypeError(f"FitOptions.{field.name}: add its TOML form to invsss.experiments.schema._TOML_FORMS")
+    return out
+
+
+FitTaskOptions = create_model("FitTaskOptions", __base__=_FitTaskBase, **_fit_task_fields())
+FitTaskOptions.__doc__ = _FitTaskBase.__doc__
+
+
+def fit_options(options: dict):
+    """The :class:`~invsss.estimator.FitOptions` of a trial's validated fit options.
+
+    ``saturation = "auto"`` gives None: the runner resolves it from the trial's
+    files before the fit (checking the other options needs no files).
+    """
+    from ..estimator.options import FitOptions
+
+    keywords = dict(options)
+    keywords["fix"] = keywords["fix"] or None
+    keywords["robust"] = None if keywords["robust"] == "none" else keywords["robust"]
+    if keywords.get("saturation") == "auto":
+        keywords["saturation"] = None
+    return FitOptions(**keywords)
 
 
 class RenderTaskOptions(BaseModel):

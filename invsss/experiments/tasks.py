@@ -24,6 +24,7 @@ import numpy as np
 
 from ..forward.params import PARAM_NAMES, SSSParams
 from ..validation import InvalidInputError
+from .schema import fit_options
 
 __all__ = ["TaskOutput", "TrialInterrupted", "check_task_options", "run_task"]
 
@@ -42,17 +43,6 @@ class TaskOutput:
     metrics: dict
     warnings: list
     files: dict  # name -> writer(path)
-
-
-def _fit_keywords(options: dict) -> dict:
-    keywords = dict(options)
-    keywords["fix"] = keywords["fix"] or None
-    keywords["robust"] = None if keywords["robust"] == "none" else keywords["robust"]
-    if keywords.get("saturation") == "auto":
-        # The level comes from the trial's files (the runner resolves it before
-        # the fit); checking the other options needs no files.
-        keywords["saturation"] = None
-    return keywords
 
 
 def _render_values(options: dict) -> dict:
@@ -97,9 +87,7 @@ def check_task_options(task: str, options: dict) -> None:
             except (ValueError, TypeError) as err:
                 raise InvalidInputError(f"tap_weights: {err}") from None
     else:
-        from ..estimator import FitOptions
-
-        FitOptions(**_fit_keywords(options))
+        fit_options(options)
 
 
 def _image_writer(image) -> Callable[[str], None]:
@@ -141,16 +129,13 @@ def run_task(task: str, options: dict, pairs: list, stop=None) -> TaskOutput:
     """Run ``task`` on the loaded ``pairs`` (:class:`invsss.ImagePair`)."""
     if task == "render":
         return _render(options, pairs[0])
-    from ..estimator import FitInterrupted, fit_pair, fit_pairs
+    from ..estimator import FitInterrupted
+    from ..estimator.fit import run_fit
 
     try:
-        if task == "fit":
-            pair = pairs[0]
-            # A pair without buffers hands an empty LightBuffers, as the CLI does.
-            result = fit_pair(pair.source, pair.target, pair.depth, pair.mask, stop=stop,
-                              light_buffers=pair.light_buffers, **_fit_keywords(options))
-        else:
-            result = fit_pairs(pairs, stop=stop, **_fit_keywords(options))
+        # The command line's entry point too (invsss.cli.fit): "fit" is one pair,
+        # "fit-joint" one set of parameters for every pair.
+        result = run_fit(pairs, task == "fit", fit_options(options), stop=stop)
     except FitInterrupted:
         raise TrialInterrupted() from None
     if result.interrupted:

@@ -46,10 +46,13 @@ def trial_id(config: dict) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
-#: Fit options added after the first release, with the defaults that leave a
-#: trial's id unchanged.
-LATER_OPTIONS = {"align": "none", "vignetting": False, "highlights": False, "light_terms": "", "saturation": None,
-                 "canvas": None}
+#: The fit options of the first release; every later one (align, vignetting,
+#: highlights, light_terms, saturation, canvas, and any added to FitOptions
+#: since) leaves a trial's id unchanged while it holds its default.
+FIRST_OPTIONS = ("model", "profile", "fix", "gauge", "solver", "n_starts", "max_steps", "tap_weights", "robust")
+#: The later fit options with their defaults (an experiment file's, :class:`~.schema.FitTaskOptions`).
+LATER_OPTIONS = {name: field.default for name, field in FitTaskOptions.model_fields.items()
+                 if name not in FIRST_OPTIONS}
 
 
 @dataclasses.dataclass(frozen=True)

@@ -169,6 +169,9 @@ def _spot_centre(skin):
     return float(rows.mean()), float(cols.mean())
 
 
+# Over 80 lines, kept whole: the four steps of the thesis's measurement in their
+# order (the reference, the band, one sample per distance bin, the normalisation),
+# each on the same two images and numbered in the body.
 def measure_profile(
     skin_image,
     spectralon_image,

@@ -122,6 +122,8 @@ def _grey_media(coefficients: dict) -> list[dict]:
     return [{**coefficients, "sigma_s_prime": [s[c]], "sigma_a": [a[c]]} for c in range(len(s))]
 
 
+# Over 80 lines, kept whole: the passes one after another on one Mitsuba scene
+# (source, key, depth, normals, light, target halves), sharing its seeds.
 def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = None, *,
                  target: bool = True) -> SceneRender:
     """Render every pass of ``config`` and return the pair, its geometry and ``scene.json``.

@@ -1,0 +1,280 @@
+"""``invsss fit``: estimate the parameters from image pairs and write a result directory.
+
+The fit's options are :class:`~invsss.estimator.FitOptions` fields: each one's flag, default,
+choices and help come from the field (:func:`add_fit_option_arguments`), and the
+parsed command line becomes one ``FitOptions`` (:func:`fit_options_from`) handed
+to :func:`~invsss.estimator.fit.run_fit`, the entry point the sweeps use too.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import os
+import signal
+import sys
+import tempfile
+import threading
+import time
+
+import numpy as np
+
+from ..estimator import FitInterrupted
+from ..runtime.interrupts import StopSignals
+from ..io import load_pair, shared_clipping_level, write_image, write_params
+from ..io.result_dir import ResultDir, ResultWriteError
+from ..forward.pair import ImagePair
+from ..validation import InvalidInputError
+
+import dataclasses
+from ..estimator.fit import run_fit
+from ..estimator.option_text import saturation_from_text
+from ..estimator.options import FitOptions
+from .progress import ProgressLine, compile_seconds
+from .arguments import add_no_cache_argument, read_key_buffer, read_light_buffer
+
+
+#: The flags that give one file per pair.
+_PAIR_FLAGS = ("source", "target", "depth", "mask")
+
+
+def add_parser(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "fit",
+        help="estimate the scattering parameters from source/target image pairs",
+        description="Fit the screen-space SSS parameters that turn SOURCE into TARGET. "
+        "Repeat --source/--target/--depth/--mask (the same number of times, matched in "
+        "order) to fit one set of parameters to several pairs. Writes DIR/params.json "
+        "(the estimate, its standard errors and the fit report; written first), "
+        "DIR/fit.exr (the fitted prediction; fit_0.exr, fit_1.exr, ... for several "
+        "pairs), DIR/report.png (images, residuals, convergence, parameters) and "
+        "DIR/invsss-manifest.json (which files make the result, and whether it is "
+        "complete; docs/outputs.md).",
+    )
+    parser.add_argument("--source", action="append", required=True,
+                        help="linear image without scattering (repeat for several pairs)")
+    parser.add_argument("--target", action="append", required=True,
+                        help="linear photograph to match, 1 or 3 channels (repeat)")
+    parser.add_argument("--depth", action="append", required=True,
+                        help="depth: float EXR, NPY or 16-bit PNG (repeat)")
+    parser.add_argument("--mask", action="append", required=True,
+                        help="skin mask, values in [0, 1] (repeat)")
+    parser.add_argument(
+        "--depth-scale",
+        type=float,
+        default=1.0,
+        help="multiplies every stored depth (unit conversion, e.g. 1000 for metres to mm)",
+    )
+    add_fit_option_arguments(parser)
+    parser.add_argument("--light", action="append", default=[], metavar="FILE",
+                        help="camera-space unit vectors towards the light, float EXR or NPY (H, W, 3), "
+                        "on the source's grid (repeat per pair)")
+    parser.add_argument("--normal", action="append", default=[], metavar="FILE",
+                        help="camera-space unit normals (x right, y up, z to the camera), float EXR or "
+                        "NPY (H, W, 3) (repeat per pair)")
+    parser.add_argument("--key", action="append", default=[], metavar="FILE",
+                        help="the source lit by the key light alone (the light --light points to), the "
+                        "source's size and channels, read as the source is (repeat per pair; "
+                        "'invsss scene' writes it as key.exr)")
+    parser.add_argument(
+        "--linear-codes",
+        action="store_true",
+        help="the source and target images' integer codes are linear values: do not "
+        "decode 8-bit files as sRGB",
+    )
+    parser.add_argument("--out", required=True, metavar="DIR",
+                        help="output directory (created if missing); a directory that "
+                        "already holds a result is refused unless --overwrite is given")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace the result already in DIR (its files only; other "
+                        "files in DIR are kept)")
+    add_no_cache_argument(parser)
+    parser.set_defaults(func=run)
+
+
+def _fit_option_fields():
+    """The :class:`FitOptions` fields the command line offers, with their flags."""
+    for field in dataclasses.fields(FitOptions):
+        flag = field.metadata["flag"]
+        if flag is not None:
+            yield field, flag or "--" + field.name.replace("_", "-")
+
+
+def add_fit_option_arguments(parser: argparse.ArgumentParser) -> None:
+    """One argument per :class:`FitOptions` field, with its flag, default, choices
+    and help taken from the field (options.py is their one declaration)."""
+    for field, flag in _fit_option_fields():
+        meta = field.metadata
+        keywords = dict(meta["argparse"])
+        if meta["choices"] is not None:
+            keywords["choices"] = tuple(meta["choices"]())
+        default = meta["cli_default"]
+        shown = "none" if default in (None, ()) and keywords.get("action") != "store_true" else default
+        help_text = meta["help"]
+        if keywords.get("action") not in ("store_true", "extend"):
+            help_text += f" (default: {shown})"
+        parser.add_argument(flag, dest=field.name, default=default, help=help_text, **keywords)
+
+
+def fit_options_from(args: argparse.Namespace) -> FitOptions:
+    """The :class:`FitOptions` of a parsed command line, checked before any file is
+    read. ``--saturation auto`` gives None here: :func:`run` resolves it from the
+    targets' files (:func:`~invsss.io.shared_clipping_level`) once the output
+    directory is locked."""
+    values = {}
+    for field, flag in _fit_option_fields():
+        value = getattr(args, field.name)
+        parse = field.metadata["parse"]
+        values[field.name] = value if parse is None else parse(value, flag)
+    if values.get("saturation") == "auto":
+        values["saturation"] = None
+    try:
+        return FitOptions(**values)
+    except InvalidInputError as err:
+        # FitOptions names the field; the user typed its flag.
+        text = str(err)
+        for field, flag in _fit_option_fields():
+            if text.startswith((f"{field.name}:", f"{field.name}[")):
+                text = flag + text[len(field.name):]
+                break
+        raise InvalidInputError(text) from None
+
+
+def saturation_level(text: str, targets: list[str]) -> float | None:
+    """``--saturation``: a number, 'none', or 'auto' (the ``targets``' own clipping level)."""
+    level = saturation_from_text(text)
+    return shared_clipping_level(targets) if level == "auto" else level
+
+
+def _check_pair_counts(args: argparse.Namespace) -> int:
+    counts = {flag: len(getattr(args, flag)) for flag in _PAIR_FLAGS}
+    if len(set(counts.values())) > 1:
+        given = ", ".join(f"{n} --{flag}" for flag, n in counts.items())
+        raise InvalidInputError(
+            f"--source/--target/--depth/--mask: expected the same number of each "
+            f"(one per pair), got {given}"
+        )
+    return counts["source"]
+
+
+def _with_light_buffers(pairs, args):
+    """The pairs with the --normal, --light and --key buffers attached (the vectors read
+    as linear floats, the key as the source is)."""
+    for flag in ("light", "normal", "key"):
+        given = getattr(args, flag)
+        if given and len(given) != len(pairs):
+            raise InvalidInputError(f"--{flag}: expected one per pair ({len(pairs)}), got {len(given)}")
+    out = []
+    for k, pair in enumerate(pairs):
+        normal = read_light_buffer(args.normal[k], "normal", pair.mask.shape) if args.normal else None
+        light = read_light_buffer(args.light[k], "light", pair.mask.shape) if args.light else None
+        key = read_key_buffer(args.key[k], pair.source, args.linear_codes) if args.key else None
+        out.append(ImagePair(pair.source, pair.target, pair.depth, pair.mask, normal=normal, light=light, key=key))
+    return out
+
+
+def _fit_file_names(count: int) -> list[str]:
+    images = ["fit.exr"] if count == 1 else [f"fit_{k}.exr" for k in range(count)]
+    return ["params.json", *images, "report.png"]
+
+
+def run(args: argparse.Namespace, stop: StopSignals) -> int:
+    options = fit_options_from(args)
+    count = _check_pair_counts(args)
+    names = _fit_file_names(count)
+    # Lock and check the output directory before reading anything, so a rerun
+    # into a finished result or a busy directory is refused at once.
+    with ResultDir(args.out, overwrite=args.overwrite, names=names) as out:
+        pairs = [
+            load_pair(s, t, d, m, depth_scale=args.depth_scale, linear_codes=args.linear_codes)
+            for s, t, d, m in zip(args.source, args.target, args.depth, args.mask)
+        ]
+        pairs = _with_light_buffers(pairs, args)
+        if args.saturation == "auto":
+            options = dataclasses.replace(options, saturation=saturation_level("auto", args.target))
+        # The report needs matplotlib (0.3-0.4 s to import, seconds while it builds
+        # its font cache); import it beside the fit, whose solver steps leave the
+        # interpreter free while XLA computes. Not a daemon: a process that ends
+        # while a daemon thread runs compiled code (a fit interrupted at once) can
+        # abort in C++ during shutdown (seen in CI: exit status -6 instead of 130).
+        threading.Thread(
+            target=importlib.import_module, args=("invsss.cli.report",), name="invsss-import-report"
+        ).start()
+        compiled_before = compile_seconds()
+        progress = ProgressLine(sys.stderr, lambda: compile_seconds() - compiled_before)
+        height, width, _ = pairs[0].source.shape
+        progress.show(f"fit: {count} pair(s), {width}x{height}, model {args.model}: searching starting points")
+
+        def stopping(signum):
+            progress.close()
+            print(
+                f"invsss: {signal.Signals(signum).name}: stopping after the current solver step "
+                "and saving the best estimate (send it again to quit without saving)",
+                file=sys.stderr, flush=True,
+            )
+
+        # From here a first Ctrl-C or SIGTERM asks the fit to stop and the result
+        # is still written; a second one quits at once.
+        with stop.deferred(stopping):
+            try:
+                result = run_fit(pairs, count == 1, options, progress, stop)
+            except FitInterrupted:
+                progress.close()
+                print("invsss: interrupted before the first solver step; nothing written", file=sys.stderr)
+                return stop.exit_status or 130
+            finally:
+                progress.close()
+            for message in result.warnings:
+                print(f"invsss: warning: {message}", file=sys.stderr)
+            written = _write_fit(out, names, result, pairs)
+        if written is None:
+            return 1
+    if stop.exit_status is not None:
+        print(
+            f"invsss: interrupted after {result.iterations} iterations; wrote the best estimate "
+            f"so far (\"interrupted\": true) to {', '.join(written)}",
+            file=sys.stderr,
+        )
+        return stop.exit_status
+    print(
+        f"fit: loss {result.loss:.4g}  PSNR {result.psnr:.2f} dB  SSIM {result.ssim:.4f}  "
+        f"{'converged' if result.converged else 'NOT converged'} ({result.iterations} iterations); "
+        f"wrote {', '.join(written)}"
+    )
+    return 0
+
+
+def _write_fit(out: ResultDir, names: list[str], result, pairs) -> list[str] | None:
+    """Commit the fit's files to ``out``; on failure keep the estimate elsewhere and say where."""
+    # matplotlib is only needed here; `invsss render` should not pay for importing it.
+    from .report import plot_fit_report
+
+    content = result.to_dict()
+    writers = {"params.json": lambda path: write_params(path, content)}
+    for name, image in zip(names[1:-1], result.fitted):
+        writers[name] = lambda path, image=image: write_image(path, np.asarray(image, np.float32))
+    writers["report.png"] = lambda path: plot_fit_report(result, pairs, path)
+    info = {"command": "fit", "converged": bool(result.converged),
+            "interrupted": bool(content.get("interrupted", False))}
+    try:
+        return out.commit(writers, info)
+    except ResultWriteError as err:
+        print(f"invsss: error: {err}; {_save_elsewhere(content)}", file=sys.stderr)
+        return None
+
+
+def _save_elsewhere(content: dict) -> str:
+    """Keep a fit whose output directory failed: a file in the temp directory, else stdout."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    path = os.path.join(tempfile.gettempdir(), f"invsss-unsaved-{stamp}-{os.getpid()}.params.json")
+    try:
+        write_params(path, content)
+        return f"the estimate was saved to {path}"
+    except (OSError, InvalidInputError):
+        sys.stdout.write(json.dumps(content, indent=2, default=_jsonable) + "\n")
+        return "the estimate was printed on standard output"
+
+
+def _jsonable(value):
+    return value.tolist() if hasattr(value, "tolist") else str(value)

@@ -1,0 +1,189 @@
+"""The fit's innermost stage and what every stage shares.
+
+:class:`FitCall` is what a stage receives; :func:`core` is the stage inside all
+others: build the problem (:func:`~.problem.build_problem`), solve it
+(:func:`~.search.solve`) and report (:func:`~.summary.summarise`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+from collections.abc import Callable, Sequence
+
+import jax
+import numpy as np
+
+from ..forward.params import PARAM_NAMES, SSSParams
+from .canvas import crop
+from .options import FitOptions
+from .parametrisation import by_unknown
+from .problem import build_problem
+from .result import FitResult
+from . import search
+from .search import solve
+from .solve import NOISE_TOL, SCREEN_TOL, compile_solver, make_solver
+from .summary import mean_psnr, summarise
+
+__all__ = ["Fit", "FitCall", "Steps", "core", "estimate_of", "psnr_on_mask"]
+
+
+class Steps:
+    """Every solver step of the fit, in the order taken: the loss history, the
+    stage each step belongs to, the progress callback and the stop poll."""
+
+    def __init__(self, progress, stop, to_loss):
+        self.progress, self.stop, self.to_loss = progress, stop, to_loss
+        self.losses: list[float] = []
+        self.stages: list[tuple[str, int, int]] = []
+
+    def begin(self, label: str) -> None:
+        self.stages.append((label, len(self.losses), len(self.losses)))
+
+    def __call__(self, half_sum_squares: float) -> None:
+        self.losses.append(half_sum_squares * self.to_loss)
+        label, first, _ = self.stages[-1]
+        self.stages[-1] = (label, first, len(self.losses))
+        if self.progress is not None:
+            self.progress(len(self.losses), self.losses[-1])
+
+    def stop_requested(self) -> bool:
+        return self.stop is not None and bool(self.stop())
+
+
+@dataclasses.dataclass(frozen=True)
+class FitCall:
+    """One call of a fit stage: the pairs, the options and the run's callbacks.
+
+    A stage (:mod:`.stages`) takes the stage inside it and returns a function of a
+    ``FitCall``; it passes the call on changed (fewer pixels, another
+    registration, a start) and never re-enters the whole fit.
+
+    Attributes
+    ----------
+    pairs : sequence of (source, target, depth, mask) or ImagePair
+    single : bool
+        One pair (``fit_pair``): the report's per-pair arrays lose their first axis.
+    options : FitOptions
+    progress, stop : callable or None
+        As for :func:`invsss.fit_pair`.
+    nuisance : WarpSensitivity or None
+        An aligned fit's warp, counted in the final fit's covariance.
+    start : dict or None
+        Natural values that replace the start scan (:func:`build_problem`).
+    nested : dict or None
+        The contained model's estimate, every added term at its identity: a start
+        the fit keeps among its best (:func:`build_problem`).
+    after_solve : callable or None
+        ``after_solve(problem, path, result) -> FitResult``, called on the solved
+        problem before the parameters are rebuilt (the light terms measure what
+        each term adds there).
+    """
+
+    pairs: Sequence
+    single: bool
+    options: FitOptions
+    progress: Callable | None = None
+    stop: Callable | None = None
+    nuisance: object = None
+    start: dict | None = None
+    nested: dict | None = None
+    after_solve: Callable | None = None
+
+
+#: A fit stage's type: a FitCall in, a FitResult out.
+Fit = Callable[[FitCall], FitResult]
+
+
+def core(call: FitCall) -> FitResult:
+    """The innermost stage: build the problem, solve it and report (steps 1-5 of
+    :mod:`invsss.estimator.fit`), with every option the stages around it handle
+    left to them."""
+    options = call.options
+    compiling = SolverCompilation(options)
+    problem = build_problem(call.pairs, options, call.start, compiling.start, nested=call.nested)
+    with jax.enable_x64(True):
+        steps = Steps(call.progress, call.stop, problem.to_loss)
+        path = solve(problem, options, steps, compiling.wait)
+        result = summarise(problem, path, call.single, steps, call.nuisance)
+        if call.after_solve is not None:
+            result = call.after_solve(problem, path, result)
+    # Rebuild the parameters outside float64 mode: the caller gets arrays of their
+    # own default precision, ready for render().
+    params = SSSParams(*(np.asarray(result.values[k]) for k in PARAM_NAMES))  # host arrays: no compile
+    return dataclasses.replace(
+        result, params=params, solver=options.solver, profile=options.profile_label,
+        tap_weights=options.tap_label,
+    )
+
+
+def psnr_on_mask(problem, predictions) -> float:
+    """PSNR over the pairs where the residual counted, at each pair's own size."""
+    fitted = [crop(np.asarray(q), shape) for q, shape in zip(predictions, problem.shapes)]
+    return mean_psnr(fitted, [np.asarray(p.target) for p in problem.given],
+                      [np.asarray(p.residual_weight) for p in problem.given])
+
+
+class SolverCompilation:
+    """The solver's step compiled on a second thread while the start scan runs.
+
+    A cold fit compiles two big functions: the loss the scan evaluates and the
+    solver's step. The scan needs only the first, so the second compiles beside
+    it (and beside the scan itself) rather than after it.
+
+    On data_synthetic/fran_front (2 cores) the cold ``fit_pair`` went from 16.6
+    to 13.7 s (medians of three runs alternating with the code before,
+    experiments/bench_fit.py --breakdown). That is less than the step's 4.6 s
+    of compilation: XLA's compilation keeps more than one core busy at times,
+    and the two traces share the interpreter. The command line's cold fit
+    gained less, within that machine's noise (medians 20.3 and 19.8 s); there
+    the report's import shares the interpreter too. When the step is compiled
+    already (a second fit in the process), the thread only sets up a solver
+    state, a few milliseconds.
+
+    ``start(problem)`` is :func:`build_problem`'s ``before_scan``. ``wait()``
+    joins the thread before the first solve, so the two never compile the same
+    function at once; a fit stopped before its first step does not wait. A
+    failure on the thread is ignored: the solve then compiles the step itself
+    and reports whatever is wrong.
+    """
+
+    def __init__(self, options: FitOptions):
+        self.options = options
+        self.thread: threading.Thread | None = None
+
+    def start(self, problem) -> None:
+        def compile_step():
+            try:
+                # float64 mode is a per-thread setting.
+                with jax.enable_x64(True):
+                    solver = make_solver(self.options.solver, tolerance=SCREEN_TOL)
+                    # device_put, not jnp.asarray: that compiles a small copy for the shape.
+                    z = jax.device_put(np.asarray(problem.z_base, np.float64))
+                    # Read from the module at run time: experiments/bench_fit.py --jacobian sets it there.
+                    compile_solver(solver, problem.objective, z, NOISE_TOL, search.SOLVER_JACOBIAN)
+            except Exception:  # noqa: BLE001 - the solve compiles it again and says what is wrong
+                pass
+
+        # Not a daemon: a process that ends while XLA compiles on a daemon thread
+        # (a fit interrupted during its scan) can abort in C++ as the interpreter
+        # shuts down (seen: exit status -6 instead of 130). It waits instead.
+        self.thread = threading.Thread(target=compile_step, name="invsss-compile-solver")
+        self.thread.start()
+
+    def wait(self) -> None:
+        if self.thread is not None:
+            self.thread.join()
+            self.thread = None
+
+
+def estimate_of(result) -> dict:
+    """A fit's natural values, as :func:`build_problem` takes them for ``start``."""
+    out = {k: result.values[k] for k in PARAM_NAMES}
+    if result.mix is not None:
+        out["mix"] = result.mix
+    if result.vignetting is not None:
+        out["vignetting"] = np.asarray(result.vignetting["coefficients"])
+    if result.light_terms is not None:
+        out.update(by_unknown(result.light_terms))
+    return out

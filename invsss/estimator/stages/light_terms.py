@@ -1,0 +1,142 @@
+"""Stage: the light-aware terms, fitted as an extension of the plain model (docs/model.md, section 8)."""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax
+import numpy as np
+
+from ...forward.light_terms import AFTER_BLUR
+from ..core import Fit, FitCall, estimate_of, psnr_on_mask
+from ..options import FitOptions
+from ..parametrisation import LIGHT_UNKNOWNS
+from ..problem import _evaluate
+from ..result import FitResult
+
+__all__ = ["against_plain", "plain_model", "term_bounds", "with_light_terms"]
+
+
+#: Every light term's unknown at its identity (docs/model.md, section 8): no
+#: shift, no gain, the law at strength 0 (its albedo then does nothing).
+IDENTITY = {"light_shift": 0.0, "grazing": 0.0, "incidence": 0.0, "law_strength": 0.0}
+#: A term set that scores this much (dB) below the plain fit on the fit's own
+#: mask is not kept: the plain fit is returned, with every term at its identity.
+WORSE_THAN_PLAIN_DB = 0.0
+#: A term that adds less than this (dB) to the fit's PSNR, measured by setting it
+#: to its identity in the final fit, is reported as not describing the pair.
+NEGLIGIBLE_DB = 0.05
+
+
+def with_light_terms(inner: Fit) -> Fit:
+    """The stage that fits the light terms (``light_terms``) as an extension of the plain model.
+
+    The terms nest the plain model (each has a value that is the identity): the
+    plain model is fitted first, and its estimate, every term at its identity, is
+    the start the fit with the terms keeps among its best, so that its loss ends at
+    or below the plain fit's. :func:`against_plain` then measures what each term
+    added and falls back to the plain fit when the terms scored below it. A call
+    with its own ``start`` (an alignment round after the first) skips the plain fit.
+    """
+
+    def fit(call: FitCall) -> FitResult:
+        options = call.options
+        if not options.light_terms or call.start is not None:
+            return inner(call)
+        plain = inner(dataclasses.replace(call, options=plain_model(options)))
+        if plain.interrupted:
+            return plain
+        # Looked up at call time, so that a test can replace it.
+        compare = functools.partial(_compare_with_plain, plain=plain)
+        return inner(dataclasses.replace(call, nested={**estimate_of(plain), **IDENTITY}, after_solve=compare))
+
+    return fit
+
+
+def plain_model(options: FitOptions) -> FitOptions:
+    """The contained model's options: the same fit without light terms."""
+    return dataclasses.replace(options, light_terms=(), light_fixed={})
+
+
+def _compare_with_plain(problem, path, result, *, plain):
+    return against_plain(problem, path, result, plain)
+
+
+def against_plain(problem, path, result, plain) -> FitResult:
+    """Measure what each term adds to the plain fit (``psnr_plain``, ``psnr_without``
+    in the terms' record), warn about terms that did not help, and fall back to the
+    plain fit when the terms together scored below it."""
+    record = dict(result.light_terms)
+    layout = problem.param.layout()
+    without = {}
+    for term, name in LIGHT_UNKNOWNS.items():
+        if term == "law_strength" or term not in record:
+            continue
+        knocked = "law_strength" if term == "law" else name
+        if knocked not in layout:
+            continue  # a held term: its value is the user's
+        first, stop = layout[knocked]
+        z = np.asarray(path.z, np.float64).copy()
+        z[first:stop] = 0.0
+        predictions = _evaluate(path.objective, jax.device_put(z), np.asarray(False))["predictions"]
+        without[term] = psnr_on_mask(problem, predictions)
+    record["psnr_plain"] = plain.psnr
+    record["psnr_without"] = without
+    messages = list(result.warnings)
+    if result.psnr < plain.psnr - WORSE_THAN_PLAIN_DB and not result.interrupted:
+        held = {term: 0.0 for term in AFTER_BLUR if term in record}
+        if "law" in record:
+            held["law_strength"] = 0.0
+        identity = {**record, **held, "psnr_without": {}, "fallback": True}
+        identity["stderr"] = {term: None for term in record["stderr"]}
+        message = (
+            f"light_terms: the fit with {', '.join(sorted(without) or record)} scored "
+            f"{plain.psnr - result.psnr:.2g} dB below the plain fit ({result.psnr:.2f} against "
+            f"{plain.psnr:.2f} dB): the terms do not describe this pair, and the plain fit is returned, "
+            "every term at its identity"
+        )
+        return dataclasses.replace(plain, light_terms=identity, warnings=(*plain.warnings, message))
+    messages.extend(term_bounds(record))
+    for term, value in without.items():
+        if result.psnr - value < NEGLIGIBLE_DB:
+            messages.append(
+                f"light_terms.{term}: adds {result.psnr - value:+.3f} dB to the fit (PSNR {result.psnr:.2f} dB "
+                f"with it, {value:.2f} dB with it at its identity): it does not describe this pair; leave it out"
+            )
+    return dataclasses.replace(result, light_terms=record, warnings=tuple(messages))
+
+
+#: The law's albedo this close to 0 or 1 is at the edge of its range: the
+#: sigmoid that maps it flattens, and the fit pushes on it because the law does
+#: not describe the data (an unseen face ended at 0.99993 with the law making
+#: the fit 12 dB worse).
+ALBEDO_EDGE = 1e-3
+#: A gain term this close to -1 darkens to nothing.
+GAIN_EDGE = 0.99
+
+
+def term_bounds(record) -> list[str]:
+    """Warnings for light-term values at the edge of their range."""
+    out = []
+    if "law" in record and "law" not in record["fixed"]:
+        w = np.atleast_1d(np.asarray(record["law"], np.float64))
+        edge = (w < ALBEDO_EDGE) | (w > 1.0 - ALBEDO_EDGE)
+        if edge.any():
+            out.append(
+                f"light_terms.law: the albedo ended at {'/'.join(f'{x:.5g}' for x in w)}, at the edge of (0, 1): "
+                "the law does not describe this pair there, and its standard error is not meaningful"
+            )
+    if "law_strength" in record:
+        a = float(record["law_strength"])
+        err = record["stderr"].get("law_strength")
+        margin = 2.0 * err if err is not None else 0.0
+        if a < -margin or a > 1.0 + margin:
+            out.append(
+                f"light_terms.law_strength: {a:.3g} is outside [0, 1] (by more than two standard errors): "
+                "the fit extrapolates the blend of Lambert's and the law's reflection, which no medium does"
+            )
+    for term in ("grazing", "incidence"):
+        if term in record and term not in record["fixed"] and float(record[term]) <= -GAIN_EDGE:
+            out.append(f"light_terms.{term}: {float(record[term]):.4g} is at its bound -1 (a gain near 0)")
+    return out
