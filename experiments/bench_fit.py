@@ -396,7 +396,7 @@ def breakdown_child(pair_dir: str, cache_dir: str) -> None:
     stages.wrap(problem_module, "choose_starts", "  start scan")
     stages.wrap(search_module, "run_solver", _solve_label)
     for module in (search_module, summary_module):
-        stages.wrap(module, "_evaluate",
+        stages.wrap(module, "evaluate",
                     lambda objective, z, flag: "evaluate + linearise" if bool(flag) else "evaluate")
     stages.wrap(summary_module, "gauss_newton_uncertainty", "covariance")
     stages.wrap(core_module, "summarise", "report (all)")

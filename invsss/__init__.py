@@ -48,7 +48,6 @@ __version__ = "0.1.0"
 _LAZY = {
     **dict.fromkeys(
         (
-            "ImagePair",
             "clipping_level",
             "load_pair",
             "read_depth",
@@ -69,7 +68,7 @@ _LAZY = {
     **dict.fromkeys(("ProfileFit", "fit_sum_of_gaussians"), ".measurement.profile_fit"),
     **dict.fromkeys(("MeasuredProfile", "column_average_gain", "measure_profile"), ".measurement.measure"),
     **dict.fromkeys(("DipoleFit", "fit_dipole"), ".measurement.dipole_fit"),
-    "fill_background_depth": ".forward.pair",
+    **dict.fromkeys(("ImagePair", "fill_background_depth"), ".forward.pair"),
     "enable_compile_cache": ".runtime.compile_cache",
 }
 

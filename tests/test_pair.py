@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import invsss
-from invsss.estimator.inputs import PairData, prepare_pair, prepare_pairs
+from invsss.estimator.inputs import prepare_pair, prepare_pairs
 from invsss.forward.pair import ImagePair
 from invsss.validation import InvalidInputError, check_pair
 
@@ -30,7 +30,7 @@ def test_load_pair_and_the_estimator_share_one_type(tmp_path):
     np.save(paths[2], depth)
     np.save(paths[3], mask)
     pair = invsss.load_pair(*paths)
-    assert type(pair) is ImagePair and PairData is ImagePair
+    assert type(pair) is ImagePair and invsss.ImagePair is ImagePair
     with jax.enable_x64(True):
         (data,) = prepare_pairs([pair])
     assert type(data) is ImagePair and data.source.dtype == np.float64

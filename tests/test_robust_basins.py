@@ -24,7 +24,7 @@ from scipy import ndimage
 import invsss
 from invsss.estimator.search import SolvePath, choose_basin
 from invsss.estimator.options import FitOptions
-from invsss.estimator.problem import _evaluate, build_problem
+from invsss.estimator.problem import evaluate, build_problem
 from invsss.estimator.robust import robust_loss, robust_scale
 from invsss.io import linear_to_srgb, srgb_to_linear
 
@@ -83,7 +83,7 @@ def _noisy_card_problem():
 
 def _candidate(problem, level):
     path = SolvePath(problem.objective, problem.param.unknowns({"sss_level": level}))
-    preds = _evaluate(path.objective, path.z, jnp.asarray(False))["predictions"]
+    preds = evaluate(path.objective, path.z, jnp.asarray(False))["predictions"]
     residuals = [np.asarray(p.target) - np.asarray(q) for p, q in zip(problem.data, preds)]
     path.delta = robust_scale(residuals, [np.asarray(p.residual_weight) for p in problem.data], "pseudo-huber")
     return path

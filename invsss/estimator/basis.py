@@ -36,12 +36,12 @@ from jaxtyping import Array, Float
 from ..forward.models import get_model
 from ..forward.params import SSSParams
 from ..forward.screen_space import LAYOUT_RENDERERS, sog_layers
-from .inputs import PairData
+from ..forward.pair import ImagePair
 
 __all__ = ["basis_images", "model_source"]
 
 
-def model_source(pair: PairData, natural: dict) -> Float[Array, "H W Cb"]:
+def model_source(pair: ImagePair, natural: dict) -> Float[Array, "H W Cb"]:
     """The image the model blurs: the source, mixed to grey when a mix is solved."""
     if "mix" in natural:
         return jnp.einsum("hwc,c->hw", pair.source, natural["mix"])[..., None]
@@ -49,7 +49,7 @@ def model_source(pair: PairData, natural: dict) -> Float[Array, "H W Cb"]:
 
 
 def basis_images(
-    pair: PairData, natural: dict, model: str, tap_weights: Float[Array, "7"], linear_weights: bool
+    pair: ImagePair, natural: dict, model: str, tap_weights: Float[Array, "7"], linear_weights: bool
 ) -> Float[Array, "nb H W Cb"]:
     """The basis images of one pair for the natural parameter values ``natural``.
 

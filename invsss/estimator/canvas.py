@@ -33,7 +33,7 @@ import jax
 import numpy as np
 
 from ..validation import InvalidInputError
-from .inputs import PairData
+from ..forward.pair import ImagePair
 
 __all__ = ["frame_terms", "unused_note", "pad_pair", "crop", "on_canvas"]
 
@@ -65,7 +65,7 @@ def _pad(x, canvas, value=None):
     return np.pad(x, widths, mode="constant", constant_values=value)
 
 
-def pad_pair(pair: PairData, canvas: tuple[int, int]) -> PairData:
+def pad_pair(pair: ImagePair, canvas: tuple[int, int]) -> ImagePair:
     """A checked pair on a ``canvas`` (height, width) at least its size: the mask
     and fit weight padded with 0, every other buffer with its last row and column.
 
@@ -83,7 +83,7 @@ def pad_pair(pair: PairData, canvas: tuple[int, int]) -> PairData:
     def put(x, value=None):
         return None if x is None else jax.device_put(_pad(x, canvas, value))
 
-    return PairData(
+    return ImagePair(
         put(pair.source), put(pair.target), put(pair.depth), put(pair.mask, 0.0), target_ndim=pair.target_ndim,
         fit_weight=put(pair.fit_weight, 0.0), normal=put(pair.normal), light=put(pair.light), key=put(pair.key),
     )

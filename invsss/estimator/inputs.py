@@ -15,12 +15,7 @@ from ..forward.light_terms import LightBuffers
 from ..forward.pair import ImagePair, fill_background_depth
 from ..validation import InvalidInputError, check_pair
 
-__all__ = ["ImagePair", "PairData", "prepare_pair", "prepare_pairs"]
-
-#: The estimator's name for the float64 form of an :class:`~invsss.forward.pair.ImagePair`
-#: (the same type; kept so annotations elsewhere read naturally).
-PairData = ImagePair
-
+__all__ = ["prepare_pair", "prepare_pairs"]
 
 def _check_fit_weight(fit_weight, shape, mask, name: str):
     weight = np.asarray(fit_weight, np.float64)

@@ -81,7 +81,7 @@ class Objective(eqx.Module):
     Attributes
     ----------
     param : Parametrisation
-    pairs : tuple of PairData
+    pairs : tuple of ImagePair
     tap_weights : array, shape (7,)
     robust : tuple of arrays, shape (H_p, W_p, C')
         Robust weights per pixel and channel (1 for plain least squares).

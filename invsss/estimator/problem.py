@@ -28,7 +28,7 @@ from .parametrisation import LIGHT_UNKNOWNS, Parametrisation, assign_roles, logi
 from .uncertainty import linearise
 from .vignetting import ORDER as VIGNETTING_ORDER
 
-__all__ = ["FitProblem", "build_problem"]
+__all__ = ["FitProblem", "build_problem", "evaluate"]
 
 
 #: Where the law's albedo starts: between the 940 nm faces' fitted 0.93-0.95 and
@@ -159,7 +159,7 @@ def _on_device(x) -> jax.Array:
     return jax.device_put(np.asarray(x, np.float64))
 
 
-_NO_JACOBIAN = np.asarray(False)  # _evaluate's traced flag, for the cheap calls
+_NO_JACOBIAN = np.asarray(False)  # evaluate's traced flag, for the cheap calls
 
 #: Threads that evaluate the start scan's losses side by side. One evaluation
 #: (a blur and the projection) keeps a 2-core CPU about 1.6 cores busy; on
@@ -177,7 +177,7 @@ def _blur_at_zero(roles, scales, fixed, variances):
 
 
 @persistent_jit
-def _evaluate(objective, z, with_jacobian):
+def evaluate(objective, z, with_jacobian):
     """Everything needed after a solve, in one compiled function: the linear
     unknowns, predictions, loss and, if the traced flag ``with_jacobian`` is set,
     the linearisation for the covariance (a ``lax.cond``: one compilation serves
@@ -210,12 +210,12 @@ def _scan_losses(objective):
     def one(z):
         # float64 mode is a per-thread setting.
         with jax.enable_x64(True):
-            return float(_evaluate(objective, _on_device(z), _NO_JACOBIAN)["loss"])
+            return float(evaluate(objective, _on_device(z), _NO_JACOBIAN)["loss"])
 
     def losses(points):
         if not points:
             return np.zeros(0)
-        # The first point alone: it may compile (or load) _evaluate, which the
+        # The first point alone: it may compile (or load) evaluate, which the
         # threads then share.
         first = one(points[0])
         with ThreadPoolExecutor(SCAN_THREADS) as pool:
@@ -233,10 +233,10 @@ class FitProblem:
     Attributes
     ----------
     options : FitOptions
-    data : tuple of PairData
+    data : tuple of ImagePair
         The checked float64 pairs the fit evaluates: on ``options.canvas``
         where that leaves the fit unchanged (:mod:`.canvas`).
-    given : tuple of PairData
+    given : tuple of ImagePair
         The checked pairs at their own sizes.
     shapes : tuple of (int, int)
         Each pair's own (height, width): crop predictions on a canvas to it.
@@ -340,7 +340,7 @@ class FitProblem:
 
     def loss(self, z) -> float:
         """The reported loss at ``z`` (mask-weighted mean squared residual)."""
-        return float(_evaluate(self.objective, _on_device(z), _NO_JACOBIAN)["loss"])
+        return float(evaluate(self.objective, _on_device(z), _NO_JACOBIAN)["loss"])
 
 
 def build_problem(

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import uncertainty
-from .problem import _evaluate
+from .problem import evaluate
 from .robust import psi_and_slope, robust_loss, robust_scale, robust_weights
 from .solve import (
     NOISE_TOL, RTOL, SCREEN_STALL_TOL, SCREEN_TOL, STALL_TOL, FitInterrupted, make_solver, run_solver,
@@ -217,7 +217,7 @@ def _robust_rounds(problem, options, run, best, records) -> SolvePath:
 
 def residuals_at(problem, path) -> list[np.ndarray]:
     """Each pair's target minus the prediction at ``path``'s point, (H, W, C')."""
-    preds = _evaluate(path.objective, path.z, np.asarray(False))["predictions"]
+    preds = evaluate(path.objective, path.z, np.asarray(False))["predictions"]
     return [np.asarray(p.target) - np.asarray(q) for p, q in zip(problem.data, preds)]
 
 
@@ -275,7 +275,7 @@ def active_set(problem, path, run, prefix: str = "") -> None:
     if not problem.linear_weights or nb < 2:
         return
     for round_ in range(nb):
-        coef = np.asarray(_evaluate(path.objective, path.z, np.asarray(False))["coef"])
+        coef = np.asarray(evaluate(path.objective, path.z, np.asarray(False))["coef"])
         active = np.asarray(path.objective.active)
         negative = (coef * np.sign(coef.sum(axis=0)) < 0) & (active > 0)
         if not negative.any():

@@ -15,7 +15,7 @@ from ..forward.params import PARAM_NAMES
 from .canvas import crop
 from .diagnostics import MISALIGNMENT_PX, masked_psnr, masked_ssim, misalignment
 from .parametrisation import LIGHT_UNKNOWNS
-from .problem import _evaluate
+from .problem import evaluate
 from .result import FitResult, masked_list
 from .uncertainty import gauss_newton_uncertainty, structural_reasons
 
@@ -41,7 +41,7 @@ def summarise(problem, path, single, steps, nuisance=None) -> FitResult:
     """
     param, roles, data, c_tgt = problem.param, problem.roles, problem.data, problem.channels
     messages = [*problem.notes, *path.messages]
-    final = _evaluate(path.objective, jnp.asarray(path.z), np.asarray(True))
+    final = evaluate(path.objective, jnp.asarray(path.z), np.asarray(True))
     ratios, coef, offset = (np.asarray(final[k]) for k in ("ratios", "coef", "offset"))
     natural = {k: np.asarray(v) for k, v in param.natural(np.asarray(path.z, np.float64)).items()}
     if problem.linear_weights:

@@ -82,7 +82,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .params import _as_float
+from .arrays import float_array
 from .stretch import stretch_factors
 from ..validation import InvalidInputError, is_concrete
 
@@ -129,7 +129,7 @@ UNIT_TOLERANCE = 0.05
 
 
 def _albedo_or_none(x):
-    return None if x is None else _as_float(x)
+    return None if x is None else float_array(x)
 
 
 class LightTerms(eqx.Module):
@@ -166,11 +166,11 @@ class LightTerms(eqx.Module):
     ()
     """
 
-    shift: Float[Array, ""] = eqx.field(converter=_as_float, default=0.0)
-    grazing: Float[Array, ""] = eqx.field(converter=_as_float, default=0.0)
-    incidence: Float[Array, ""] = eqx.field(converter=_as_float, default=0.0)
+    shift: Float[Array, ""] = eqx.field(converter=float_array, default=0.0)
+    grazing: Float[Array, ""] = eqx.field(converter=float_array, default=0.0)
+    incidence: Float[Array, ""] = eqx.field(converter=float_array, default=0.0)
     law: Float[Array, "*C"] | None = eqx.field(converter=_albedo_or_none, default=None)
-    law_strength: Float[Array, ""] = eqx.field(converter=_as_float, default=1.0)
+    law_strength: Float[Array, ""] = eqx.field(converter=float_array, default=1.0)
 
     @property
     def used(self) -> tuple[str, ...]:

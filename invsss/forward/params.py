@@ -26,9 +26,6 @@ __all__ = [
 PARAM_NAMES = ("sss_level", "correction", "maxdd", "weights", "variances")
 
 
-# The name light_terms.py and passes.py import; the converter itself is arrays.float_array.
-_as_float = float_array
-
 
 class SSSParams(eqx.Module):
     """Stretch factors and sum-of-Gaussians profile (docs/model.md, sections 2, 4, 6).

@@ -11,7 +11,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .params import _as_float
+from .arrays import float_array
 
 __all__ = [
     "TAP_OFFSETS",
@@ -43,7 +43,7 @@ def tap_weights(spec="jimenez", dtype=None) -> Float[Array, "7"]:
                 f"tap_weights: expected one of {sorted(TAP_WEIGHTS)} or 7 numbers, got {spec!r}"
             )
         spec = TAP_WEIGHTS[spec]
-    w = _as_float(spec, dtype)
+    w = float_array(spec, dtype)
     if w.shape != (7,):
         raise ValueError(f"tap_weights: expected 7 numbers, got shape {w.shape}")
     return w

@@ -12,7 +12,6 @@ first seven are re-exported here.
 """
 
 from .colour import linear_to_srgb, srgb_to_linear
-from ..forward.pair import ImagePair
 from .depth import read_depth
 from .images import clipping_level, load_pair, read_image, shared_clipping_level
 from .masks import read_mask
@@ -26,7 +25,6 @@ __all__ = [
     "image_extension",
     "PARAMS_KEYS",
     "PARAMS_OPTIONAL_KEYS",
-    "ImagePair",
     "load_pair",
     "read_depth",
     "read_image",

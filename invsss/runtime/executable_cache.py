@@ -3,7 +3,7 @@
 JAX's persistent compilation cache (:mod:`invsss.runtime.compile_cache`) saves XLA's
 work, but every new process still traces each jitted function to a jaxpr and
 lowers it to find the cache key. For the estimator's three big functions (the
-solver's ``init`` and ``step``, and ``_evaluate``) that took 1.8 s of a fit of
+solver's ``init`` and ``step``, and ``evaluate``) that took 1.8 s of a fit of
 data_synthetic/fran_front on a 2-core CPU (the solve itself: 1.9 s).
 
 :func:`persistent_jit` is :func:`equinox.filter_jit` plus a second cache:

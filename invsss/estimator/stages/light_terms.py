@@ -12,7 +12,7 @@ from ...forward.light_terms import AFTER_BLUR
 from ..core import Fit, FitCall, estimate_of, psnr_on_mask
 from ..options import FitOptions
 from ..parametrisation import LIGHT_UNKNOWNS
-from ..problem import _evaluate
+from ..problem import evaluate
 from ..result import FitResult
 
 __all__ = ["against_plain", "plain_model", "term_bounds", "with_light_terms"]
@@ -79,7 +79,7 @@ def against_plain(problem, path, result, plain) -> FitResult:
         first, stop = layout[knocked]
         z = np.asarray(path.z, np.float64).copy()
         z[first:stop] = 0.0
-        predictions = _evaluate(path.objective, jax.device_put(z), np.asarray(False))["predictions"]
+        predictions = evaluate(path.objective, jax.device_put(z), np.asarray(False))["predictions"]
         without[term] = psnr_on_mask(problem, predictions)
     record["psnr_plain"] = plain.psnr
     record["psnr_without"] = without
