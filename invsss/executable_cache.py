@@ -16,7 +16,8 @@ would produce, so a hit needs neither tracing nor lowering:
 - the non-array arguments and the tree structure (pickled), and every array
   argument's shape, dtype and weak type;
 - the settings that change a trace or a compilation: float64 mode, the default
-  matmul precision, dtype promotion, ``XLA_FLAGS``, the backend and its device.
+  matmul precision, dtype promotion, ``XLA_FLAGS``, ``INVSSS_PASS_KERNEL`` and
+  ``INVSSS_SCAN_UNROLL`` (which passes are traced), the backend and its device.
 
 It is on exactly when the compilation cache is (:func:`invsss.compile_cache.enable_compile_cache`
 was called and ``$INVSSS_NO_CACHE`` is unset); its files live in the
@@ -118,6 +119,10 @@ def _settings() -> tuple:
         str(jax.config.jax_default_matmul_precision),
         str(jax.config.jax_numpy_dtype_promotion),
         os.environ.get("XLA_FLAGS", ""),
+        # Which pass implementation is traced (invsss.pass_kernels) and whether
+        # the passes' scan is unrolled (invsss.screen_space).
+        os.environ.get("INVSSS_PASS_KERNEL", "auto"),
+        os.environ.get("INVSSS_SCAN_UNROLL", "0"),
         device.platform,
         device.device_kind,
     )
@@ -341,6 +346,10 @@ def _try_in_child(data: bytes, digest: str, leaves) -> str | None:
     import numpy as np
 
     env = dict(os.environ, INVSSS_NO_CACHE="1")
+    # On a GPU this process's JAX already holds most of the device's memory
+    # (XLA preallocates 75 %); a child preallocating too left the GPU solver
+    # no memory for its handle (issue 35), so the child allocates as it goes.
+    env.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
     package_root = str(Path(__file__).resolve().parent.parent)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
     weak = [bool(getattr(jax.typeof(leaf), "weak_type", False)) for leaf in leaves]

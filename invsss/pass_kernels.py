@@ -70,7 +70,7 @@ def kernel_enabled(image) -> bool:
 
     ``INVSSS_PASS_KERNEL`` = ``xla`` or ``pallas`` decides; otherwise (``auto``)
     the kernel runs when JAX's default backend is a GPU and the image is float32
-    and at least 2 x 2 pixels.
+    or float64 (the estimator fits in float64) and at least 2 x 2 pixels.
 
     Examples
     --------
@@ -83,7 +83,7 @@ def kernel_enabled(image) -> bool:
     if choice == "xla":
         return False
     fits = (
-        getattr(image, "dtype", None) == jnp.float32
+        getattr(image, "dtype", None) in (jnp.float32, jnp.float64)
         and image.ndim == 3
         and image.shape[0] >= 2
         and image.shape[1] >= 2
@@ -108,20 +108,25 @@ def _choice() -> str:
 
 
 def _tap_geometry(rows, cols, footprint, along_rows, h, w, t):
-    """Left index, step to the right neighbour, fraction and clamp slope of tap ``t``."""
-    n = jnp.where(along_rows, w, h)
-    base = jnp.where(along_rows, cols, rows).astype(jnp.float32)
+    """Left index, step to the right neighbour, fraction and clamp slope of tap ``t``.
+
+    ``along_rows`` is the pass axis as int32, 1 (rows) or 0 (columns): the two
+    layouts are mixed arithmetically, as Triton lowers no select of scalars.
+    """
+    dtype = footprint.dtype
+    n = h + along_rows * (w - h)
+    base = (rows + along_rows * (cols - rows)).astype(dtype)
     p = base + t * footprint
-    top = (n - 1).astype(jnp.float32)
+    top = (n - 1).astype(dtype)
     u = jnp.clip(p, 0.0, top)
     i0 = jnp.clip(jnp.floor(u).astype(jnp.int32), 0, n - 2)
-    frac = u - i0.astype(jnp.float32)
-    flat0 = jnp.where(along_rows, rows * w + i0, i0 * w + cols)
-    step = jnp.where(along_rows, 1, w)
+    frac = u - i0.astype(dtype)
+    flat0 = along_rows * (rows * w + i0) + (1 - along_rows) * (i0 * w + cols)
+    step = w - along_rows * (w - 1)
     # d u / d p of jnp.clip: 1 inside, 1/2 on a bound (JAX's convention for ties).
     inside = (p > 0.0) & (p < top)
     on_bound = (p == 0.0) | (p == top)
-    slope = jnp.where(inside, 1.0, jnp.where(on_bound, 0.5, 0.0))
+    slope = jnp.where(inside, 1.0, jnp.where(on_bound, 0.5, 0.0)).astype(dtype)
     return flat0, step, frac, slope
 
 
@@ -145,7 +150,7 @@ def _forward_kernel(axis_ref, w_ref, img_ref, f_ref, m_ref, out_ref, *, h, w, c,
     from jax.experimental.pallas import triton as plgpu
 
     rows, cols, valid, pix = _tile(block, h, w, 0)
-    along_rows = axis_ref[0] == 1
+    along_rows = axis_ref[0]
     f = f_ref[pix]
     m = m_ref[pix]
     centre = [img_ref[pix * c + ch] for ch in range(c)]
@@ -168,7 +173,7 @@ def _tangent_kernel(axis_ref, w_ref, img_ref, f_ref, m_ref, dimg_ref, df_ref, ou
 
     rows, cols, valid, pix = _tile(block, h, w, 1)
     image_offset = pl.program_id(0) * (h * w * c)
-    along_rows = axis_ref[0] == 1
+    along_rows = axis_ref[0]
     f = f_ref[pix]
     m = m_ref[pix]
     df = df_ref[pl.program_id(0) * (h * w) + pix]
@@ -215,7 +220,7 @@ def _transpose_kernel(
     rows, cols, valid, pix = _tile(block, h, w, 1)
     tangent = pl.program_id(0)
     image_offset = tangent * (h * w * c)
-    along_rows = axis_ref[0] == 1
+    along_rows = axis_ref[0]
     f = f_ref[pix]
     m = m_ref[pix]
     ct = [m * ct_ref[image_offset + pix * c + ch] for ch in range(c)]
@@ -501,7 +506,7 @@ batching.primitive_batchers[pass_transpose_p] = _transpose_batch
 def directional_pass_kernel(image, footprint, mask, weights, axis, *, interpret=None, block=None):
     """:func:`invsss.passes.directional_pass` as one kernel per pass (see the module docstring).
 
-    Same arguments and result as the reference; float32 only. ``interpret``
+    Same arguments and result as the reference; float32 or float64. ``interpret``
     runs the Pallas kernels in the interpreter (any platform, slow; for tests);
     otherwise they run on CUDA and the XLA reference runs elsewhere; ``None``
     means ``INVSSS_PASS_KERNEL == "interpret"``.

@@ -150,21 +150,28 @@ def _has_gpu() -> bool:
 @pytest.mark.gpu
 @pytest.mark.skipif(not _has_gpu(), reason="needs a GPU")
 @pytest.mark.parametrize("axis", [1, 0])
-def test_triton_kernel_matches_reference_on_gpu(axis):
+@pytest.mark.parametrize("x64", [False, True], ids=["float32", "float64"])
+def test_triton_kernel_matches_reference_on_gpu(axis, x64):
     # The compiled kernels (Triton's gathers and atomic adds, which the
-    # interpreter does not run) on a 257 x 300 image: partial tiles both ways.
+    # interpreter does not run) on a 257 x 300 image: partial tiles both ways;
+    # float64 is what the estimator fits in.
+    with jax.enable_x64(x64):
+        _check_on_gpu(axis, jnp.float64 if x64 else jnp.float32)
+
+
+def _check_on_gpu(axis, dtype):
     image, footprint, mask, rng = _inputs(h=257, w=300, seed=4)
-    footprint = footprint * 3.0
+    image, footprint, mask = (x.astype(dtype) for x in (image, footprint * 3.0, mask))
     kernel, reference = _fns(mask, axis, interpret=False, block=None)
     kernel, reference = jax.jit(kernel), jax.jit(reference)
     np.testing.assert_allclose(kernel(image, footprint), reference(image, footprint), atol=1e-5)
-    tangents = tuple(jnp.asarray(rng.standard_normal(x.shape), jnp.float32) for x in (image, footprint))
+    tangents = tuple(jnp.asarray(rng.standard_normal(x.shape), dtype) for x in (image, footprint))
     np.testing.assert_allclose(
         jax.jit(lambda i, f: jax.jvp(kernel, (i, f), tangents)[1])(image, footprint),
         jax.jit(lambda i, f: jax.jvp(reference, (i, f), tangents)[1])(image, footprint),
         atol=1e-4,
     )
-    cotangent = jnp.asarray(rng.standard_normal(image.shape), jnp.float32)
+    cotangent = jnp.asarray(rng.standard_normal(image.shape), dtype)
     got = jax.jit(lambda i, f: jax.vjp(kernel, i, f)[1](cotangent))(image, footprint)
     want = jax.jit(lambda i, f: jax.vjp(reference, i, f)[1](cotangent))(image, footprint)
     np.testing.assert_allclose(got[0], want[0], atol=1e-4)
