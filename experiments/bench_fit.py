@@ -118,7 +118,10 @@ def make_scene(size: int, seed: int = 0):
     r2 = ((x - c) / (0.47 * size)) ** 2 + ((y - c) / (0.49 * size)) ** 2
     # Ripples scaled with the image, so the slope distribution does not depend on --size.
     period = size / 16.0
-    depth = 600.0 - 0.9 * size * np.sqrt(np.clip(1.0 - r2, 0.0, None)) + 4.0 * np.sin(x / period)
+    # The bulge's relief (mm) grows with the image up to 128 px and no further,
+    # so that depth stays near 600 mm (and > 0) at any size (synthetic:1024).
+    relief = 0.9 * min(size, 128)
+    depth = 600.0 - relief * np.sqrt(np.clip(1.0 - r2, 0.0, None)) + 4.0 * np.sin(x / period)
     mask = (r2 < 0.8).astype(np.float64)
     fine = gaussian_filter(rng.standard_normal((size, size)), 0.7)
     coarse = gaussian_filter(rng.standard_normal((size, size)), 3.0)
