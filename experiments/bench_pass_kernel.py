@@ -9,6 +9,9 @@ are 2-9 px (a 1024-px face at the thesis's 940 nm profile) scaled with the size.
 Times are medians of ``--repeats`` runs after a warm-up, with
 ``block_until_ready``. The kernel runs compiled on a GPU only; elsewhere the
 ``pallas`` rows time its XLA lowering (the reference wrapped in the primitive).
+The ``vjp`` of the ``pallas`` rows is the transpose that
+:data:`invsss.pass_kernels.KERNEL_ON_CUDA` picks: XLA's since the measurement in
+docs/gpu.md, whose ``vjp`` column timed the Pallas transpose kernel.
 
 Usage::
 

@@ -7,12 +7,15 @@
 #   OUT=/tmp/out bash experiments/gpu_session.sh
 #
 # Parts, most important first: environment; the GPU tests (pytest -m gpu); one
-# pass, XLA against the kernel; the models' forward and value+grad at 256, 1024
-# and 2048 px (GPU, both pass implementations, and the machine's CPU for the
-# ratios); the bundled pair's command-line fit cold and warm (GPU, then the CPU
-# limited to 2 cores as on the project's machines); a model-made 1024 x 1024
-# pair's fit cold and warm with the per-step host/device split. All output goes
-# to $OUT/session.log, the fits' own logs to $OUT/fit_logs.txt.
+# pass at 1024 px, XLA against the kernel at several tiles; the models' forward
+# and value+grad at 256, 1024 and 2048 px (both pass implementations, the scan
+# unrolled or not); the bundled pair's command-line fit cold and warm (kernels,
+# then XLA passes); a model-made 1024 x 1024 pair's fit cold and warm with the
+# per-step host/device split; then, for ratios, the machine's CPU: the forward
+# benchmark, and the command-line fit limited to 2 cores as on the project's
+# machines; last the one-pass benchmark at 256 and 2048 px and the 1024 x 1024
+# fit with XLA passes. All output goes to $OUT/session.log, the fits' own logs
+# to $OUT/fit_logs.txt. docs/gpu.md holds what it printed on an H100.
 set -o pipefail
 OUT=${OUT:-/tmp/invsss-gpu-session}
 mkdir -p "$OUT"

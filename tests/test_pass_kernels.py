@@ -152,9 +152,10 @@ def _has_gpu() -> bool:
 @pytest.mark.parametrize("axis", [1, 0])
 @pytest.mark.parametrize("x64", [False, True], ids=["float32", "float64"])
 def test_triton_kernel_matches_reference_on_gpu(axis, x64):
-    # The compiled kernels (Triton's gathers and atomic adds, which the
-    # interpreter does not run) on a 257 x 300 image: partial tiles both ways;
-    # float64 is what the estimator fits in.
+    # The compiled kernels (Triton's gathers, which the interpreter does not
+    # run) on a 257 x 300 image: partial tiles both ways; float64 is what the
+    # estimator fits in. Reverse mode runs XLA's transpose on CUDA
+    # (KERNEL_ON_CUDA); the value and the JVP are the Triton kernels'.
     with jax.enable_x64(x64):
         _check_on_gpu(axis, jnp.float64 if x64 else jnp.float32)
 
