@@ -14,7 +14,7 @@ For each model and image size the script times, on one device per framework:
     PyTorch runs eagerly and has none.
 
 ``--passes xla pallas`` times the JAX rows once per implementation of the
-directional pass (:mod:`invsss.pass_kernels`: the XLA reference, the Pallas
+directional pass (:mod:`invsss.forward.pass_kernels`: the XLA reference, the Pallas
 kernel; ``auto``, the default, is what the backend picks; ``+unroll`` after
 either also unrolls the models' scan over the passes, ``INVSSS_SCAN_UNROLL=1``) and prints how far
 each one's forward image and gradient lie from the first one's. ``--no-torch``
@@ -47,8 +47,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import invsss
-from invsss.models import MODEL_NAMES, get_model, resolve_tap_weights
-from invsss.screen_space import LAYOUT_RENDERERS
+from invsss.forward.models import MODEL_NAMES, get_model, resolve_tap_weights
+from invsss.forward.screen_space import LAYOUT_RENDERERS
 
 # The thesis's 940 nm forearm fit (its Table 5.1, docs/model.md, section 4).
 THESIS_VARIANCES = [8.749, 2.099, 0.549, 0.5574, 1.194]
@@ -113,9 +113,9 @@ def bench_jax(model: str, size: int, repeats: int, device, passes: str = "auto")
     """Times (and the forward image and gradient, for agreement) of one JAX row.
 
     ``passes`` sets ``INVSSS_PASS_KERNEL`` while the functions are traced,
-    which is when :func:`invsss.pass_kernels.kernel_enabled` is read.
+    which is when :func:`invsss.forward.pass_kernels.kernel_enabled` is read.
     """
-    from invsss.pass_kernels import PASS_KERNEL_VARIABLE
+    from invsss.forward.pass_kernels import PASS_KERNEL_VARIABLE
 
     kernel, _, unroll = passes.partition("+")
     settings = {PASS_KERNEL_VARIABLE: kernel, "INVSSS_SCAN_UNROLL": "1" if unroll == "unroll" else "0"}

@@ -1,4 +1,4 @@
-"""One directional pass: the XLA reference against the Pallas kernel (invsss.pass_kernels).
+"""One directional pass: the XLA reference against the Pallas kernel (invsss.forward.pass_kernels).
 
 For each square size and pass axis the script times, on JAX's default device:
 the forward pass, its JVP with one tangent (image and footprint), with 8
@@ -10,7 +10,7 @@ Times are medians of ``--repeats`` runs after a warm-up, with
 ``block_until_ready``. The kernel runs compiled on a GPU only; elsewhere the
 ``pallas`` rows time its XLA lowering (the reference wrapped in the primitive).
 The ``vjp`` of the ``pallas`` rows is the transpose that
-:data:`invsss.pass_kernels.KERNEL_ON_CUDA` picks: XLA's since the measurement in
+:data:`invsss.forward.pass_kernels.KERNEL_ON_CUDA` picks: XLA's since the measurement in
 docs/gpu.md, whose ``vjp`` column timed the Pallas transpose kernel.
 
 Usage::
@@ -29,8 +29,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from invsss.pass_kernels import directional_pass_kernel
-from invsss.passes import _directional_pass_xla, tap_weights
+from invsss.forward.pass_kernels import directional_pass_kernel
+from invsss.forward.passes import _directional_pass_xla, tap_weights
 
 
 def scene(size: int, seed: int = 0):

@@ -1,4 +1,4 @@
-"""The Pallas pass kernel against the XLA reference pass (invsss.pass_kernels).
+"""The Pallas pass kernel against the XLA reference pass (invsss.forward.pass_kernels).
 
 On the CPU the kernels run in Pallas's interpreter (``interpret=True``), so CI
 checks the kernel code itself: values, forward-mode (the estimator's
@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 import invsss
-from invsss.pass_kernels import PASS_KERNEL_VARIABLE, directional_pass_kernel, kernel_enabled
-from invsss.passes import _directional_pass_xla, tap_weights
-from invsss.screen_space import render_sog
+from invsss.forward.pass_kernels import PASS_KERNEL_VARIABLE, directional_pass_kernel, kernel_enabled
+from invsss.forward.passes import _directional_pass_xla, tap_weights
+from invsss.forward.screen_space import render_sog
 from invsss.validation import InvalidInputError
 
 #: A tile that leaves partial tiles on the 11 x 19 test image.

@@ -1,6 +1,6 @@
 """Compiled functions kept whole on disk, so a new process skips tracing as well.
 
-JAX's persistent compilation cache (:mod:`invsss.compile_cache`) saves XLA's
+JAX's persistent compilation cache (:mod:`invsss.runtime.compile_cache`) saves XLA's
 work, but every new process still traces each jitted function to a jaxpr and
 lowers it to find the cache key. For the estimator's three big functions (the
 solver's ``init`` and ``step``, and ``_evaluate``) that took 1.8 s of a fit of
@@ -19,7 +19,7 @@ would produce, so a hit needs neither tracing nor lowering:
   matmul precision, dtype promotion, ``XLA_FLAGS``, ``INVSSS_PASS_KERNEL`` and
   ``INVSSS_SCAN_UNROLL`` (which passes are traced), the backend and its device.
 
-It is on exactly when the compilation cache is (:func:`invsss.compile_cache.enable_compile_cache`
+It is on exactly when the compilation cache is (:func:`invsss.runtime.compile_cache.enable_compile_cache`
 was called and ``$INVSSS_NO_CACHE`` is unset); its files live in the
 ``executables`` folder of that cache directory. Otherwise the decorated
 function is plain :func:`equinox.filter_jit`.
@@ -119,8 +119,8 @@ def _settings() -> tuple:
         str(jax.config.jax_default_matmul_precision),
         str(jax.config.jax_numpy_dtype_promotion),
         os.environ.get("XLA_FLAGS", ""),
-        # Which pass implementation is traced (invsss.pass_kernels) and whether
-        # the passes' scan is unrolled (invsss.screen_space).
+        # Which pass implementation is traced (invsss.forward.pass_kernels) and whether
+        # the passes' scan is unrolled (invsss.forward.screen_space).
         os.environ.get("INVSSS_PASS_KERNEL", "auto"),
         os.environ.get("INVSSS_SCAN_UNROLL", "0"),
         device.platform,
@@ -335,7 +335,7 @@ def _write_atomic(path: Path, data: bytes) -> bool:
 # argv[4] options (JSON). It prints "ok" after the call has finished.
 _TRY = """
 import sys
-from invsss.executable_cache import _try_entry
+from invsss.runtime.executable_cache import _try_entry
 _try_entry(*sys.argv[1:5])
 print("ok", flush=True)
 """

@@ -120,7 +120,7 @@ def directional_pass(
     is ``m P + (1 - m) I``.
     """
     # ---- GPU dispatch (issue 35): one Pallas kernel per pass where
-    # invsss.pass_kernels.kernel_enabled says so; this XLA code stays the
+    # invsss.forward.pass_kernels.kernel_enabled says so; this XLA code stays the
     # reference and the CPU path.
     from . import pass_kernels
 

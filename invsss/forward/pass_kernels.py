@@ -1,6 +1,6 @@
 """A directional pass as one GPU kernel (Pallas on Triton), with its derivatives.
 
-:func:`invsss.passes.directional_pass` in plain XLA is the reference and the
+:func:`invsss.forward.passes.directional_pass` in plain XLA is the reference and the
 CPU path. Here one Pallas kernel computes a pass per tile of pixels: each
 output pixel reads its 7 taps (two neighbours each, linear interpolation,
 clamp-to-edge) and writes the blend ``I + m (sum_k W_k S_k - I)`` once. On an
@@ -69,7 +69,7 @@ NUM_WARPS = 4
 
 
 def kernel_enabled(image) -> bool:
-    """Whether :func:`invsss.passes.directional_pass` runs :func:`directional_pass_kernel`.
+    """Whether :func:`invsss.forward.passes.directional_pass` runs :func:`directional_pass_kernel`.
 
     ``INVSSS_PASS_KERNEL`` = ``xla`` or ``pallas`` decides; otherwise (``auto``)
     the kernel runs when JAX's default backend is a GPU and the image is float32
@@ -99,7 +99,7 @@ def kernel_enabled(image) -> bool:
 def _choice() -> str:
     choice = os.environ.get(PASS_KERNEL_VARIABLE, "auto").strip().lower()
     if choice not in ("auto", "pallas", "xla", "interpret"):
-        from .validation import InvalidInputError
+        from ..validation import InvalidInputError
 
         raise InvalidInputError(
             f"{PASS_KERNEL_VARIABLE}: expected one of auto, pallas, xla, interpret, got {choice!r}"
@@ -515,7 +515,7 @@ batching.primitive_batchers[pass_transpose_p] = _transpose_batch
 
 
 def directional_pass_kernel(image, footprint, mask, weights, axis, *, interpret=None, block=None):
-    """:func:`invsss.passes.directional_pass` as one kernel per pass (see the module docstring).
+    """:func:`invsss.forward.passes.directional_pass` as one kernel per pass (see the module docstring).
 
     Same arguments and result as the reference; float32 or float64. ``interpret``
     runs the Pallas kernels in the interpreter (any platform, slow; for tests);
@@ -526,7 +526,7 @@ def directional_pass_kernel(image, footprint, mask, weights, axis, *, interpret=
     Examples
     --------
     >>> import jax.numpy as jnp
-    >>> from invsss.passes import directional_pass, tap_weights
+    >>> from invsss.forward.passes import directional_pass, tap_weights
     >>> image = jnp.linspace(0.0, 1.0, 4 * 6 * 3).reshape(4, 6, 3)
     >>> footprint = jnp.full((4, 6), 1.5); mask = jnp.ones((4, 6))
     >>> fast = directional_pass_kernel(image, footprint, mask, tap_weights(), 1, interpret=True)
