@@ -105,7 +105,7 @@ def _code_fingerprint() -> str:
         except metadata.PackageNotFoundError:
             version = "absent"
         digest.update(f"{name} {version}\n".encode())
-    package = Path(__file__).resolve().parent
+    package = Path(__file__).resolve().parent.parent  # invsss/, every layer
     for path in sorted(package.rglob("*.py")):
         digest.update(str(path.relative_to(package)).encode())
         digest.update(path.read_bytes())
@@ -350,7 +350,7 @@ def _try_in_child(data: bytes, digest: str, leaves) -> str | None:
     # (XLA preallocates 75 %); a child preallocating too left the GPU solver
     # no memory for its handle (issue 35), so the child allocates as it goes.
     env.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
-    package_root = str(Path(__file__).resolve().parent.parent)
+    package_root = str(Path(__file__).resolve().parents[2])  # the folder holding invsss/
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
     weak = [bool(getattr(jax.typeof(leaf), "weak_type", False)) for leaf in leaves]
     options = json.dumps({"x64": bool(jax.config.jax_enable_x64), "weak": weak})
