@@ -61,12 +61,20 @@ during which anything was compiling once.
 It runs three fits measured in one run: a fresh process with an empty persistent
 compilation cache (cold), a second fit in that process (what a sweep worker does
 after its first trial), and a fresh process on the cache the first one wrote
-(warm); each child process prints JSON, the parent the table.
+(warm); each child process prints JSON, the parent the table. ``synthetic:N``
+in place of a folder fits this script's model-made N x N pair (rendered in the
+child, not timed as reading). The table names JAX's device, and per solver step
+splits the wall time into the host dispatching the jitted step, the wait for
+the device's result (the step's one device-to-host read: its loss and
+stopping flags) and the host's own work between steps, so a device left idle
+by the host shows; "same history" says whether the three fits took the same
+steps to the same losses, bit for bit.
 
 Usage::
 
     python experiments/bench_fit.py [--size 128] [--repeats 3] [--max-steps 200]
     python experiments/bench_fit.py --breakdown data_synthetic/fran_front
+    python experiments/bench_fit.py --breakdown synthetic:1024
     python experiments/bench_fit.py --stopping data_synthetic/pt_face_940 data_synthetic/fran_front
     python experiments/bench_fit.py --jacobian data_synthetic/fran_front data_synthetic/pt_face_940
     python experiments/bench_fit.py --canvas data_synthetic/fran_front
@@ -110,7 +118,10 @@ def make_scene(size: int, seed: int = 0):
     r2 = ((x - c) / (0.47 * size)) ** 2 + ((y - c) / (0.49 * size)) ** 2
     # Ripples scaled with the image, so the slope distribution does not depend on --size.
     period = size / 16.0
-    depth = 600.0 - 0.9 * size * np.sqrt(np.clip(1.0 - r2, 0.0, None)) + 4.0 * np.sin(x / period)
+    # The bulge's relief (mm) grows with the image up to 128 px and no further,
+    # so that depth stays near 600 mm (and > 0) at any size (synthetic:1024).
+    relief = 0.9 * min(size, 128)
+    depth = 600.0 - relief * np.sqrt(np.clip(1.0 - r2, 0.0, None)) + 4.0 * np.sin(x / period)
     mask = (r2 < 0.8).astype(np.float64)
     fine = gaussian_filter(rng.standard_normal((size, size)), 0.7)
     coarse = gaussian_filter(rng.standard_normal((size, size)), 3.0)
@@ -401,8 +412,40 @@ def breakdown_child(pair_dir: str, cache_dir: str) -> None:
     stages.wrap(summary_module, "gauss_newton_uncertainty", "covariance")
     stages.wrap(core_module, "summarise", "report (all)")
 
+    import invsss.estimator.solve as solve_module
+
+    steps = {"dispatch": 0.0, "wait": 0.0, "between": 0.0, "n": 0, "last": None}
+    iterate = solve_module._iterate
+
+    def timed_iterate(*args, **kwargs):
+        # Replace the step function (argument 10) by one that times dispatch
+        # and the wait for its result separately.
+        args = list(args)
+        inner = args[10]
+
+        def step(*a, **k):
+            t0 = time.perf_counter()
+            if steps["last"] is not None:
+                steps["between"] += t0 - steps["last"]
+            out = inner(*a, **k)
+            t1 = time.perf_counter()
+            jax.block_until_ready(out[2:])  # loss, dof, done, ok: what the loop reads
+            steps["last"] = time.perf_counter()
+            steps["dispatch"] += t1 - t0
+            steps["wait"] += steps["last"] - t1
+            steps["n"] += 1
+            return out
+
+        args[10] = step
+        try:
+            return iterate(*args, **kwargs)
+        finally:
+            steps["last"] = None
+
+    solve_module._iterate = timed_iterate
+
     t0 = time.perf_counter()
-    pair = read_pair_folder(pair_dir)
+    pair = _pair_source(pair_dir)
     reading = time.perf_counter() - t0
     runs = []
     for _ in range(2):
@@ -410,6 +453,7 @@ def breakdown_child(pair_dir: str, cache_dir: str) -> None:
         stages.counts.clear()
         compiles.clear()
         spans.clear()
+        steps.update(dispatch=0.0, wait=0.0, between=0.0, n=0, last=None)
         t0 = time.perf_counter()
         result = fit_module.fit_pair(pair.source, pair.target, pair.depth, pair.mask)
         total = time.perf_counter() - t0
@@ -419,14 +463,32 @@ def breakdown_child(pair_dir: str, cache_dir: str) -> None:
             "compiling": _covered_seconds(spans),
             "iterations": result.iterations, "loss": float(result.loss),
             "converged": bool(result.converged),
+            "steps": {k: v for k, v in steps.items() if k != "last"},
+            "history": [float(x).hex() for x in np.ravel(result.history)],
         })
-    print(json.dumps({"import": imported, "reading": reading, "runs": runs}))
+    device = jax.devices()[0]
+    print(json.dumps({"import": imported, "reading": reading, "runs": runs,
+                      "device": f"{device.platform}: {device.device_kind}"}))
+
+
+def _pair_source(pair_dir: str):
+    """A pair folder's pair, or ``synthetic:N``: this script's model-made N x N pair."""
+    if pair_dir.startswith("synthetic:"):
+        from types import SimpleNamespace
+
+        source, target, depth, mask = make_scene(int(pair_dir.split(":", 1)[1]))
+        return SimpleNamespace(source=source.astype(np.float32), target=target.astype(np.float32),
+                               depth=depth.astype(np.float32), mask=mask.astype(np.float32))
+    return read_pair_folder(pair_dir)
 
 
 def _child_run(pair_dir: str, cache_dir: str) -> dict:
     command = [sys.executable, __file__, "--breakdown", pair_dir, "--breakdown-child", cache_dir]
     env = {k: v for k, v in os.environ.items() if k != "INVSSS_NO_CACHE"}
-    done = subprocess.run(command, capture_output=True, text=True, env=env, check=True)
+    done = subprocess.run(command, capture_output=True, text=True, env=env)
+    if done.returncode != 0:
+        raise SystemExit(f"bench_fit: the child process failed (exit status {done.returncode}):\n"
+                         + done.stderr[-4000:])
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
@@ -446,7 +508,7 @@ def breakdown(pair_dir: str) -> None:
 
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"bench_fit --breakdown {pair_dir}: fit_pair with the CLI defaults; {os.cpu_count()} CPUs, "
-          f"load average {load:.1f}; seconds (calls)")
+          f"load average {load:.1f}; JAX device {cold.get('device')}; seconds (calls)")
     header = f"{'stage':<34}" + "".join(f"{name:>16}" for name in columns)
     print(header)
     print("-" * len(header))
@@ -463,6 +525,12 @@ def breakdown(pair_dir: str) -> None:
         row(stage, [f"{run['stages'].get(stage, 0.0):.2f} ({run['counts'].get(stage, 0)})"
                     for _, run in columns.values()])
     row("iterations", [str(run["iterations"]) for _, run in columns.values()])
+    row("solver steps", [str(run["steps"]["n"]) for _, run in columns.values()])
+    for part, label in (("dispatch", "  host dispatch, ms/step"), ("wait", "  wait for device, ms/step"),
+                        ("between", "  host between steps, ms/step")):
+        row(label, [f"{1e3 * run['steps'][part] / max(run['steps']['n'], 1):.2f}" for _, run in columns.values()])
+    histories = [run.get("history") for _, run in columns.values()]
+    row("same history (bitwise)", ["-" if h is None else ("yes" if h == histories[0] else "no") for h in histories])
     row("loss", [f"{run['loss']:.4e}" for _, run in columns.values()])
     print("compilation per jitted function: trace+lower+XLA seconds (compilations); "
           "cache loads seconds (loads)")

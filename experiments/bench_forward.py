@@ -13,6 +13,13 @@ For each model and image size the script times, on one device per framework:
     for JAX, the time to lower and compile each function ahead of time (XLA);
     PyTorch runs eagerly and has none.
 
+``--passes xla pallas`` times the JAX rows once per implementation of the
+directional pass (:mod:`invsss.forward.pass_kernels`: the XLA reference, the Pallas
+kernel; ``auto``, the default, is what the backend picks; ``+unroll`` after
+either also unrolls the models' scan over the passes, ``INVSSS_SCAN_UNROLL=1``) and prints how far
+each one's forward image and gradient lie from the first one's. ``--no-torch``
+leaves the PyTorch rows out.
+
 Times are medians over ``--repeats`` runs after a warm-up run, with
 ``block_until_ready`` (JAX) and ``torch.cuda.synchronize`` (PyTorch on a GPU)
 so that asynchronous dispatch is not mistaken for speed. The profile is the
@@ -24,6 +31,7 @@ Usage::
 
     python experiments/bench_forward.py [--sizes 256 512 1024] [--repeats 5]
         [--models sog thesis separable] [--device auto|cpu|gpu] [--torch-threads N]
+        [--passes auto|xla|pallas[+unroll] ...] [--no-torch]
 """
 
 from __future__ import annotations
@@ -101,7 +109,29 @@ def jax_device(kind: str):
         raise SystemExit(f"bench_forward: no JAX {kind} device ({err})") from None
 
 
-def bench_jax(model: str, size: int, repeats: int, device) -> dict:
+def bench_jax(model: str, size: int, repeats: int, device, passes: str = "auto") -> dict:
+    """Times (and the forward image and gradient, for agreement) of one JAX row.
+
+    ``passes`` sets ``INVSSS_PASS_KERNEL`` while the functions are traced,
+    which is when :func:`invsss.forward.pass_kernels.kernel_enabled` is read.
+    """
+    from invsss.forward.pass_kernels import PASS_KERNEL_VARIABLE
+
+    kernel, _, unroll = passes.partition("+")
+    settings = {PASS_KERNEL_VARIABLE: kernel, "INVSSS_SCAN_UNROLL": "1" if unroll == "unroll" else "0"}
+    saved = {name: os.environ.get(name) for name in settings}
+    os.environ.update(settings)
+    try:
+        return _bench_jax(model, size, repeats, device)
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+
+
+def _bench_jax(model: str, size: int, repeats: int, device) -> dict:
     image, target, depth, mask = (jax.device_put(a, device) for a in make_scene(size))
     params = jax.device_put(invsss.SSSParams(**scene_params(size)), device)
     render_model = layout_renderer(model, LAYOUT_RENDERERS)
@@ -118,7 +148,16 @@ def bench_jax(model: str, size: int, repeats: int, device) -> dict:
         compiled = jax.jit(fn).lower(params).compile()
         row[f"{name} compile"] = time.perf_counter() - start
         row[name] = median_time(lambda: jax.block_until_ready(compiled(params)), repeats)
+        row[f"{name} result"] = jax.device_get(compiled(params))
     return row
+
+
+def _agreement(row: dict, first: dict) -> tuple[float, float]:
+    """Largest |difference| of the forward image, and of the gradient relative to its largest entry."""
+    image = float(np.max(np.abs(row["forward result"] - first["forward result"])))
+    grad, ref = (jax.tree_util.tree_leaves(r["value+grad result"][1]) for r in (row, first))
+    rel = max(float(np.max(np.abs(a - b)) / max(float(np.max(np.abs(b))), 1e-30)) for a, b in zip(grad, ref))
+    return image, rel
 
 
 # -------------------------------------------------------------------- PyTorch
@@ -176,7 +215,7 @@ def bench_torch(model: str, size: int, repeats: int, device) -> dict:
 
 
 def _ms(seconds) -> str:
-    return "-" if seconds is None else f"{1e3 * seconds:10.1f}"
+    return "-" if seconds is None else f"{1e3 * seconds:10.3f}"
 
 
 def _s(seconds) -> str:
@@ -196,10 +235,17 @@ def main(argv=None) -> int:
                         help="torch.set_num_threads(N) for CPU runs (default: torch's choice); "
                         "on a machine shared with other jobs, 1 avoids OpenMP threads "
                         "spinning against each other")
+    parser.add_argument("--passes", nargs="+", default=["auto"],
+                        choices=[k + u for k in ("auto", "xla", "pallas") for u in ("", "+unroll")],
+                        help="directional pass implementations for the JAX rows (default: auto); "
+                        "agreement is measured against the first")
+    parser.add_argument("--no-torch", action="store_true", help="leave the PyTorch rows out")
     args = parser.parse_args(argv)
 
     jdev = jax_device(args.device)
     try:
+        if args.no_torch:
+            raise ImportError("--no-torch")
         import torch
 
         import invsss.torch  # noqa: F401
@@ -218,19 +264,24 @@ def main(argv=None) -> int:
     print(f"  float32, 3 channels, {len(THESIS_VARIANCES)} Gaussians (thesis Table 5.1), "
           f"median of {args.repeats} after a warm-up; compile = JAX ahead-of-time lower+compile")
     print()
-    header = (f"{'model':<10} {'size':>5} {'framework':<8} {'forward ms':>10} {'v+grad ms':>10} "
-              f"{'fwd compile s':>13} {'v+g compile s':>13}")
+    header = (f"{'model':<10} {'size':>5} {'framework':<10} {'forward ms':>10} {'v+grad ms':>10} "
+              f"{'fwd compile s':>13} {'v+g compile s':>13} {'max|d fwd|':>10} {'grad rel d':>10}")
     print(header)
     print("-" * len(header))
     for model in args.models:
         for size in args.sizes:
-            rows = [("jax", bench_jax(model, size, args.repeats, jdev))]
+            rows = [(f"jax/{passes}", bench_jax(model, size, args.repeats, jdev, passes))
+                    for passes in args.passes]
             if tdev is not None:
                 rows.append(("torch", bench_torch(model, size, args.repeats, tdev)))
+            first = rows[0][1]
             for framework, row in rows:
-                print(f"{model:<10} {size:>5} {framework:<8} {_ms(row['forward'])} "
+                agree = ("", "")
+                if "forward result" in row and row is not first:
+                    agree = tuple(f"{x:10.1e}" for x in _agreement(row, first))
+                print(f"{model:<10} {size:>5} {framework:<10} {_ms(row['forward'])} "
                       f"{_ms(row['value+grad'])} {_s(row.get('forward compile')):>13} "
-                      f"{_s(row.get('value+grad compile')):>13}", flush=True)
+                      f"{_s(row.get('value+grad compile')):>13} {agree[0]:>10} {agree[1]:>10}", flush=True)
     return 0
 
 

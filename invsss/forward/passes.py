@@ -119,6 +119,19 @@ def directional_pass(
     Where ``mask`` is 0 the image is returned unchanged; in between the result
     is ``m P + (1 - m) I``.
     """
+    # ---- GPU dispatch (issue 35): one Pallas kernel per pass where
+    # invsss.forward.pass_kernels.kernel_enabled says so; this XLA code stays the
+    # reference and the CPU path.
+    from . import pass_kernels
+
+    if pass_kernels.kernel_enabled(image):
+        return pass_kernels.directional_pass_kernel(image, footprint, mask, weights, axis)
+    # ---- end of GPU dispatch
+    return _directional_pass_xla(image, footprint, mask, weights, axis)
+
+
+def _directional_pass_xla(image, footprint, mask, weights, axis):
+    """:func:`directional_pass` in plain XLA (the reference)."""
     base = pixel_coordinates(image.shape, axis, image.dtype)
     # The centre tap (t = 0) reads the pixel itself; the other six are gathered
     # one at a time so that each gather fuses into the running sum.

@@ -16,6 +16,8 @@ valid (H, W, C) inputs.
 
 from __future__ import annotations
 
+import os
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -70,6 +72,10 @@ def _pass_sequence(
     afterwards, halves the time on CPU.
     """
 
+    # INVSSS_SCAN_UNROLL=1 unrolls the scan (issue 35: measured on a GPU, where
+    # a loop step costs launches and a host round trip; experiments/bench_forward.py).
+    unroll = os.environ.get("INVSSS_SCAN_UNROLL", "0") == "1"
+
     # Reverse mode recomputes each pass from its input instead of storing the
     # twelve gathered images per pass: 24-32 % less time for value+grad on CPU.
     @jax.checkpoint
@@ -88,7 +94,7 @@ def _pass_sequence(
             layer = blur(layer, axis, width)
             return (layer, total + weight * (layer - image)), None
 
-        (_, total), _ = jax.lax.scan(step, (image, jnp.zeros_like(image)), (axes, widths, mix))
+        (_, total), _ = jax.lax.scan(step, (image, jnp.zeros_like(image)), (axes, widths, mix), unroll=unroll)
         return image + total
     if slots is not None:
         def step(carry, xs):
@@ -98,9 +104,9 @@ def _pass_sequence(
             return (layer, stack.at[slot].set(layer, mode="drop")), None
 
         stack = jnp.zeros((num_slots,) + image.shape, image.dtype)
-        (_, stack), _ = jax.lax.scan(step, (image, stack), (axes, widths, slots))
+        (_, stack), _ = jax.lax.scan(step, (image, stack), (axes, widths, slots), unroll=unroll)
         return stack
-    out, _ = jax.lax.scan(lambda layer, xs: (blur(layer, *xs), None), image, (axes, widths))
+    out, _ = jax.lax.scan(lambda layer, xs: (blur(layer, *xs), None), image, (axes, widths), unroll=unroll)
     return out
 
 

@@ -16,7 +16,8 @@ would produce, so a hit needs neither tracing nor lowering:
 - the non-array arguments and the tree structure (pickled), and every array
   argument's shape, dtype and weak type;
 - the settings that change a trace or a compilation: float64 mode, the default
-  matmul precision, dtype promotion, ``XLA_FLAGS``, the backend and its device.
+  matmul precision, dtype promotion, ``XLA_FLAGS``, ``INVSSS_PASS_KERNEL`` and
+  ``INVSSS_SCAN_UNROLL`` (which passes are traced), the backend and its device.
 
 It is on exactly when the compilation cache is (:func:`invsss.runtime.compile_cache.enable_compile_cache`
 was called and ``$INVSSS_NO_CACHE`` is unset); its files live in the
@@ -120,6 +121,10 @@ def _settings() -> tuple:
         str(jax.config.jax_default_matmul_precision),
         str(jax.config.jax_numpy_dtype_promotion),
         os.environ.get("XLA_FLAGS", ""),
+        # Which pass implementation is traced (invsss.forward.pass_kernels) and whether
+        # the passes' scan is unrolled (invsss.forward.screen_space).
+        os.environ.get("INVSSS_PASS_KERNEL", "auto"),
+        os.environ.get("INVSSS_SCAN_UNROLL", "0"),
         device.platform,
         device.device_kind,
     )

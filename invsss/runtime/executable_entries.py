@@ -174,6 +174,10 @@ def try_in_child(data: bytes, digest: str, leaves) -> str | None:
     import numpy as np
 
     env = dict(os.environ, INVSSS_NO_CACHE="1")
+    # On a GPU this process's JAX already holds most of the device's memory
+    # (XLA preallocates 75 %); a child preallocating too left the GPU solver
+    # no memory for its handle (issue 35), so the child allocates as it goes.
+    env.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
     package_root = str(Path(__file__).resolve().parents[2])  # the folder holding invsss/
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
     weak = [bool(getattr(jax.typeof(leaf), "weak_type", False)) for leaf in leaves]
