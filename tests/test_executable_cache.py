@@ -41,7 +41,7 @@ with warnings.catch_warnings(record=True) as caught:
 print(json.dumps({
     "fit": result.to_dict(),
     "iterations": result.iterations,
-    "traces": {f.__name__: f.traces for f in (solve._init, solve._step, problem._evaluate)},
+    "traces": {f.__name__: f.traces for f in (solve._init, solve._step, problem.evaluate)},
     "warnings": [str(w.message) for w in caught if "executable cache" in str(w.message)],
     "all_warnings": [str(w.message) for w in caught],
 }, default=str))
@@ -71,10 +71,10 @@ def reference():
 @pytest.mark.slow
 def test_a_second_process_traces_nothing_and_fits_the_same(tmp_path, reference):
     first = _fit(tmp_path)
-    assert len(_entries(tmp_path)) == 3  # _evaluate, the solver's init and its step
+    assert len(_entries(tmp_path)) == 3  # evaluate, the solver's init and its step
     assert all(count >= 1 for count in first["traces"].values())
     second = _fit(tmp_path)
-    assert second["traces"] == {"_init": 0, "_step": 0, "_evaluate": 0}
+    assert second["traces"] == {"_init": 0, "_step": 0, "evaluate": 0}
     # Bit for bit: the stored executable is the one the first process compiled.
     assert first["fit"] == reference["fit"]
     assert second["fit"] == reference["fit"]
@@ -91,7 +91,7 @@ def test_an_unreadable_entry_is_compiled_again_with_a_warning(tmp_path, referenc
     assert len(again["warnings"]) == 3
     assert all(count >= 1 for count in again["traces"].values())
     # ... and the entries were written again, whole.
-    assert _fit(tmp_path)["traces"] == {"_init": 0, "_step": 0, "_evaluate": 0}
+    assert _fit(tmp_path)["traces"] == {"_init": 0, "_step": 0, "evaluate": 0}
 
 
 @pytest.mark.slow  # three or four child processes, each fitting
@@ -100,7 +100,7 @@ def test_a_stored_init_without_its_step_starts_the_solve_afresh(tmp_path, refere
     # entry keeps as text: a step that must be traced cannot take that state.
     _fit(tmp_path)
     # The step's result is the tuple (z, state, loss, dof, done, ok); the init's
-    # is a solver state and _evaluate's a dict. (The step compiles on a second
+    # is a solver state and evaluate's a dict. (The step compiles on a second
     # thread, so the order the entries were stored in does not tell them apart.)
     # An entry is sealed with its checksum; the payload is the pickle.
     steps = [entry for entry in _entries(tmp_path)
@@ -118,7 +118,7 @@ def test_another_layout_is_another_entry(tmp_path):
     _fit(tmp_path, starts=2)
     # One start: no same-basin test, the same three functions and layouts.
     one = _fit(tmp_path, starts=1)
-    assert one["traces"] == {"_init": 0, "_step": 0, "_evaluate": 0}
+    assert one["traces"] == {"_init": 0, "_step": 0, "evaluate": 0}
     assert len(_entries(tmp_path)) == 3
 
 
@@ -137,7 +137,7 @@ def test_concurrent_processes_share_one_folder(tmp_path, reference):
     assert len(_entries(tmp_path)) == 3
     assert not list((tmp_path / "executables").glob(".writing-*"))
     after = _fit(tmp_path)
-    assert after["traces"] == {"_init": 0, "_step": 0, "_evaluate": 0}
+    assert after["traces"] == {"_init": 0, "_step": 0, "evaluate": 0}
     assert after["fit"] == reference["fit"] and not after["warnings"]
 
 
@@ -402,5 +402,5 @@ def test_a_fit_from_a_read_only_cache_loads_it_without_a_word(warm, read_only, r
     again = _fit(frozen)
     assert again["fit"] == reference["fit"]
     assert again["all_warnings"] == []
-    assert again["traces"] == {"_init": 0, "_step": 0, "_evaluate": 0}
+    assert again["traces"] == {"_init": 0, "_step": 0, "evaluate": 0}
     assert sorted(str(p.relative_to(frozen)) for p in frozen.rglob("*")) == listing

@@ -73,9 +73,9 @@ def test_compile_solver_leaves_the_solve_nothing_to_compile():
 @pytest.mark.slow  # a whole fit (cold compilation at a new size)
 def test_a_fit_compiles_its_step_once_on_the_second_thread():
     pair = _scene(30, seed=5)
-    with Compilations("_step", "_evaluate") as compiled:
+    with Compilations("_step", "evaluate") as compiled:
         fit = invsss.fit_pair(*pair, options=FitOptions(profile=PROFILE3, n_starts=2))
     # The scan's loss compiled on the caller's thread, the step once, beside it.
-    assert compiled.seen.count(("jit(_evaluate)", threading.current_thread().name)) == 1
+    assert compiled.seen.count(("jit(evaluate)", threading.current_thread().name)) == 1
     assert [thread for fun, thread in compiled.seen if fun == "jit(_step)"] == ["invsss-compile-solver"]
     assert fit.converged
