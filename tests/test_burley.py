@@ -143,10 +143,12 @@ def test_torch_twin_agrees_with_jax(compiled):
     out_t = itorch.render(timage, torch.tensor(depth), torch.tensor(mask), params, "burley")
     (torch.tensor(probe) * out_t).sum().backward()
     assert np.max(np.abs(out_j - image)) > 1e-2  # it blurs: agreement is not vacuous
-    np.testing.assert_allclose(out_t.detach().numpy(), out_j, rtol=0, atol=1e-5 * np.abs(out_j).max())
-    np.testing.assert_allclose(d.grad.numpy(), g_d_j, rtol=1e-4)
-    assert float(level.grad) == pytest.approx(float(g_level_j), rel=1e-4)
-    np.testing.assert_allclose(timage.grad.numpy(), g_image_j, rtol=0, atol=1e-4 * np.abs(g_image_j).max())
+    # The issue asks for 1e-5 (values) and 1e-4 (gradients); in float64 the twins
+    # agree to rounding, so the suite's cross-check tolerance (1e-6) applies.
+    np.testing.assert_allclose(out_t.detach().numpy(), out_j, rtol=0, atol=1e-6 * np.abs(out_j).max())
+    np.testing.assert_allclose(d.grad.numpy(), g_d_j, rtol=1e-6)
+    assert float(level.grad) == pytest.approx(float(g_level_j), rel=1e-6)
+    np.testing.assert_allclose(timage.grad.numpy(), g_image_j, rtol=0, atol=1e-6 * np.abs(g_image_j).max())
 
 
 # ------------------------------------------------------------------ recovery by `invsss fit`
