@@ -237,7 +237,7 @@ def main() -> None:
                         help="only the source, the thesis's values, the plain fit and the term rows: no dipole, "
                         "free-variance, transfer or joint rows (a held-out check in a third of the time)")
     parser.add_argument("--models", default="",
-                        help="also fit each of these models (comma-separated names of invsss.models) and "
+                        help="also fit each of these models (comma-separated names of invsss.forward.models) and "
                         "print their table with the cost per pixel (issue 34)")
     parser.add_argument("--models-only", action="store_true",
                         help="with --models: only the source, the model rows and the noise ceiling")
@@ -245,7 +245,7 @@ def main() -> None:
                         help=f"the split file (default {SPLIT_FILE})")
     args = parser.parse_args()
     term_rows = LIGHT_TERM_ROWS if args.terms is None else tuple(
-        tuple(t for t in invsss.light_terms.LIGHT_TERM_NAMES if t in row.split(","))
+        tuple(t for t in invsss.forward.light_terms.LIGHT_TERM_NAMES if t in row.split(","))
         for row in args.terms.split(";") if row.strip())
     split = read_split(args.split_file) if args.split_file.is_file() else {}
     folders = args.pairs or sorted(p.parent for p in pathlib.Path("data_synthetic").glob("*/scene.json"))
@@ -257,7 +257,7 @@ def main() -> None:
     fit_options = {"n_starts": 1, "max_steps": 50} if args.quick else {}
     models = [m for m in args.models.split(",") if m.strip()]
     for name in models:
-        invsss.models.get_model(name)
+        invsss.forward.models.get_model(name)
     if args.models_only and not models:
         parser.error("--models-only needs --models")
     pairs = [load_scene_pair(folder) for folder in folders]
@@ -294,7 +294,7 @@ def main() -> None:
             rows["fit (medium's dipole)"] = score(dipole.fitted[0], pair, mask)
         for terms in term_rows:
             buffers = pair["buffers"]
-            if any(getattr(buffers, b) is None for t in terms for b in invsss.light_terms.NEEDED_BUFFERS[t]):
+            if any(getattr(buffers, b) is None for t in terms for b in invsss.forward.light_terms.NEEDED_BUFFERS[t]):
                 continue
             lit = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"],
                                   light_terms=terms, light_buffers=buffers, **fit_options)
@@ -379,7 +379,7 @@ def fit_model(pair: dict, name: str, fit_options: dict):
     """The plain fit of model ``name``; ``burley`` with its distances free and
     ``sss_level`` at the camera's focal length in pixels (depth in mm)."""
     args = (pair["source"], pair["target"], pair["depth"], pair["mask"])
-    if invsss.models.get_model(name).layout == "disk":
+    if invsss.forward.models.get_model(name).layout == "disk":
         return invsss.fit_pair(*args, model=name, gauge="sss_level",
                                fix={"sss_level": float(pair["info"]["focal_px"])}, **fit_options)
     return invsss.fit_pair(*args, model=name, **fit_options)
@@ -394,9 +394,9 @@ def samples_per_pixel(name: str, gaussians: int) -> int:
     >>> [samples_per_pixel(m, 5) for m in ("sog", "thesis", "separable", "burley")]
     [70, 70, 34, 32]
     """
-    from invsss.burley_screen_space import BURLEY_SAMPLES
+    from invsss.forward.burley_screen_space import BURLEY_SAMPLES
 
-    layout = invsss.models.get_model(name).layout
+    layout = invsss.forward.models.get_model(name).layout
     return {"layered": 14 * gaussians, "chained": 14 * gaussians, "kernel": 2 * 17,
             "disk": BURLEY_SAMPLES}[layout]
 

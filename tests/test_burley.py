@@ -14,9 +14,9 @@ import pytest
 from scipy.ndimage import gaussian_filter
 
 import invsss
-from invsss.burley_screen_space import burley_cdf, render_burley, unit_radii
+from invsss.forward.burley_screen_space import burley_cdf, render_burley, unit_radii
 from invsss.cli import main
-from invsss.engine_profiles import (
+from invsss.io.engine_profiles import (
     engine_profile,
     hdrp_distances,
     hdrp_profile,

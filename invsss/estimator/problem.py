@@ -16,9 +16,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..executable_cache import persistent_jit
-from ..models import get_model
-from ..params import PARAM_NAMES
+from ..runtime.executable_cache import persistent_jit
+from ..forward.models import get_model
+from ..forward.params import PARAM_NAMES
 from ..validation import InvalidInputError
 from .canvas import on_canvas
 from .initial import blur_reference, choose_starts, data_scales
@@ -402,9 +402,9 @@ def build_problem(
         profile_w, profile_v = resolve_profile(options.profile)
         data = prepare_pairs(pairs)
         # --- issue 34: burley's variances are d_c^2, one per target channel, started
-        # from the profile's per-axis variance (invsss.burley_screen_space.start_variances).
+        # from the profile's per-axis variance (invsss.forward.burley_screen_space.start_variances).
         if get_model(options.model).layout == "disk":
-            from ..burley_screen_space import start_variances
+            from ..forward.burley_screen_space import start_variances
 
             profile_v = start_variances(profile_w, profile_v, data[0].channels[1])
             profile_w = np.ones(profile_v.shape[0])

@@ -1,4 +1,4 @@
-"""The ``burley`` disk blur (twin of :mod:`invsss.burley_screen_space`, docs/model.md, section 5).
+"""The ``burley`` disk blur (twin of :mod:`invsss.forward.burley_screen_space`, docs/model.md, section 5).
 
 Shares only the sample pattern's constants with the JAX code; the image is
 read with :func:`kornia.geometry.transform.remap` (``grid_sample``, bilinear,
@@ -11,7 +11,7 @@ from __future__ import annotations
 import torch
 from kornia.geometry.transform import remap
 
-from ..burley_screen_space import BURLEY_SAMPLES, check_burley_distances, sample_pattern
+from ..forward.burley_screen_space import BURLEY_SAMPLES, check_burley_distances, sample_pattern
 
 __all__ = ["render_burley"]
 

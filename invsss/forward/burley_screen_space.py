@@ -38,7 +38,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .validation import InvalidInputError
+from ..validation import InvalidInputError
 
 __all__ = [
     "BURLEY_SAMPLES",

@@ -14,7 +14,7 @@ Exit codes, all without a traceback:
 * 2: bad input, reported as ``invsss: error: <message>`` (an
   :class:`~invsss.validation.InvalidInputError`), or an output directory that
   already holds a result (``--overwrite``) or is in use by another run;
-* 130 / 143: interrupted by SIGINT (Ctrl-C) / SIGTERM (:mod:`invsss.interrupts`).
+* 130 / 143: interrupted by SIGINT (Ctrl-C) / SIGTERM (:mod:`invsss.runtime.interrupts`).
   ``fit`` then writes the best estimate so far, marked ``"interrupted": true``,
   when at least one solver step has finished.
 """
@@ -34,15 +34,15 @@ import warnings
 
 import numpy as np
 
-from . import __version__
-from .determinism import use_deterministic_scheduler
-from .estimator import FitInterrupted, fit_pair, fit_pairs
-from .interrupts import Interrupted, StopSignals
-from .estimator.options import check_canvas
-from .estimator.parametrisation import GAUGES
-from .estimator.solve import SOLVERS
-from .export import EXPORT_FORMATS, export_params
-from .io import (
+from .. import __version__
+from ..runtime.determinism import use_deterministic_scheduler
+from ..estimator import FitInterrupted, fit_pair, fit_pairs
+from ..runtime.interrupts import Interrupted, StopSignals
+from ..estimator.options import check_canvas
+from ..estimator.parametrisation import GAUGES
+from ..estimator.solve import SOLVERS
+from ..io.export import EXPORT_FORMATS, export_params
+from ..io import (
     image_extension,
     load_pair,
     read_depth,
@@ -53,14 +53,14 @@ from .io import (
     write_image,
     write_params,
 )
-from .passes import TAP_WEIGHTS
-from .profiles import PROFILE_NAMES
-from .result_dir import ResultDir, ResultWriteError
-from .screen_space import MODELS, render
-from .params import check_plausible
-from .light_terms import LIGHT_TERM_FIELDS, LIGHT_TERM_NAMES, NEEDED_BUFFERS, LightBuffers, LightTerms
-from .pair import ImagePair, fill_background_depth
-from .validation import InvalidInputError, check_depth, check_same_frame
+from ..forward.passes import TAP_WEIGHTS
+from ..forward.profiles import PROFILE_NAMES
+from ..io.result_dir import ResultDir, ResultWriteError
+from ..forward.screen_space import MODELS, render
+from ..forward.params import check_plausible
+from ..forward.light_terms import LIGHT_TERM_FIELDS, LIGHT_TERM_NAMES, NEEDED_BUFFERS, LightBuffers, LightTerms
+from ..forward.pair import ImagePair, fill_background_depth
+from ..validation import InvalidInputError, check_depth, check_same_frame
 
 __all__ = ["build_parser", "main"]
 
@@ -473,7 +473,7 @@ class _ProgressLine:
             # Everything the first step needs is compiled once it has run.
             self.close()
             seconds = self._compile_seconds()
-            # A warm cache (invsss.executable_cache) leaves nothing to compile.
+            # A warm cache (invsss.runtime.executable_cache) leaves nothing to compile.
             self._stream.write(f"fit: compiling ... {seconds:.1f} s\n" if seconds >= 0.05
                                else "fit: compiled code loaded from the cache\n")
             self._compile_seconds = None
@@ -560,7 +560,7 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
         # while a daemon thread runs compiled code (a fit interrupted at once) can
         # abort in C++ during shutdown (seen in CI: exit status -6 instead of 130).
         threading.Thread(
-            target=importlib.import_module, args=("invsss.report",), name="invsss-import-report"
+            target=importlib.import_module, args=("invsss.cli.report",), name="invsss-import-report"
         ).start()
         options = dict(
             model=args.model, profile=args.profile, fix=fix or None, gauge=args.gauge,
@@ -677,7 +677,7 @@ def _add_export_parser(subparsers) -> None:
                         help="separable only: blend of the kernel with the identity (default: 1)")
     parser.add_argument("--out", default=None, metavar="FILE",
                         help="output file (default: standard output)")
-    # --- issue 34: the engines' profile assets (invsss.engine_profiles) ---
+    # --- issue 34: the engines' profile assets (invsss.io.engine_profiles) ---
     parser.add_argument("--mm-per-unit", type=float, default=1.0,
                         help="hdrp/unreal: millimetres per unit of the fitted pair's depth (default: 1)")
     parser.add_argument("--albedo", default=None, metavar="A or R/G/B",
@@ -758,7 +758,7 @@ def _add_scene_parser(subparsers) -> None:
 
 def _warp_from_params(path: str):
     """The one warp in a fit's params.json (``alignment``), for ``scene --warp``."""
-    from .io import read_params
+    from ..io import read_params
 
     _, extras = read_params(path)
     warps = extras.get("alignment") or []
@@ -772,8 +772,8 @@ def _warp_from_params(path: str):
 
 def _run_scene(args: argparse.Namespace, stop: StopSignals) -> int:
     # Imported here: the scene code needs Mitsuba, which the other commands do not.
-    from .scenes import load_config
-    from .scenes.render import SCENE_FILES, render_scene, scene_writers
+    from ..scenes import load_config
+    from ..scenes.render import SCENE_FILES, render_scene, scene_writers
 
     config = load_config(args.config)
     if args.warp is not None:
@@ -834,8 +834,8 @@ def _add_sweep_parser(subparsers) -> None:
 
 
 def _run_sweep(args: argparse.Namespace, stop: StopSignals) -> int:
-    from .experiments import load, run
-    from .experiments.experiment import MAX_TRIALS
+    from ..experiments import load, run
+    from ..experiments.experiment import MAX_TRIALS
 
     limit = MAX_TRIALS if args.max_trials is None else args.max_trials
     if limit < 1:
@@ -875,7 +875,7 @@ def _add_sweep_report_parser(subparsers) -> None:
 
 
 def _run_sweep_report(args: argparse.Namespace, stop: StopSignals) -> int:
-    from .experiments.report import write_report
+    from ..experiments.report import write_report
 
     table, written = write_report(args.out, plots=not args.no_plots, parquet=args.parquet)
     _print_out(table)
@@ -946,8 +946,8 @@ def _add_profile_parser(subparsers) -> None:
 
 
 def _run_profile(args: argparse.Namespace, stop: StopSignals) -> int:
-    from .dipole_fit import fit_dipole
-    from .measure import measure_profile
+    from ..measurement.dipole_fit import fit_dipole
+    from ..measurement.measure import measure_profile
 
     if os.path.exists(args.out):
         raise InvalidInputError(f"{args.out}: already exists; remove it or choose another --out")
@@ -1050,7 +1050,7 @@ def _use_compile_cache(args: argparse.Namespace) -> None:
         # Through the environment, so that a sweep's worker processes see it too.
         os.environ["INVSSS_NO_CACHE"] = "1"
         return
-    from .compile_cache import enable_compile_cache
+    from ..runtime.compile_cache import enable_compile_cache
 
     enable_compile_cache()
 

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .validation import InvalidInputError
+from ..validation import InvalidInputError
 
 __all__ = [
     "ENGINE_FORMATS",

@@ -1,6 +1,6 @@
 """Constants for a real-time shader: fitted parameters in the form a renderer uses.
 
-A fitted :class:`~invsss.params.SSSParams` describes the model; a shader needs
+A fitted :class:`~invsss.forward.params.SSSParams` describes the model; a shader needs
 the numbers derived from it: per-pass widths, the 7 tap offsets and weights,
 the running blend factors that accumulate the ``sog`` layers, or the N-tap
 kernel of the ``separable`` model. :func:`shader_constants` computes them,
@@ -35,20 +35,20 @@ import os
 import jax
 import numpy as np
 
-from .io import read_params, write_text_atomic
-from .light_terms import AFTER_BLUR, LAW_TRUST, LightTerms
-from .models import get_model, resolve_tap_weights
-from .params import SSSParams
-from .passes import TAP_OFFSETS, tap_spread
-from .passes import tap_weights as tap_weight_set
-from .screen_space import separable_kernel
-from .validation import InvalidInputError
+from . import read_params, write_text_atomic
+from ..forward.light_terms import AFTER_BLUR, LAW_TRUST, LightTerms
+from ..forward.models import get_model, resolve_tap_weights
+from ..forward.params import SSSParams
+from ..forward.passes import TAP_OFFSETS, tap_spread
+from ..forward.passes import tap_weights as tap_weight_set
+from ..forward.screen_space import separable_kernel
+from ..validation import InvalidInputError
 
 __all__ = ["EXPORT_FORMATS", "shader_constants", "to_hlsl", "to_json", "export_params", "write_shader",
            "scale_to_resolution"]
 
 #: Output formats of :func:`export_params` and ``invsss export``; ``hdrp`` and
-#: ``unreal`` are the engines' profile assets (:mod:`invsss.engine_profiles`, issue 34).
+#: ``unreal`` are the engines' profile assets (:mod:`invsss.io.engine_profiles`, issue 34).
 EXPORT_FORMATS = ("json", "hlsl", "hdrp", "unreal")
 
 _SCALE_UNITS = (
@@ -104,7 +104,7 @@ def shader_constants(
     params : SSSParams
         Weights of shape (K,), (K, 1) or (K, 3).
     model : {"sog", "thesis", "separable"}
-        A name from :data:`invsss.models.MODEL_NAMES`.
+        A name from :data:`invsss.forward.models.MODEL_NAMES`.
     tap_weights : {"jimenez", "thesis"} or 7 numbers, optional
         7-tap weight set of ``sog`` and ``thesis`` (default: the model's
         ``default_tap_weights``). Not used by ``separable``.
@@ -319,11 +319,11 @@ def _separable_constants(weights, variances, taps, strength) -> dict:
     }
 
 
-#: How each layout of :data:`invsss.models.LAYOUTS` is exported.
-# --- issue 34: the burley model's disk (invsss.burley_screen_space) ---
+#: How each layout of :data:`invsss.forward.models.LAYOUTS` is exported.
+# --- issue 34: the burley model's disk (invsss.forward.burley_screen_space) ---
 def _disk_constants(entry, weights, variances, options) -> dict:
     """The ``burley`` layout: shape parameters and the fixed sample pattern."""
-    from .burley_screen_space import sample_pattern
+    from ..forward.burley_screen_space import sample_pattern
 
     x, cos_a, sin_a = sample_pattern()
     return {"shapeParameters": _floats(np.sqrt(variances)), "numSamples": int(x.size),
@@ -442,7 +442,7 @@ def write_shader(constants_path) -> list:
     here, they include ``constants_path``'s file name instead. Returns the paths
     written (each atomically).
     """
-    from .shaders import shader_sources
+    from ..shaders import shader_sources
 
     constants_path = os.fspath(constants_path)
     folder = os.path.dirname(os.path.abspath(constants_path))
@@ -471,10 +471,10 @@ def export_params(
         Where to write (atomically); nothing is written when omitted.
     format : {"json", "hlsl", "hdrp", "unreal"}
         ``hdrp`` and ``unreal`` write a ``burley`` fit as the engine's profile
-        asset (:func:`invsss.engine_profiles.engine_profile`, JSON).
+        asset (:func:`invsss.io.engine_profiles.engine_profile`, JSON).
     engine : dict, optional
         ``hdrp``/``unreal`` only: keyword arguments of
-        :func:`~invsss.engine_profiles.engine_profile` (``mm_per_unit``,
+        :func:`~invsss.io.engine_profiles.engine_profile` (``mm_per_unit``,
         ``albedo``, ``world_scale``).
     model, tap_weights, taps, strength
         As in :func:`shader_constants`; ``model`` and ``tap_weights`` override the file.
