@@ -36,6 +36,15 @@ target over the eroded mask, one row per way of predicting the target:
     the same terms with the profile's variances fitted too (``gauge="sss_level"``,
     ``sss_level`` held at the value the fit with fixed variances found: the gauge
     lets either carry the scale);
+``model <name>`` (with ``--models``, issue 34)
+    the plain fit of each screen-space model of the table: ``sog``, ``thesis`` and
+    ``separable`` with their defaults (the thesis-nir profile's variances held), and
+    ``burley`` with its per-channel distances free and ``sss_level`` held at the
+    camera's focal length in pixels (``scene.json``'s ``focal_px``; the depth is in
+    mm), which is what an engine knows. :func:`print_model_summary` then prints
+    one table of these rows over the pairs, with each model's cost per pixel as a
+    shader (:func:`samples_per_pixel`). ``--models-only`` leaves out every other
+    row but the source and the noise ceiling;
 ``noise ceiling``
     the best PSNR a noise-free prediction can reach against this Monte Carlo target
     (``scene.json``, from the two half renders).
@@ -62,6 +71,7 @@ do not dominate. Residual maps (target minus prediction) are saved as PNG under
 ``--out``; the table also goes to ``--out/fidelity.json``.
 
     python experiments/fidelity.py [PAIR_DIR ...] [--split tuning|held-out|all] [--out runs/fidelity] [--quick] [--terms "shift,law;law"]
+    python experiments/fidelity.py --split all --models sog,thesis,separable,burley --models-only
 
 Without PAIR_DIR, every folder of ``data_synthetic/`` that holds a ``scene.json`` and is
 in the chosen part. ``--terms ""`` leaves out every light-term row (and the transfer
@@ -226,6 +236,11 @@ def main() -> None:
     parser.add_argument("--lean", action="store_true",
                         help="only the source, the thesis's values, the plain fit and the term rows: no dipole, "
                         "free-variance, transfer or joint rows (a held-out check in a third of the time)")
+    parser.add_argument("--models", default="",
+                        help="also fit each of these models (comma-separated names of invsss.forward.models) and "
+                        "print their table with the cost per pixel (issue 34)")
+    parser.add_argument("--models-only", action="store_true",
+                        help="with --models: only the source, the model rows and the noise ceiling")
     parser.add_argument("--split-file", type=pathlib.Path, default=SPLIT_FILE,
                         help=f"the split file (default {SPLIT_FILE})")
     args = parser.parse_args()
@@ -240,6 +255,11 @@ def main() -> None:
         parser.error(f"no path-traced pair folders (with scene.json) found in split {part!r}")
     print(f"pairs ({part}): {', '.join(f.name for f in folders)}", flush=True)
     fit_options = {"n_starts": 1, "max_steps": 50} if args.quick else {}
+    models = [m for m in args.models.split(",") if m.strip()]
+    for name in models:
+        invsss.forward.models.get_model(name)
+    if args.models_only and not models:
+        parser.error("--models-only needs --models")
     pairs = [load_scene_pair(folder) for folder in folders]
     for pair, folder in zip(pairs, folders):
         pair["split"] = pair_split(folder, split) or NO_SPLIT
@@ -249,6 +269,16 @@ def main() -> None:
         started = time.perf_counter()
         mask = eroded(pair["mask"], args.erode)
         rows: dict[str, dict] = {"source": score(pair["source"], pair, mask)}
+        for name in models:
+            model_fit = fit_model(pair, name, fit_options)
+            rows[f"model {name}"] = score(model_fit.fitted[0], pair, mask)
+            rows[f"model {name}"]["variances"] = np.asarray(model_fit.values["variances"]).tolist()
+        if args.models_only:
+            rows["noise ceiling"] = {"psnr": pair["info"]["noise"]["noise_ceiling_db"], "ssim": None,
+                                     "coarse": None, "residual": None}
+            table[pair["name"]] = rows
+            print(f"{pair['name']}: {time.perf_counter() - started:.0f} s", flush=True)
+            continue
         for level, correction in THESIS_HAND_VALUES:
             params = invsss.SSSParams(sss_level=1000.0 * level, correction=correction, maxdd=THESIS_MAXDD_MM,
                                       weights=list(invsss.THESIS_NIR_940["weights"]),
@@ -336,7 +366,59 @@ def main() -> None:
                                "split": parts[name]}
                          for row, r in rows.items()}
     (args.out / "fidelity.json").write_text(json.dumps(summary, indent=2) + "\n")
-    print_term_summary(table, parts)
+    if not args.models_only:
+        print_term_summary(table, parts)
+    if models:
+        print_model_summary(table, parts, models)
+
+
+# --- issue 34: the four models side by side ---
+
+
+def fit_model(pair: dict, name: str, fit_options: dict):
+    """The plain fit of model ``name``; ``burley`` with its distances free and
+    ``sss_level`` at the camera's focal length in pixels (depth in mm)."""
+    args = (pair["source"], pair["target"], pair["depth"], pair["mask"])
+    if invsss.forward.models.get_model(name).layout == "disk":
+        return invsss.fit_pair(*args, model=name, gauge="sss_level",
+                               fix={"sss_level": float(pair["info"]["focal_px"])}, **fit_options)
+    return invsss.fit_pair(*args, model=name, **fit_options)
+
+
+def samples_per_pixel(name: str, gaussians: int) -> int:
+    """Image reads per pixel of model ``name`` as a shader (``gaussians`` in the profile).
+
+    ``sog`` and ``thesis``: 2K passes of 7 taps; ``separable``: 2 passes of its 17-tap
+    kernel; ``burley``: its fixed pattern's samples (each a 2D bilinear read).
+
+    >>> [samples_per_pixel(m, 5) for m in ("sog", "thesis", "separable", "burley")]
+    [70, 70, 34, 32]
+    """
+    from invsss.forward.burley_screen_space import BURLEY_SAMPLES
+
+    layout = invsss.forward.models.get_model(name).layout
+    return {"layered": 14 * gaussians, "chained": 14 * gaussians, "kernel": 2 * 17,
+            "disk": BURLEY_SAMPLES}[layout]
+
+
+def print_model_summary(table: dict, parts: dict, models: list) -> None:
+    """One row per pair: PSNR of each model's plain fit, the noise ceiling; then the
+    mean per split and the reads per pixel."""
+    gaussians = len(invsss.THESIS_NIR_940["variances"])
+    print("\n| pair | split | " + " | ".join(models) + " | noise ceiling |")
+    print("|---|---|" + "---|" * (len(models) + 1))
+    for name, rows in table.items():
+        cells = " | ".join(f"{rows[f'model {m}']['psnr']:.2f}" for m in models)
+        print(f"| {name} | {parts[name]} | {cells} | {rows['noise ceiling']['psnr']:.2f} |")
+    for part in dict.fromkeys(parts[name] for name in table):
+        names = [n for n in table if parts[n] == part]
+        cells = " | ".join(f"{np.mean([table[n][f'model {m}']['psnr'] for n in names]):.2f}" for m in models)
+        print(f"| mean ({len(names)} pairs) | {part} | {cells} | "
+              f"{np.mean([table[n]['noise ceiling']['psnr'] for n in names]):.2f} |")
+    print("| reads per pixel | | " + " | ".join(str(samples_per_pixel(m, gaussians)) for m in models) + " | |")
+
+
+# --- end issue 34 ---
 
 
 #: The row every light-term row is compared with.

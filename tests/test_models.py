@@ -47,23 +47,24 @@ def scene(size=14, seed=3):
     return image, depth, np.ones((size, size))
 
 
-BASE = dict(sss_level=600.0, correction=50.0, maxdd=3.0, weights=[0.3, 0.7], variances=[1.0, 4.0])
+# Three Gaussians: the burley model reads the three variances as d^2 per channel.
+BASE = dict(sss_level=600.0, correction=50.0, maxdd=3.0, weights=[0.3, 0.5, 0.2], variances=[1.0, 4.0, 0.5])
 # One change per parameter; the weights change their ratio (only ratios matter in sog).
-CHANGED = dict(sss_level=700.0, correction=80.0, maxdd=1.5, weights=[0.7, 0.3], variances=[1.5, 3.0])
+CHANGED = dict(sss_level=700.0, correction=80.0, maxdd=1.5, weights=[0.5, 0.3, 0.2], variances=[1.5, 3.0, 0.7])
 
 
 # ------------------------------------------------------------------ the table
 
 
 def test_table_names_and_lookup():
-    assert MODEL_NAMES == tuple(MODELS) == ("sog", "thesis", "separable")
+    assert MODEL_NAMES == tuple(MODELS) == ("sog", "thesis", "separable", "burley")
     assert invsss.MODELS == invsss.forward.screen_space.MODELS == MODEL_NAMES
     for name in MODEL_NAMES:
         assert get_model(name).name == name
     # docs/model.md, sections 3 and 5: jimenez is the default set, the thesis shipped its own.
     defaults = {name: m.default_tap_weights for name, m in MODELS.items()}
-    assert defaults == {"sog": "jimenez", "thesis": "thesis", "separable": None}
-    with pytest.raises(InvalidInputError, match=r"^model: expected one of sog, thesis, separable, got 'x'$"):
+    assert defaults == {"sog": "jimenez", "thesis": "thesis", "separable": None, "burley": None}
+    with pytest.raises(InvalidInputError, match=r"^model: expected one of sog, thesis, separable, burley, got 'x'$"):
         get_model("x")
     with pytest.raises(InvalidInputError, match="model: expected one of"):
         invsss.render(*scene(), invsss.SSSParams(**BASE), model="x")
@@ -216,6 +217,8 @@ def test_every_model_renders_in_both_frameworks_and_exports(name):
     entry = get_model(name)
     if entry.layout == "kernel":
         assert "passWidths" not in constants and constants["numTaps"] == 17
+    elif entry.layout == "disk":
+        np.testing.assert_allclose(constants["shapeParameters"], np.sqrt(BASE["variances"]), rtol=1e-14)
     else:
         # One width per Gaussian, in pass order, from docs/model.md's formula.
         _, widths, _ = expected_plan(entry.layout, BASE["variances"], spread(entry.default_tap_weights))

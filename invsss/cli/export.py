@@ -7,6 +7,7 @@ import sys
 
 
 from ..runtime.interrupts import StopSignals
+from ..validation import InvalidInputError
 from ..io.export import EXPORT_FORMATS, export_params
 from .arguments import add_model_arguments
 
@@ -30,16 +31,39 @@ def add_parser(subparsers) -> None:
                         help="separable only: blend of the kernel with the identity (default: 1)")
     parser.add_argument("--out", default=None, metavar="FILE",
                         help="output file (default: standard output)")
+    # The engines' profile assets (invsss.io.engine_profiles).
+    parser.add_argument("--mm-per-unit", type=float, default=1.0,
+                        help="hdrp/unreal: millimetres per unit of the fitted pair's depth (default: 1)")
+    parser.add_argument("--albedo", default=None, metavar="A or R/G/B",
+                        help="unreal: surface albedo for the mean-free-path conversion (default: Unreal's "
+                        "default, reported as undetermined)")
+    parser.add_argument("--world-scale", type=float, default=None,
+                        help="hdrp: worldScale (m per unit); unreal: WorldUnitScale (default: the engine's, "
+                        "reported as undetermined)")
     parser.add_argument("--with-shader", action="store_true",
                         help="with --format hlsl and --out: also write the reference shader "
                         "(invsss_*.hlsl, docs/renderer.md) beside FILE, including it")
     parser.set_defaults(func=run)
 
 
+def _engine_options(args) -> dict | None:
+    """The hdrp/unreal options of ``invsss export``; None for the shader formats."""
+    if args.format not in ("hdrp", "unreal"):
+        return None
+    albedo = None
+    if args.albedo is not None:
+        try:
+            albedo = [float(a) for a in args.albedo.split("/")]
+        except ValueError:
+            raise InvalidInputError(f"--albedo: expected a number or R/G/B numbers, got {args.albedo!r}") from None
+    return {"mm_per_unit": args.mm_per_unit, "albedo": albedo, "world_scale": args.world_scale}
+
+
 def run(args: argparse.Namespace, stop: StopSignals) -> int:
     text = export_params(
         args.params, args.out, args.format, model=args.model, tap_weights=args.tap_weights,
         taps=args.taps, strength=args.strength, with_shader=args.with_shader,
+        engine=_engine_options(args),
     )
     if args.out is None:
         sys.stdout.write(text)

@@ -245,10 +245,18 @@ def _plot_profile(ax, result) -> None:
         curves.append(("start", np.asarray(start["weights"], np.float64),
                        np.asarray(start["variances"], np.float64), ":"))
     r_max = 3.0 * float(np.sqrt(max(np.max(c[2]) for c in curves)))
-    r = np.linspace(0.0, r_max, 200)
+    burley = getattr(result, "model", "sog") == "burley"  # issue 34: its variances are d^2
+    if burley:
+        r_max = max(r_max, 6.0 * float(np.sqrt(np.max(variances))))
+    r = np.linspace(r_max / 400.0 if burley else 0.0, r_max, 200)
     for label, w, v, style in curves:
         w = w / np.sum(w, axis=0)
-        profile = sum_of_gaussians(r, w, v)  # NumPy in and out: no compilation
+        if burley and label == "fitted":
+            # Christensen & Burley's R(r) per channel (docs/model.md, section 4), unit albedo.
+            d = np.maximum(np.sqrt(v), 1e-9)[None, :]
+            profile = (np.exp(-r[:, None] / d) + np.exp(-r[:, None] / (3 * d))) / (8 * np.pi * d * r[:, None])
+        else:
+            profile = sum_of_gaussians(r, w, v)  # NumPy in and out: no compilation
         profile = profile.reshape(r.size, -1)
         for c in range(profile.shape[1]):
             name = label if profile.shape[1] == 1 else f"{label}, channel {c}"

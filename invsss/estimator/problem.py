@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..runtime.executable_cache import persistent_jit
+from ..forward.models import get_model
 from ..forward.params import PARAM_NAMES
 from ..validation import InvalidInputError
 from .canvas import on_canvas
@@ -402,4 +403,13 @@ def build_problem(
         raise InvalidInputError(f"options: expected a FitOptions, got {type(options).__name__}")
     with jax.enable_x64(True):
         profile_w, profile_v = resolve_profile(options.profile)
-        return FitProblem(prepare_pairs(pairs), options, profile_w, profile_v, start, before_scan, nested)
+        data = prepare_pairs(pairs)
+        # --- issue 34: burley's variances are d_c^2, one per target channel, started
+        # from the profile's per-axis variance (invsss.forward.burley_screen_space.start_variances).
+        if get_model(options.model).layout == "disk":
+            from ..forward.burley_screen_space import start_variances
+
+            profile_v = start_variances(profile_w, profile_v, data[0].channels[1])
+            profile_w = np.ones(profile_v.shape[0])
+        # --- end issue 34
+        return FitProblem(data, options, profile_w, profile_v, start, before_scan, nested)

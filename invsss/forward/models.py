@@ -35,8 +35,9 @@ WEIGHTS_ROLES = ("linear", "free", "unused")
 #: mixed by the weights; ``"chained"``: K horizontal then K vertical passes of
 #: the full variances, the last one the output (both 7-tap, planned by
 #: :func:`invsss.forward.pass_plan.pass_plan`); ``"kernel"``: one pass pair with a
-#: precomputed N-tap kernel.
-LAYOUTS = ("layered", "chained", "kernel")
+#: precomputed N-tap kernel; ``"disk"``: one gather of importance-sampled
+#: radii over a disk (:mod:`invsss.forward.burley_screen_space`, issue 34).
+LAYOUTS = ("layered", "chained", "kernel", "disk")
 
 
 @dataclass(frozen=True)
@@ -138,6 +139,17 @@ MODELS: dict[str, ScreenSpaceModel] = {
             weights_role="free",
             layout="kernel",
         ),
+        # --- issue 34: the engines' model (invsss.forward.burley_screen_space) ---
+        ScreenSpaceModel(
+            name="burley",
+            summary="Burley normalized diffusion sampled over a disk, as Unity HDRP and Unreal do",
+            default_tap_weights=None,
+            # Its variances are d_c^2, one per channel; samples land at r L / depth.
+            parameters=frozenset({"sss_level", "variances"}),
+            weights_role="unused",
+            layout="disk",
+        ),
+        # --- end issue 34 ---
     )
 }
 
@@ -160,7 +172,7 @@ def get_model(name) -> ScreenSpaceModel:
     >>> get_model("blur")
     Traceback (most recent call last):
     ...
-    invsss.validation.InvalidInputError: model: expected one of sog, thesis, separable, got 'blur'
+    invsss.validation.InvalidInputError: model: expected one of sog, thesis, separable, burley, got 'blur'
     """
     if isinstance(name, ScreenSpaceModel):
         return name

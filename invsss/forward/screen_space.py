@@ -24,6 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .burley_screen_space import check_burley_distances, render_burley
 from .light_terms import AFTER_BLUR, LightBuffers, LightTerms, apply_law, apply_light_terms
 from .models import MODEL_NAMES, get_model, resolve_tap_weights
 from .params import SSSParams
@@ -238,6 +239,7 @@ LAYOUT_RENDERERS = {
     "layered": render_sog,
     "chained": render_thesis,
     "kernel": _render_kernel,
+    "disk": render_burley,  # issue 34: invsss.forward.burley_screen_space
 }
 
 
@@ -300,8 +302,9 @@ def render(
     params : SSSParams
         Stretch-factor and profile parameters. Weights of shape (K, C) must have
         the image's C.
-    model : {"sog", "thesis", "separable"}
-        A name from :data:`invsss.forward.models.MODEL_NAMES`.
+    model : {"sog", "thesis", "separable", "burley"}
+        A name from :data:`invsss.forward.models.MODEL_NAMES`. ``burley`` reads
+        ``variances`` as ``d^2`` per channel (:mod:`invsss.forward.burley_screen_space`).
     tap_weights : {"jimenez", "thesis"} or 7 numbers, optional
         Tap weights of the 7-tap passes; default the model's
         ``default_tap_weights`` ("jimenez" for ``sog``, "thesis" for
@@ -347,6 +350,8 @@ def render(
             f"params.weights: expected one column per image channel ({channels}), "
             f"got shape {np.shape(params.weights)}"
         )
+    if entry.layout == "disk":  # issue 34: burley takes one d^2, or one per channel
+        check_burley_distances(params.variances, channels)
     tap_weights = resolve_tap_weights(entry, tap_weights)
     dtype = jnp.result_type(float)
     image = jnp.asarray(image, dtype)

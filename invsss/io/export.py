@@ -47,8 +47,9 @@ from ..validation import InvalidInputError
 __all__ = ["EXPORT_FORMATS", "shader_constants", "to_hlsl", "to_json", "export_params", "write_shader",
            "scale_to_resolution"]
 
-#: Output formats of :func:`export_params` and ``invsss export``.
-EXPORT_FORMATS = ("json", "hlsl")
+#: Output formats of :func:`export_params` and ``invsss export``; ``hdrp`` and
+#: ``unreal`` are the engines' profile assets (:mod:`invsss.io.engine_profiles`, issue 34).
+EXPORT_FORMATS = ("json", "hlsl", "hdrp", "unreal")
 
 _SCALE_UNITS = (
     "depth and profile in scene units (mm recommended); sssLevel in pixels per scene unit "
@@ -319,7 +320,19 @@ def _separable_constants(weights, variances, taps, strength) -> dict:
 
 
 #: How each layout of :data:`invsss.forward.models.LAYOUTS` is exported.
-_RECIPES = {"layered": _pass_constants, "chained": _pass_constants, "kernel": _kernel_constants}
+# --- issue 34: the burley model's disk (invsss.forward.burley_screen_space) ---
+def _disk_constants(entry, weights, variances, options) -> dict:
+    """The ``burley`` layout: shape parameters and the fixed sample pattern."""
+    from ..forward.burley_screen_space import sample_pattern
+
+    x, cos_a, sin_a = sample_pattern()
+    return {"shapeParameters": _floats(np.sqrt(variances)), "numSamples": int(x.size),
+            "sampleRadii": _floats(x), "sampleCos": _floats(cos_a), "sampleSin": _floats(sin_a)}
+
+
+_RECIPES = {"layered": _pass_constants, "chained": _pass_constants, "kernel": _kernel_constants,
+            "disk": _disk_constants}
+# --- end issue 34 ---
 
 
 # ------------------------------------------------------------------ writers
@@ -445,7 +458,7 @@ def write_shader(constants_path) -> list:
 
 def export_params(
     params_json_path, out_path=None, format: str = "json", *, model: str | None = None,
-    tap_weights=None, taps: int = 17, strength: float = 1.0, with_shader: bool = False,
+    tap_weights=None, taps: int = 17, strength: float = 1.0, with_shader: bool = False, engine: dict | None = None,
 ) -> str:
     """Read a params JSON file and export its shader constants.
 
@@ -456,7 +469,13 @@ def export_params(
         ``tap_weights`` entries are used unless given here.
     out_path : str or os.PathLike, optional
         Where to write (atomically); nothing is written when omitted.
-    format : {"json", "hlsl"}
+    format : {"json", "hlsl", "hdrp", "unreal"}
+        ``hdrp`` and ``unreal`` write a ``burley`` fit as the engine's profile
+        asset (:func:`invsss.io.engine_profiles.engine_profile`, JSON).
+    engine : dict, optional
+        ``hdrp``/``unreal`` only: keyword arguments of
+        :func:`~invsss.io.engine_profiles.engine_profile` (``mm_per_unit``,
+        ``albedo``, ``world_scale``).
     model, tap_weights, taps, strength
         As in :func:`shader_constants`; ``model`` and ``tap_weights`` override the file.
     with_shader : bool
@@ -487,6 +506,17 @@ def export_params(
         params, extras = read_params(params_json_path)
     model = model or extras.get("model", "sog")
     tap_weights = tap_weights or extras.get("tap_weights")
+    if format in ("hdrp", "unreal"):  # issue 34: the engines' assets
+        from .engine_profiles import engine_profile
+
+        if get_model(model).layout != "disk":
+            raise InvalidInputError(
+                f"format: {format} takes a burley fit (model burley), got model {model}; refit with --model burley"
+            )
+        text = to_json(engine_profile(params, format, **(engine or {})))
+        if out_path is not None:
+            write_text_atomic(out_path, text)
+        return text
     constants = shader_constants(params, model, tap_weights=tap_weights, taps=taps, strength=strength,
                                  light_terms=extras.get("light_terms"))
     text = to_json(constants) if format == "json" else to_hlsl(constants)

@@ -15,6 +15,7 @@ single definition both follow), module for module:
 :func:`sum_of_gaussians`
 :func:`render`, :func:`sog_layers`,     :mod:`invsss.forward.screen_space`
 :func:`separable_kernel`, ...
+:func:`render_burley`                   :mod:`invsss.forward.burley_screen_space`
 :func:`apply_light_terms`,              :mod:`invsss.forward.light_terms`
 :func:`shift_image`, ...
 =====================================  ==========================================
@@ -52,6 +53,7 @@ except ImportError as err:  # pragma: no cover - exercised only without the extr
         "(pip install 'invsss[torch]')"
     ) from err
 
+from .burley_screen_space import render_burley
 from .light_terms import (
     apply_law,
     apply_light_terms,

@@ -14,6 +14,7 @@ from ..forward.models import MODEL_NAMES, get_model, resolve_tap_weights
 from ..forward.pass_plan import pass_plan
 from ..forward.pair import fill_background_depth
 from ..validation import InvalidInputError, check_depth, check_image, check_mask
+from .burley_screen_space import render_burley
 from .params import SSSParams
 from .passes import directional_pass, sample_along, tap_spread
 from .passes import tap_weights as tap_weight_set
@@ -150,6 +151,7 @@ LAYOUT_RENDERERS = {
     "layered": render_sog,
     "chained": render_thesis,
     "kernel": _render_kernel,
+    "disk": render_burley,  # issue 34: invsss.torch.burley_screen_space
 }
 
 

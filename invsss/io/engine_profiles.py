@@ -1,0 +1,234 @@
+"""A ``burley`` fit as the values of Unity HDRP's Diffusion Profile and Unreal's Subsurface Profile.
+
+Both engines blur with Christensen & Burley's normalized diffusion (docs/model.md,
+section 5, "The burley model"); they differ in what their asset stores
+(docs/renderer.md, "Engine profiles"):
+
+HDRP (``format="hdrp"``)
+    ``scatteringDistance`` (a colour) times ``scatteringDistanceMultiplier`` is
+    Burley's ``d`` per channel in millimetres: HDRP's ``DiffusionProfile``
+    sets its shape parameter ``S = 1 / (colour * multiplier)`` and evaluates
+    ``S / (8 pi) (e^{-S r} + e^{-S r / 3})`` at distances in mm. ``worldScale``
+    is the size of one scene unit in metres (HDRP converts view-space positions
+    with ``mmPerUnit = 1000 worldScale``).
+Unreal (``format="unreal"``)
+    ``MeanFreePathColor`` times ``MeanFreePathDistance`` (world units, cm) is
+    the mean free path ``l`` per channel; the engine turns it into Burley's
+    shape with the albedo ``A`` (``SurfaceAlbedo``) through Christensen &
+    Burley's fit for the searchlight configuration, ``d = l / s(A)`` with
+    ``s(A) = 1.85 - A + 7 |A - 0.8|^3`` (their section 5; Unreal's
+    ``GetPerpendicularScalingFactor``).
+
+One photograph pair determines ``L d_c`` (the blur in pixels), hence ``d_c`` in
+the depth's unit once ``sss_level`` is known (the camera's focal length in
+pixels: fit with ``gauge="sss_level"``). It does not determine the engine
+scene's unit (``worldScale``, ``WorldUnitScale``), the surface albedo that
+Unreal's conversion needs, the index of refraction, or anything the blur
+does not see (transmission, texturing mode, specular lobes); the export names
+every such field in ``undetermined`` with the value it assumed, never a
+fitted-looking number.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..validation import InvalidInputError
+
+__all__ = [
+    "ENGINE_FORMATS",
+    "UNREAL_DEFAULT_ALBEDO",
+    "searchlight_scaling",
+    "dmfp_scaling",
+    "hdrp_profile",
+    "hdrp_distances",
+    "unreal_profile",
+    "unreal_distances",
+    "engine_profile",
+]
+
+#: The engine formats of ``invsss export``.
+ENGINE_FORMATS = ("hdrp", "unreal")
+
+#: Unreal's default ``SurfaceAlbedo`` of a new Subsurface Profile (its Python
+#: API's ``SubsurfaceProfileStruct`` defaults): what the export assumes when no
+#: albedo is given.
+UNREAL_DEFAULT_ALBEDO = (0.91058, 0.338275, 0.2718)
+
+_MM_PER_CM = 10.0
+
+
+def searchlight_scaling(albedo):
+    """Christensen & Burley's ``s(A) = 1.85 - A + 7 |A - 0.8|^3``: ``d = l / s`` for mean free path ``l``.
+
+    Examples
+    --------
+    >>> round(float(searchlight_scaling(0.8)), 12)
+    1.05
+    """
+    a = np.asarray(albedo, np.float64)
+    return 1.85 - a + 7.0 * np.abs(a - 0.8) ** 3
+
+
+def dmfp_scaling(albedo):
+    """Christensen & Burley's ``s(A) = 3.5 + 100 (A - 0.33)^4``: ``d = l_d / s`` for diffuse mean free path ``l_d``.
+
+    Examples
+    --------
+    >>> round(float(dmfp_scaling(0.33)), 12)
+    3.5
+    """
+    a = np.asarray(albedo, np.float64)
+    return 3.5 + 100.0 * (a - 0.33) ** 4
+
+
+def _distances(d, name="d") -> np.ndarray:
+    d = np.asarray(d, np.float64).reshape(-1)
+    if d.size not in (1, 3) or not np.all(np.isfinite(d)) or np.any(d <= 0):
+        raise InvalidInputError(f"{name}: expected one or three shape parameters > 0 (mm), got {d.tolist()}")
+    return np.broadcast_to(d, (3,)).copy()
+
+
+def _positive(value, name) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"{name}: expected a number > 0, got {value!r}") from None
+    if not np.isfinite(x) or x <= 0:
+        raise InvalidInputError(f"{name}: expected a number > 0, got {value!r}")
+    return x
+
+
+def _colour_and_scale(d: np.ndarray) -> tuple[list, float]:
+    # The engines' colour pickers hold [0, 1]: the widest channel is 1 and the scale carries it.
+    scale = float(d.max())
+    return (d / scale).tolist(), scale
+
+
+def hdrp_profile(d_mm, world_scale: float = 1.0) -> dict:
+    """HDRP Diffusion Profile fields for shape parameters ``d_mm`` (one or per R, G, B).
+
+    Examples
+    --------
+    >>> p = hdrp_profile([2.0, 1.0, 0.5])
+    >>> p["scatteringDistance"], p["scatteringDistanceMultiplier"], p["worldScale"]
+    ([1.0, 0.5, 0.25], 2.0, 1.0)
+    """
+    d = _distances(d_mm, "d_mm")
+    colour, multiplier = _colour_and_scale(d)
+    return {"scatteringDistance": colour, "scatteringDistanceMultiplier": multiplier,
+            "worldScale": _positive(world_scale, "world_scale")}
+
+
+def hdrp_distances(fields: dict) -> np.ndarray:
+    """Burley's ``d`` per channel (mm) from HDRP fields: ``colour * multiplier``, shape (3,).
+
+    Examples
+    --------
+    >>> hdrp_distances(hdrp_profile([2.0, 1.0, 0.5])).tolist()
+    [2.0, 1.0, 0.5]
+    """
+    colour = np.asarray(fields["scatteringDistance"], np.float64)[:3]
+    return colour * _positive(fields["scatteringDistanceMultiplier"], "scatteringDistanceMultiplier")
+
+
+def unreal_profile(d_mm, albedo=UNREAL_DEFAULT_ALBEDO, world_unit_scale: float = 0.1) -> dict:
+    """Unreal Subsurface Profile fields (Burley, mean free path) for shape parameters ``d_mm``.
+
+    ``l_c = d_c s(A_c)`` (:func:`searchlight_scaling`), in cm as Unreal's
+    ``MeanFreePathDistance`` takes it.
+
+    Examples
+    --------
+    >>> p = unreal_profile([1.0, 0.5, 0.25], albedo=0.8)
+    >>> [round(x, 6) for x in p["MeanFreePathColor"]], round(p["MeanFreePathDistance"], 6)
+    ([1.0, 0.5, 0.25], 0.105)
+    """
+    d = _distances(d_mm, "d_mm")
+    a = np.broadcast_to(np.asarray(albedo, np.float64).reshape(-1), (3,))
+    if not np.all((a > 0) & (a < 1)):
+        raise InvalidInputError(f"albedo: expected one or three values in (0, 1), got {np.asarray(albedo).tolist()}")
+    mfp_cm = d * searchlight_scaling(a) / _MM_PER_CM
+    colour, distance = _colour_and_scale(mfp_cm)
+    return {"SurfaceAlbedo": a.tolist(), "MeanFreePathColor": colour, "MeanFreePathDistance": distance,
+            "WorldUnitScale": _positive(world_unit_scale, "world_unit_scale"),
+            "bEnableBurley": True, "bEnableMeanFreePath": True}
+
+
+def unreal_distances(fields: dict) -> np.ndarray:
+    """Burley's ``d`` per channel (mm) from Unreal fields: ``10 colour distance / s(A)``, shape (3,).
+
+    Examples
+    --------
+    >>> unreal_distances(unreal_profile([1.0, 0.5, 0.25], albedo=0.8)).round(12).tolist()
+    [1.0, 0.5, 0.25]
+    """
+    colour = np.asarray(fields["MeanFreePathColor"], np.float64)[:3]
+    mfp_mm = colour * _positive(fields["MeanFreePathDistance"], "MeanFreePathDistance") * _MM_PER_CM
+    return mfp_mm / searchlight_scaling(np.asarray(fields["SurfaceAlbedo"], np.float64)[:3])
+
+
+def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None, world_scale=None) -> dict:
+    """The asset values of engine ``format`` for a ``burley`` fit's parameters.
+
+    Parameters
+    ----------
+    params : SSSParams
+        A ``burley`` fit: ``variances`` are ``d_c^2`` in the depth's unit squared.
+    format : {"hdrp", "unreal"}
+    mm_per_unit : float
+        Millimetres per unit of the pair's depth (1 for depth in mm, as recommended).
+    albedo : float or 3 floats, optional
+        ``unreal``: the surface albedo for the mean-free-path conversion; default
+        :data:`UNREAL_DEFAULT_ALBEDO` (then listed as undetermined).
+    world_scale : float, optional
+        The engine scene's unit: HDRP ``worldScale`` (metres per unit, default 1)
+        or Unreal ``WorldUnitScale`` (default 0.1); listed as undetermined when not given.
+
+    Returns
+    -------
+    dict
+        ``format``, ``fields`` (the asset's values), ``shapeParameterMm`` (``d`` per
+        channel), ``undetermined`` (field: why, and what was assumed) and ``units``.
+
+    Examples
+    --------
+    >>> import invsss
+    >>> p = invsss.SSSParams(900.0, 0.0, 1.0, [1.0, 1.0, 1.0], [4.0, 1.0, 0.25])
+    >>> out = engine_profile(p, "hdrp")
+    >>> out["fields"]["scatteringDistanceMultiplier"], sorted(out["undetermined"])[:2]
+    (2.0, ['indexOfRefraction', 'texturingMode'])
+    """
+    if format not in ENGINE_FORMATS:
+        raise InvalidInputError(f"format: expected one of {', '.join(ENGINE_FORMATS)}, got {format!r}")
+    scale = _positive(mm_per_unit, "mm_per_unit")
+    d = np.sqrt(np.asarray(params.variances, np.float64)) * scale
+    if d.size not in (1, 3):
+        raise InvalidInputError(
+            f"params: a burley fit has one or three shape parameters (variances = d^2), got {d.size}"
+        )
+    undetermined = {}
+    if format == "hdrp":
+        if world_scale is None:
+            undetermined["worldScale"] = "the engine scene's unit; assumed HDRP's default 1 (1 unit = 1 m)"
+        fields = hdrp_profile(d, 1.0 if world_scale is None else world_scale)
+        undetermined["indexOfRefraction"] = "the blur does not see the specular reflection; HDRP's default is 1.4"
+        undetermined["texturingMode"] = "whether albedo is applied before or after the blur is the material's choice"
+        undetermined["transmissionTint"] = "transmission is not in a front-lit photograph pair"
+        units = "scatteringDistance x scatteringDistanceMultiplier = Burley's d per channel in mm"
+    else:
+        if albedo is None:
+            undetermined["SurfaceAlbedo"] = (
+                "not determined by a photograph pair (the fit's gain absorbs it); the mean free path assumes "
+                f"Unreal's default {list(UNREAL_DEFAULT_ALBEDO)}"
+            )
+        if world_scale is None:
+            undetermined["WorldUnitScale"] = "the engine scene's unit; assumed Unreal's default 0.1"
+        fields = unreal_profile(d, UNREAL_DEFAULT_ALBEDO if albedo is None else albedo,
+                                0.1 if world_scale is None else world_scale)
+        undetermined["IOR"] = "the blur does not see the specular reflection"
+        undetermined["Tint, BoundaryColorBleed, TransmissionTintColor"] = "not in a front-lit photograph pair"
+        units = ("MeanFreePathColor x MeanFreePathDistance = mean free path l per channel in cm; "
+                 "Burley's d = 10 l / (1.85 - A + 7 |A - 0.8|^3) mm")
+    return {"format": format, "fields": fields, "shapeParameterMm": d.reshape(-1).tolist(),
+            "undetermined": undetermined, "units": units}
