@@ -44,7 +44,6 @@ from .estimator.solve import SOLVERS
 from .export import EXPORT_FORMATS, export_params
 from .io import (
     image_extension,
-    load_pair,
     read_depth,
     read_image,
     read_mask,
@@ -60,6 +59,7 @@ from .screen_space import MODELS, render
 from .params import check_plausible
 from .light_terms import LIGHT_TERM_FIELDS, LIGHT_TERM_NAMES, NEEDED_BUFFERS, LightBuffers, LightTerms
 from .pair import ImagePair, fill_background_depth
+from . import photo_pair  # issue 33
 from .validation import InvalidInputError, check_depth, check_same_frame
 
 __all__ = ["build_parser", "main"]
@@ -261,10 +261,18 @@ def _add_fit_parser(subparsers) -> None:
                         help="linear image without scattering (repeat for several pairs)")
     parser.add_argument("--target", action="append", required=True,
                         help="linear photograph to match, 1 or 3 channels (repeat)")
-    parser.add_argument("--depth", action="append", required=True,
-                        help="depth: float EXR, NPY or 16-bit PNG (repeat)")
-    parser.add_argument("--mask", action="append", required=True,
-                        help="skin mask, values in [0, 1] (repeat)")
+    # --- issue 33: photographs without a 3D model (invsss/photo_pair.py) ---
+    parser.add_argument("--depth", action="append", default=[],
+                        help="eye-space depth in mm: float EXR or NPY, or a 16-bit PNG whose integer codes are "
+                        "read as mm (times --depth-scale) (repeat; or give --distance)")
+    parser.add_argument("--distance", action="append", default=[], type=float, metavar="MM",
+                        help="instead of --depth: the face's distance from the camera in mm, one depth for the "
+                        "whole face; correction and maxdd then have no effect and are held (at 0 and 1 unless "
+                        "--fix gives them; params.json's inputs.held says so) (once, or once per pair)")
+    parser.add_argument("--mask", action="append", default=[],
+                        help="skin mask, values in [0, 1] (repeat); without it a mask is made from the pair "
+                        "and written to DIR/mask_used.png (docs/capture.md)")
+    # --- end issue 33 ---
     parser.add_argument(
         "--depth-scale",
         type=float,
@@ -413,7 +421,8 @@ def _parse_fix(items: list[str]) -> dict:
 
 
 def _check_pair_counts(args: argparse.Namespace) -> int:
-    counts = {flag: len(getattr(args, flag)) for flag in _PAIR_FLAGS}
+    # issue 33: --depth and --mask may be left out (photo_pair.check_photo_arguments).
+    counts = {flag: len(getattr(args, flag)) for flag in _PAIR_FLAGS if flag in ("source", "target") or getattr(args, flag)}
     if len(set(counts.values())) > 1:
         given = ", ".join(f"{n} --{flag}" for flag, n in counts.items())
         raise InvalidInputError(
@@ -545,14 +554,15 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
     fix = _parse_fix(args.fix)
     canvas = _canvas(args.canvas)
     count = _check_pair_counts(args)
-    names = _fit_file_names(count)
+    # issue 33: check --depth/--distance/--mask before the output directory is touched.
+    made_mask_names = photo_pair.check_photo_arguments(count, args.depth, args.distance, args.mask)
+    names = _fit_file_names(count) + made_mask_names
     # Lock and check the output directory before reading anything, so a rerun
     # into a finished result or a busy directory is refused at once.
     with ResultDir(args.out, overwrite=args.overwrite, names=names) as out:
-        pairs = [
-            load_pair(s, t, d, m, depth_scale=args.depth_scale, linear_codes=args.linear_codes)
-            for s, t, d, m in zip(args.source, args.target, args.depth, args.mask)
-        ]
+        inputs = photo_pair.photo_inputs(args.source, args.target, args.depth, args.distance, args.mask, fix=fix,
+                                         depth_scale=args.depth_scale, linear_codes=args.linear_codes)
+        pairs, fix = inputs.pairs, inputs.fix
         pairs = _with_light_buffers(pairs, args)
         # The report needs matplotlib (0.3-0.4 s to import, seconds while it builds
         # its font cache); import it beside the fit, whose solver steps leave the
@@ -602,7 +612,7 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
                 progress.close()
             for message in result.warnings:
                 print(f"invsss: warning: {message}", file=sys.stderr)
-            written = _write_fit(out, names, result, pairs)
+            written = _write_fit(out, names, result, pairs, inputs)
         if written is None:
             return 1
     if stop.exit_status is not None:
@@ -620,16 +630,20 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
     return 0
 
 
-def _write_fit(out: ResultDir, names: list[str], result, pairs) -> list[str] | None:
+def _write_fit(out: ResultDir, names: list[str], result, pairs, inputs=None) -> list[str] | None:
     """Commit the fit's files to ``out``; on failure keep the estimate elsewhere and say where."""
     # matplotlib is only needed here; `invsss render` should not pay for importing it.
     from .report import plot_fit_report
 
     content = result.to_dict()
+    if inputs is not None and inputs.record is not None:
+        content["inputs"] = inputs.record  # issue 33: distance, made masks, held parameters
     writers = {"params.json": lambda path: write_params(path, content)}
-    for name, image in zip(names[1:-1], result.fitted):
+    for name, image in zip(names[1:], result.fitted):
         writers[name] = lambda path, image=image: write_image(path, np.asarray(image, np.float32))
     writers["report.png"] = lambda path: plot_fit_report(result, pairs, path)
+    for name, mask in ({} if inputs is None else inputs.made_masks).items():
+        writers[name] = lambda path, mask=mask: write_image(path, mask)  # issue 33: DIR/mask_used.png
     info = {"command": "fit", "converged": bool(result.converged),
             "interrupted": bool(content.get("interrupted", False))}
     try:
