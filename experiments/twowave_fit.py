@@ -66,10 +66,23 @@ REPO = Path(__file__).resolve().parent.parent
 SPLITTER_SHIFT_PX = (0.4, -0.3)
 
 
-def profile_mm(params, focal_px: float) -> tuple[np.ndarray, np.ndarray]:
-    """Normalised weights (K,) and variances in mm^2 (K,) of a fitted one-channel profile."""
+def effective_level(params, depth, mask) -> float:
+    """The median over the skin of ``L d / (d + c min(|dd|, maxdd))`` (both axes): the
+    sss_level that gives the same blur without the slope correction."""
+    from invsss.stretch import depth_slopes
+
+    d = np.asarray(depth, np.float64)
+    skin = np.asarray(mask) > 0.5
+    level, c, delta = float(params.sss_level), float(params.correction), float(params.maxdd)
+    values = [level * d / (d + c * np.minimum(slope, delta)) for slope in depth_slopes(d)]
+    return float(np.median(np.concatenate([v[skin] for v in values])))
+
+
+def profile_mm(params, focal_px: float, level: float) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised weights (K,) and variances in mm^2 on the skin (K,) of a fitted
+    one-channel profile: ``v (level / f)^2``, ``level`` the sss_level without correction."""
     w = np.asarray(params.weights, np.float64).reshape(len(params.variances), -1)[:, 0]
-    v = np.asarray(params.variances, np.float64) * (float(params.sss_level) / focal_px) ** 2
+    v = np.asarray(params.variances, np.float64) * (level / focal_px) ** 2
     return w / w.sum(), v
 
 
@@ -116,7 +129,7 @@ def fit(source, target, depth, mask, distance, *, starts, saturation, align="non
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         result = invsss.fit_pairs([pair], fix=fix, n_starts=starts, saturation=saturation, align=align)
-    return result, time.perf_counter() - t0
+    return result, time.perf_counter() - t0, pair
 
 
 def run(args) -> None:
@@ -131,7 +144,10 @@ def run(args) -> None:
     print(f"pair {folder}: focal {focal:.1f} px, median skin depth {np.median(vis['depth'][skin]):.1f} mm "
           f"(--distance {distance:g}), mask made from the pair: IoU {iou:.4f} against the scene's")
     # The visible photograph with the near-infrared pigment contrast (the albedo maps' ratio).
-    ratio = np.where(vis["source"] > 0, nir["source"] / np.maximum(vis["source"], 1e-12), 0.0)
+    # Rendered with the visible source's seed (--matched-source), the two albedo maps'
+    # ratio has next to no Monte Carlo noise of its own.
+    nir_source = invsss.read_image(args.matched_source) if args.matched_source else nir["source"]
+    ratio = np.where(vis["source"] > 0, nir_source / np.maximum(vis["source"], 1e-12), 0.0)
     rows = []
     for condition in args.conditions.split(","):
         rng = np.random.default_rng(args.seed)
@@ -141,32 +157,38 @@ def run(args) -> None:
         align = "translation" if shift is not None else "none"
         for depth_kind in ("depth map", "distance"):
             d = None if depth_kind == "depth map" else distance
-            fits = {
-                "render, visible": fit(vis["source"], vis_photo, vis["depth"], mask, d, starts=args.starts,
-                                       saturation=vis_clip),
-                "render, 940 nm": fit(nir["source"], nir_photo, nir["depth"], mask, d, starts=args.starts,
-                                      saturation=nir_clip, align=align),
-                "photo": fit(vis_photo, nir_photo, vis["depth"], mask, d, starts=args.starts, saturation=nir_clip,
-                             align=align),
-                "photo, pigment matched": fit(vis_photo * ratio, nir_photo, vis["depth"], mask, d,
-                                              starts=args.starts, saturation=nir_clip, align=align),
+            plans = {
+                "render, visible": lambda: fit(vis["source"], vis_photo, vis["depth"], mask, d, starts=args.starts,
+                                               saturation=vis_clip),
+                "render, 940 nm": lambda: fit(nir["source"], nir_photo, nir["depth"], mask, d, starts=args.starts,
+                                              saturation=nir_clip, align=align),
+                "photo": lambda: fit(vis_photo, nir_photo, vis["depth"], mask, d, starts=args.starts,
+                                     saturation=nir_clip, align=align),
+                "photo, pigment matched": lambda: fit(vis_photo * ratio, nir_photo, vis["depth"], mask, d,
+                                                      starts=args.starts, saturation=nir_clip, align=align),
             }
             if depth_kind == "distance":
-                fits["photo, mask made"] = fit(vis_photo, nir_photo, vis["depth"], made_mask, d, starts=args.starts,
-                                               saturation=nir_clip, align=align)
+                plans["photo, mask made"] = lambda: fit(vis_photo, nir_photo, vis["depth"], made_mask, d,
+                                                        starts=args.starts, saturation=nir_clip, align=align)
+            wanted = None if args.rows is None else [r.strip() for r in args.rows.split(";")]
+            fits = {name: plan() for name, plan in plans.items() if wanted is None or name in wanted}
             widths = {}
-            for name, (result, seconds) in fits.items():
-                w, v = profile_mm(result.params, focal)
+            for name, (result, seconds, pair) in fits.items():
+                level = effective_level(result.params, pair.depth, pair.mask)
+                w, v = profile_mm(result.params, focal, level)
                 widths[name] = (half_energy_radius(w, v), rms_width(w, v))
-                rows.append((condition, depth_kind, name, float(result.params.sss_level), widths[name][0],
-                             widths[name][1], result.psnr, seconds))
+                rows.append((condition, depth_kind, name, float(result.params.sss_level),
+                             float(result.params.correction), level, widths[name][0], widths[name][1], result.psnr,
+                             seconds))
+            if "render, visible" not in widths or "render, 940 nm" not in widths:
+                continue
             s_vis, s_nir = widths["render, visible"][1], widths["render, 940 nm"][1]
             extra = np.sqrt(max(s_nir**2 - s_vis**2, 0.0))
-            rows.append((condition, depth_kind, "render: nir - vis (variances subtract)", np.nan,
+            rows.append((condition, depth_kind, "render: nir - vis (variances subtract)", np.nan, np.nan, np.nan,
                          1.1774 * extra, extra, np.nan, 0.0))
             for name in [n for n in fits if n.startswith("photo")]:
                 r50, sigma = widths[name]
-                rows.append((condition, depth_kind, f"{name} - render (sigma, %)", np.nan, np.nan,
+                rows.append((condition, depth_kind, f"{name} - render (sigma, %)", np.nan, np.nan, np.nan, np.nan,
                              100.0 * (sigma - extra) / extra, np.nan, 0.0))
             print_table(rows)
     print_table(rows, final=True)
@@ -175,18 +197,17 @@ def run(args) -> None:
 def print_table(rows, final: bool = False) -> None:
     if not final:
         return
-    print("| capture | depth | fit | sss_level | r50 (mm) | sigma (mm) | PSNR (dB) | time (s) |")
-    print("|---|---|---|---|---|---|---|---|")
-    for condition, depth_kind, name, level, r50, sigma, psnr, seconds in rows:
+    print("| capture | depth | fit | sss_level | correction | L without c | r50 (mm) | sigma (mm) | PSNR (dB) | time (s) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for condition, depth_kind, name, level, correction, flat, r50, sigma, psnr, seconds in rows:
         if name.endswith("(sigma, %)"):
-            print(f"| {condition} | {depth_kind} | {name} | | | {sigma:+.1f} % | | |")
+            print(f"| {condition} | {depth_kind} | {name} | | | | | {sigma:+.1f} % | | |")
             continue
-        level_text = "" if np.isnan(level) else f"{level:.1f}"
-        psnr_text = "" if np.isnan(psnr) else f"{psnr:.2f}"
-        time_text = f"{seconds:.0f}" if seconds else ""
-        r50_text = f"{r50:.3f}" if not name.startswith("render: nir") else f"({r50:.3f})"
-        print(f"| {condition} | {depth_kind} | {name} | {level_text} | {r50_text} | {sigma:.3f} | {psnr_text} | "
-              f"{time_text} |")
+        if name.startswith("render: nir"):
+            print(f"| {condition} | {depth_kind} | {name} | | | | ({r50:.3f}) | {sigma:.3f} | | |")
+            continue
+        print(f"| {condition} | {depth_kind} | {name} | {level:.1f} | {correction:.1f} | {flat:.1f} | {r50:.3f} | "
+              f"{sigma:.3f} | {psnr:.2f} | {seconds:.0f} |")
     sys.stdout.flush()
 
 
@@ -217,6 +238,12 @@ def main() -> None:
     parser.add_argument("--conditions", default="clean,camera,splitter")
     parser.add_argument("--starts", type=int, default=4)
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--matched-source", default=None, metavar="EXR",
+                        help="the near-infrared Lambertian source rendered with the visible one's seed "
+                        "(invsss scene experiments/scenes/face_twowave_940.toml --source-only --seed 5 --spp 4096), "
+                        "for the pigment-matched rows (default: nir/source.exr, whose own noise then enters)")
+    parser.add_argument("--rows", default=None, metavar="NAMES",
+                        help="only these fits, separated by ';' (e.g. 'photo;photo, pigment matched'); default all")
     parser.add_argument("--masks", action="store_true", help="the mask maker's IoU on every bundled pair instead")
     args = parser.parse_args()
     use_deterministic_scheduler()

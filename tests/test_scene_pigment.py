@@ -76,3 +76,24 @@ def test_the_pigment_darkens_source_and_target_alike_on_a_flat_lit_patch():
     # out, at nearby points) as the albedo map takes from the source (t^2 at one point).
     assert np.mean(target_ratio) < 0.95 and np.mean(target_ratio) == pytest.approx(np.mean(source_ratio), abs=0.05)
     assert json.loads(json.dumps(with_pigment.info["mesh"]))["pigment"]["strength"] == 1.0
+
+
+@pytest.mark.parametrize("half, config_file", [("visible", "face_twowave_visible.toml"), ("nir", "face_twowave_940.toml")])
+def test_the_bundled_two_wavelength_pair_is_what_its_scene_files_say(half, config_file, monkeypatch):
+    import hashlib
+
+    from invsss.scenes import load_config
+
+    folder = REPO / "data_synthetic" / "twowave_face" / half
+    info = json.loads((folder / "scene.json").read_text())
+    monkeypatch.chdir(REPO)
+    config = load_config(Path("experiments") / "scenes" / config_file).model_dump()
+    config["object"]["mesh"] = str(Path(config["object"]["mesh"]).relative_to(REPO))
+    config["object"]["pigment"]["map"] = str(Path(config["object"]["pigment"]["map"]).relative_to(REPO))
+    assert parse_config(info["config"], "scene.json").model_dump() == config
+    assert info["mesh"]["pigment"]["sha256"] == hashlib.sha256((MESHES / "Map-COL.jpg").read_bytes()).hexdigest()
+    # One camera: both halves see the same skin on the same pixels.
+    other = REPO / "data_synthetic" / "twowave_face" / ("nir" if half == "visible" else "visible")
+    np.testing.assert_array_equal(invsss.read_mask(folder / "mask.png"), invsss.read_mask(other / "mask.png"))
+    np.testing.assert_array_equal(invsss.read_depth(folder / "depth.exr"), invsss.read_depth(other / "depth.exr"))
+    assert info["noise"]["noise_ceiling_db"] > 30.0
