@@ -144,6 +144,18 @@ def run(args) -> None:
     print(f"pair {folder}: focal {focal:.1f} px, median skin depth {np.median(vis['depth'][skin]):.1f} mm "
           f"(--distance {distance:g}), mask made from the pair: IoU {iou:.4f} against the scene's")
     # The visible photograph with the near-infrared pigment contrast (the albedo maps' ratio).
+    # The media's own (dipole) profiles as sums of Gaussians: what the widths would be
+    # if the screen-space fit recovered them exactly.
+    from invsss.profiles import JENSEN_SKIN1_SOG, THESIS_NIR_940
+
+    refs = {}
+    for label, table, column in (("skin1 green", JENSEN_SKIN1_SOG, 1), ("thesis-nir", THESIS_NIR_940, None)):
+        w = np.asarray(table["weights"], np.float64)
+        w = w[:, column] if column is not None else w
+        v = np.asarray(table["variances"], np.float64)
+        refs[label] = (half_energy_radius(w / w.sum(), v), rms_width(w / w.sum(), v))
+    print("published profiles: " + ", ".join(f"{k} r50 {r:.3f} mm, sigma {s:.3f} mm" for k, (r, s) in refs.items())
+          + f"; sigma_extra {np.sqrt(refs['thesis-nir'][1] ** 2 - refs['skin1 green'][1] ** 2):.3f} mm")
     # Rendered with the visible source's seed (--matched-source), the two albedo maps'
     # ratio has next to no Monte Carlo noise of its own.
     nir_source = invsss.read_image(args.matched_source) if args.matched_source else nir["source"]
