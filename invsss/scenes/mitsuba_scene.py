@@ -19,10 +19,11 @@ Scene units are millimetres. Mitsuba is imported by :func:`import_mitsuba` only.
 from __future__ import annotations
 
 import os
+import warnings
 
 import numpy as np
 
-from ..validation import InvalidInputError
+from ..validation import InputNotice, InvalidInputError
 from .config import SceneConfig
 
 __all__ = ["import_mitsuba", "scene_dict", "medium_dict", "boundary_bsdf", "load_mesh_ply", "bumped_normals",
@@ -242,7 +243,10 @@ def pigmented_mesh(mesh_path: str, pigment) -> tuple[np.ndarray, np.ndarray, np.
     for _ in range(pigment.subdivide):
         vertices, faces, attributes = subdivide(vertices, faces, vertex_attributes={"uv": uv})
         uv = attributes["uv"]
-    image = read_image(pigment.map, linear=False).astype(np.float64)
+    with warnings.catch_warnings():
+        # A colour map is sRGB-coded by convention: the decoding notice says nothing new.
+        warnings.simplefilter("ignore", InputNotice)
+        image = read_image(pigment.map, linear=False).astype(np.float64)
     if image.ndim == 2:
         image = image[..., None]
     image = np.repeat(image, 3, axis=2) if image.shape[2] == 1 else image[..., :3]
