@@ -44,6 +44,15 @@ def test_the_mask_made_from_the_pair_finds_the_face(name):
     assert _iou(made > 0.5, truth) > 0.95
 
 
+def test_the_mask_made_from_the_two_wavelength_pair_finds_the_face():
+    """The bundled pair a user with two photographs has (docs/capture.md): the visible and
+    the 940 nm targets, against the scene's mask."""
+    folder = DATA / "twowave_face"
+    made = skin_mask_from_pair(invsss.read_image(folder / "visible" / "target.exr"),
+                               invsss.read_image(folder / "nir" / "target.exr")) > 0.5
+    assert _iou(made, invsss.read_mask(folder / "visible" / "mask.png") > 0.5) > 0.95
+
+
 def test_a_background_bright_in_one_band_only_is_not_skin():
     """A lamp seen by the visible photograph alone stays out, and the face's shadowed
     stripe and its dark spot (a freckle, an eye) stay in."""
