@@ -364,7 +364,7 @@ def breakdown_child(pair_dir: str, cache_dir: str) -> None:
 
     import invsss.estimator.fit as fit_module
     import invsss.estimator.problem as problem_module
-    from invsss.compile_cache import enable_compile_cache
+    from invsss.runtime.compile_cache import enable_compile_cache
     import invsss.io  # noqa: F401  (loaded before the reading stage is timed)
 
     imported = time.perf_counter() - _T_START

@@ -39,8 +39,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import invsss
-from invsss.models import MODEL_NAMES, get_model, resolve_tap_weights
-from invsss.screen_space import LAYOUT_RENDERERS
+from invsss.forward.models import MODEL_NAMES, get_model, resolve_tap_weights
+from invsss.forward.screen_space import LAYOUT_RENDERERS
 
 # The thesis's 940 nm forearm fit (its Table 5.1, docs/model.md, section 4).
 THESIS_VARIANCES = [8.749, 2.099, 0.549, 0.5574, 1.194]

@@ -230,7 +230,7 @@ def main() -> None:
                         help=f"the split file (default {SPLIT_FILE})")
     args = parser.parse_args()
     term_rows = LIGHT_TERM_ROWS if args.terms is None else tuple(
-        tuple(t for t in invsss.light_terms.LIGHT_TERM_NAMES if t in row.split(","))
+        tuple(t for t in invsss.forward.light_terms.LIGHT_TERM_NAMES if t in row.split(","))
         for row in args.terms.split(";") if row.strip())
     split = read_split(args.split_file) if args.split_file.is_file() else {}
     folders = args.pairs or sorted(p.parent for p in pathlib.Path("data_synthetic").glob("*/scene.json"))
@@ -264,7 +264,7 @@ def main() -> None:
             rows["fit (medium's dipole)"] = score(dipole.fitted[0], pair, mask)
         for terms in term_rows:
             buffers = pair["buffers"]
-            if any(getattr(buffers, b) is None for t in terms for b in invsss.light_terms.NEEDED_BUFFERS[t]):
+            if any(getattr(buffers, b) is None for t in terms for b in invsss.forward.light_terms.NEEDED_BUFFERS[t]):
                 continue
             lit = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"],
                                   light_terms=terms, light_buffers=buffers, **fit_options)

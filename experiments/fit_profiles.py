@@ -11,7 +11,7 @@ minimises), ``max rel`` the largest pointwise relative error on a dense grid whe
 the profile is at least 1 % of its peak (for Burley from r = d / 4 on), ``total`` the fit's total diffuse
 reflectance (sum of weights) over the profile's (closed form). With ``--out`` each fit
 is written as a JSON profile file (``invsss.load_profile`` reads them). The
-``jensen-skin1`` row is the table ``invsss.profiles.JENSEN_SKIN1_SOG``.
+``jensen-skin1`` row is the table ``invsss.forward.profiles.JENSEN_SKIN1_SOG``.
 """
 
 from __future__ import annotations

@@ -44,8 +44,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import invsss
-from invsss.light_terms import light_transport, propagation_offsets
-from invsss.stretch import stretch_factors
+from invsss.forward.light_terms import light_transport, propagation_offsets
+from invsss.forward.stretch import stretch_factors
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 from fidelity import eroded, load_scene_pair, score  # noqa: E402

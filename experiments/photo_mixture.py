@@ -230,7 +230,7 @@ def main() -> None:
     photographer = Photographer(config, args)
 
     if args.check_camera:
-        from invsss.registration import estimate_warp
+        from invsss.estimator.registration import estimate_warp
 
         albedo = info["source_albedo"]["value"][0]
         source = render_pass(photographer.views[True], "source", 256, 0, photographer.grey, albedo)

@@ -53,7 +53,7 @@ from scipy import ndimage
 import invsss
 from invsss.estimator.diagnostics import masked_psnr
 from invsss.io import PARAMS_KEYS, linear_to_srgb, srgb_to_linear
-from invsss.registration import Warp
+from invsss.estimator.registration import Warp
 from make_synthetic import CameraMove, noise_free_target, render_moved_view
 
 

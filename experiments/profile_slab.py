@@ -50,9 +50,9 @@ import time
 
 import numpy as np
 
-from invsss.dipole_fit import fit_dipole
+from invsss.measurement.dipole_fit import fit_dipole
 from invsss.io import write_image
-from invsss.measure import measure_profile
+from invsss.measurement.measure import measure_profile
 from invsss.scenes import parse_config
 from invsss.scenes.mitsuba_scene import import_mitsuba, scene_dict
 

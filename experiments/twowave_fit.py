@@ -29,7 +29,7 @@ image moved by (0.4, -0.3) px as a beam splitter's second sensor would, fitted w
 visible photograph's pigment contrast brought down to the near-infrared one's
 (multiplied by ``source_nir / source_vis``, the two albedo maps' ratio): a user cannot
 do that, but it isolates the bias that the pigment's fading brings. ``photo, mask made``
-uses the skin mask made from the pair (:mod:`invsss.skin_mask`) instead of the scene's.
+uses the skin mask made from the pair (:mod:`invsss.io.skin_mask`) instead of the scene's.
 
 Blur of a fitted profile, in mm on the skin: each Gaussian's variance ``v`` becomes
 ``v (L / f)^2`` (``L`` the fitted sss_level, ``f`` the camera's focal length in pixels
@@ -55,9 +55,9 @@ import numpy as np
 from scipy.optimize import brentq
 
 import invsss
-from invsss.determinism import use_deterministic_scheduler
-from invsss.photo_pair import HELD_WITH_CONSTANT_DEPTH, constant_depth_pair
-from invsss.skin_mask import skin_mask_from_pair
+from invsss.runtime.determinism import use_deterministic_scheduler
+from invsss.io.photo_pair import HELD_WITH_CONSTANT_DEPTH, constant_depth_pair
+from invsss.io.skin_mask import skin_mask_from_pair
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from photo_robustness import eight_bit_srgb, misregister, shot_noise  # noqa: E402
@@ -69,7 +69,7 @@ SPLITTER_SHIFT_PX = (0.4, -0.3)
 def effective_level(params, depth, mask) -> float:
     """The median over the skin of ``L d / (d + c min(|dd|, maxdd))`` (both axes): the
     sss_level that gives the same blur without the slope correction."""
-    from invsss.stretch import depth_slopes
+    from invsss.forward.stretch import depth_slopes
 
     d = np.asarray(depth, np.float64)
     skin = np.asarray(mask) > 0.5
@@ -120,7 +120,7 @@ def capture(image: np.ndarray, condition: str, rng, shift=None) -> tuple[np.ndar
 
 def fit(source, target, depth, mask, distance, *, starts, saturation, align="none"):
     if distance is None:
-        pair = invsss.ImagePair(source, target, invsss.pair.fill_background_depth(depth), mask)
+        pair = invsss.ImagePair(source, target, invsss.forward.pair.fill_background_depth(depth), mask)
         fix = None
     else:
         pair = constant_depth_pair(source, target, distance, mask)
@@ -146,7 +146,7 @@ def run(args) -> None:
     # The visible photograph with the near-infrared pigment contrast (the albedo maps' ratio).
     # The media's own (dipole) profiles as sums of Gaussians: what the widths would be
     # if the screen-space fit recovered them exactly.
-    from invsss.profiles import JENSEN_SKIN1_SOG, THESIS_NIR_940
+    from invsss.forward.profiles import JENSEN_SKIN1_SOG, THESIS_NIR_940
 
     refs = {}
     for label, table, column in (("skin1 green", JENSEN_SKIN1_SOG, 1), ("thesis-nir", THESIS_NIR_940, None)):

@@ -11,9 +11,9 @@ only renders arrays does not pay for them.
 
 import importlib
 
-from .params import SSSParams
-from .passes import TAP_WEIGHTS, directional_pass, sample_along, tap_spread, tap_weights
-from .profiles import (
+from .forward.params import SSSParams
+from .forward.passes import TAP_WEIGHTS, directional_pass, sample_along, tap_spread, tap_weights
+from .forward.profiles import (
     DEON_SKIN_RGB,
     JENSEN_SKIN1,
     JENSEN_SKIN1_SOG,
@@ -28,7 +28,7 @@ from .profiles import (
     sum_of_gaussians,
     total_diffuse_reflectance,
 )
-from .screen_space import (
+from .forward.screen_space import (
     MODELS,
     render,
     render_separable,
@@ -37,9 +37,9 @@ from .screen_space import (
     separable_kernel,
     sog_layers,
 )
-from .light_terms import LightBuffers, LightTerms, apply_law, apply_light_terms
-from .models import MODEL_NAMES, ScreenSpaceModel, get_model
-from .stretch import depth_slopes, stretch_factors
+from .forward.light_terms import LightBuffers, LightTerms, apply_law, apply_light_terms
+from .forward.models import MODEL_NAMES, ScreenSpaceModel, get_model
+from .forward.stretch import depth_slopes, stretch_factors
 from .validation import InputNotice, InvalidInputError
 
 __version__ = "0.1.0"
@@ -64,19 +64,19 @@ _LAZY = {
         ("FitInterrupted", "FitOptions", "FitResult", "build_problem", "fit_pair", "fit_pairs"),
         ".estimator",
     ),
-    **dict.fromkeys(("ResultDir", "result_state"), ".result_dir"),
-    **dict.fromkeys(("export_params", "shader_constants", "to_hlsl", "to_json"), ".export"),
-    **dict.fromkeys(("ProfileFit", "fit_sum_of_gaussians"), ".profile_fit"),
-    **dict.fromkeys(("MeasuredProfile", "column_average_gain", "measure_profile"), ".measure"),
-    **dict.fromkeys(("DipoleFit", "fit_dipole"), ".dipole_fit"),
-    "fill_background_depth": ".pair",
-    "enable_compile_cache": ".compile_cache",
+    **dict.fromkeys(("ResultDir", "result_state"), ".io.result_dir"),
+    **dict.fromkeys(("export_params", "shader_constants", "to_hlsl", "to_json"), ".io.export"),
+    **dict.fromkeys(("ProfileFit", "fit_sum_of_gaussians"), ".measurement.profile_fit"),
+    **dict.fromkeys(("MeasuredProfile", "column_average_gain", "measure_profile"), ".measurement.measure"),
+    **dict.fromkeys(("DipoleFit", "fit_dipole"), ".measurement.dipole_fit"),
+    "fill_background_depth": ".forward.pair",
+    "enable_compile_cache": ".runtime.compile_cache",
 }
 
-# Submodules reachable as attributes (``invsss.io.PARAMS_KEYS``) without an import.
+# Submodules reachable as attributes (``invsss.io.PARAMS_KEYS``) without an import: the
+# layer folders (docs/architecture.md).
 _SUBMODULES = (
-    "cli", "estimator", "experiments", "export", "interrupts", "io", "measure", "models", "profile_fit",
-    "report", "result_dir", "scenes", "torch",
+    "cli", "estimator", "experiments", "forward", "io", "measurement", "runtime", "scenes", "shaders", "torch",
 )
 
 __all__ = [

@@ -163,7 +163,7 @@ def check_depth(depth, shape_hw: tuple[int, int], name: str = "depth", mask=None
 
     With ``mask=None`` every pixel counts as masked. Off the mask (the background),
     depth may be 0, NaN or infinite as renderers write it: the model never uses
-    it there once :func:`invsss.pair.fill_background_depth` has replaced it, which
+    it there once :func:`invsss.forward.pair.fill_background_depth` has replaced it, which
     every public entry point does. Pass a mask already checked with
     :func:`check_mask`.
 

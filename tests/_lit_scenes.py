@@ -7,7 +7,7 @@ import numpy as np
 from scipy import ndimage
 
 import invsss
-from invsss.light_terms import LightBuffers
+from invsss.forward.light_terms import LightBuffers
 
 
 def _unit(v):

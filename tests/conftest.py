@@ -1,6 +1,6 @@
 """Suite-wide settings: keep JAX's persistent compilation cache out of the user's home.
 
-The command line switches the cache on (``invsss.compile_cache``), and the CLI
+The command line switches the cache on (``invsss.runtime.compile_cache``), and the CLI
 tests call it in this process and in subprocesses that inherit the environment,
 so the whole session points ``INVSSS_CACHE_DIR`` at a temporary directory, set
 before any test runs and removed at the end. ``invsss ... --no-cache`` sets
@@ -34,7 +34,7 @@ def pytest_configure(config):
 #: Docstring examples that run a whole fit (more than about 5 s on 2 cores).
 SLOW_DOCTESTS = frozenset({
     "invsss.estimator.result.FitResult.history_by_stage",
-    "invsss.report.plot_fit_report",
+    "invsss.cli.report.plot_fit_report",
     "invsss.estimator.fit.fit_pair",
     "invsss.estimator.problem.build_problem",
 })

@@ -14,7 +14,7 @@ import pytest
 
 import invsss
 from invsss.cli import main
-from invsss.pair import fill_background_depth
+from invsss.forward.pair import fill_background_depth
 from invsss.validation import InvalidInputError
 
 H, W = 20, 24

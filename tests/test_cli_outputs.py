@@ -23,7 +23,7 @@ import pytest
 
 import invsss
 from invsss.cli import main
-from invsss.result_dir import MANIFEST_NAME, ResultDir, result_state
+from invsss.io.result_dir import MANIFEST_NAME, ResultDir, result_state
 from _pair_files import pair_args
 
 ROOT = Path(__file__).resolve().parents[1]

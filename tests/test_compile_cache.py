@@ -1,4 +1,4 @@
-"""invsss.compile_cache: where the persistent compilation cache lives, that a second
+"""invsss.runtime.compile_cache: where the persistent compilation cache lives, that a second
 process loads what the first compiled, that concurrent processes share one
 directory cleanly, and the command line's --no-cache."""
 
@@ -18,7 +18,7 @@ import pytest
 
 from invsss import InvalidInputError
 from invsss.cli import build_parser, main
-from invsss.compile_cache import cache_directory, enable_compile_cache
+from invsss.runtime.compile_cache import cache_directory, enable_compile_cache
 
 # A child process: switch the cache on in argv[1], compile three functions of
 # distinct shapes, and print JAX's cache hit/miss counts and a checksum.
@@ -26,7 +26,7 @@ _CHILD = r"""
 import json, sys
 import jax, jax.numpy as jnp
 from jax import monitoring
-from invsss.compile_cache import enable_compile_cache
+from invsss.runtime.compile_cache import enable_compile_cache
 
 counts = {"hits": 0, "misses": 0}
 def listen(event, **kwargs):
@@ -216,7 +216,7 @@ def test_cache_folders_are_created_for_you_alone(tmp_path):
 
 @pytest.mark.parametrize("whose", ["writable by others", "someone else's"])
 def test_a_cache_folder_not_yours_alone_is_not_used(tmp_path, whose):
-    from invsss import compile_cache
+    from invsss.runtime import compile_cache
 
     folder = tmp_path / "shared"
     folder.mkdir()

@@ -1,4 +1,4 @@
-"""invsss.determinism: the command line switches XLA's concurrency-optimised CPU
+"""invsss.runtime.determinism: the command line switches XLA's concurrency-optimised CPU
 scheduler off before JAX starts (with it, the solver's step was not
 deterministic); a value the user gave is kept, and a started backend is left alone."""
 
@@ -11,7 +11,7 @@ import sys
 
 import jax
 
-from invsss.determinism import SCHEDULER_FLAG, use_deterministic_scheduler
+from invsss.runtime.determinism import SCHEDULER_FLAG, use_deterministic_scheduler
 
 
 def _child(code: str, xla_flags: str | None) -> str:

@@ -522,7 +522,7 @@ def test_history_holds_every_start_and_round(recovered):
 def test_report_draws_every_start_and_both_profiles(recovered):
     from matplotlib.figure import Figure
 
-    from invsss.report import _parameter_lines, _plot_convergence, _plot_profile
+    from invsss.cli.report import _parameter_lines, _plot_convergence, _plot_profile
 
     result = recovered["face"][0]
     fig = Figure()
@@ -538,7 +538,7 @@ def test_report_draws_every_start_and_both_profiles(recovered):
     _plot_profile(profile, result)
     fitted, start = profile.get_lines()
     r = np.asarray(fitted.get_xdata())
-    expected = invsss.profiles.sum_of_gaussians(r, np.asarray(result.values["weights"]), np.asarray(PROFILE3["variances"]))
+    expected = invsss.forward.profiles.sum_of_gaussians(r, np.asarray(result.values["weights"]), np.asarray(PROFILE3["variances"]))
     np.testing.assert_allclose(fitted.get_ydata(), np.maximum(np.asarray(expected), 1e-12), rtol=1e-5)
     assert not np.allclose(fitted.get_ydata(), start.get_ydata())
     assert any("conditional on the chosen profile" in line for line in _parameter_lines(result))

@@ -1,4 +1,4 @@
-"""invsss.executable_cache: a second process runs the estimator's compiled
+"""invsss.runtime.executable_cache: a second process runs the estimator's compiled
 functions from disk without tracing them, with the very same numbers; a bad or
 missing entry costs a compilation, never a wrong result or a crash."""
 
@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from invsss import executable_cache
-from invsss.executable_cache import _prune
+from invsss.runtime import executable_cache
+from invsss.runtime.executable_cache import _prune
 
 _TESTS = Path(__file__).resolve().parent
 
@@ -27,7 +27,7 @@ _TESTS = Path(__file__).resolve().parent
 _FIT = r"""
 import json, sys, warnings
 sys.path.insert(0, sys.argv[3])
-from invsss.compile_cache import enable_compile_cache
+from invsss.runtime.compile_cache import enable_compile_cache
 enable_compile_cache(sys.argv[1])
 import invsss
 from invsss.estimator import problem, solve
@@ -167,7 +167,7 @@ def _double(x, factor):
 def cache_dir(tmp_path):
     """A fresh cache switched on in this process (the session's is put back afterwards)."""
     from invsss import compile_cache, executable_cache
-    from invsss.compile_cache import enable_compile_cache
+    from invsss.runtime.compile_cache import enable_compile_cache
 
     def forget():  # what this process has warned about and checked
         for name, module in (("_warned", compile_cache), ("_checked_folders", executable_cache)):
@@ -186,7 +186,7 @@ def _call(x=None):
 
     import jax.numpy as jnp
 
-    from invsss.executable_cache import persistent_jit
+    from invsss.runtime.executable_cache import persistent_jit
 
     function = persistent_jit(_double)
     with warnings.catch_warnings(record=True) as caught:
@@ -201,7 +201,7 @@ def _entry_files(cache: Path) -> list[Path]:
 
 def _sealed(payload: bytes) -> bytes:
     """``payload`` as an entry file holds it (a pickle, after the checksum)."""
-    from invsss import executable_cache
+    from invsss.runtime import executable_cache
 
     return getattr(executable_cache, "_seal", lambda data: data)(payload)
 
@@ -217,7 +217,7 @@ class _Bomb:
 
 
 def test_a_checksum_is_written_with_each_entry_and_checked():
-    from invsss.executable_cache import _seal, _unseal
+    from invsss.runtime.executable_cache import _seal, _unseal
 
     sealed = _seal(b"payload bytes")
     assert _unseal(sealed) == b"payload bytes"

@@ -12,7 +12,7 @@ import pytest
 
 from invsss import InvalidInputError, SSSParams, render, write_params
 from invsss.cli import main
-from invsss.export import export_params, shader_constants, to_hlsl, to_json
+from invsss.io.export import export_params, shader_constants, to_hlsl, to_json
 
 
 @pytest.fixture

@@ -24,7 +24,7 @@ from invsss import (
     separable_kernel,
     stretch_factors,
 )
-from invsss.passes import directional_pass
+from invsss.forward.passes import directional_pass
 
 # Published 7-tap weight sets, typed in again from docs/model.md, section 3.
 JIMENEZ_TAPS = np.array([0.006, 0.061, 0.242, 0.382, 0.242, 0.061, 0.006])

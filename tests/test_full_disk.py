@@ -21,7 +21,7 @@ import pytest
 
 import invsss
 from invsss.cli import main
-from invsss.result_dir import ResultDir
+from invsss.io.result_dir import ResultDir
 
 _TESTS = Path(__file__).resolve().parent
 sys.path.insert(0, str(_TESTS))

@@ -14,8 +14,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from invsss.estimator.parametrisation import SCALED_BLOCKS, Parametrisation
-from invsss.profiles import sum_of_gaussians
-from invsss.stretch import depth_slopes
+from invsss.forward.profiles import sum_of_gaussians
+from invsss.forward.stretch import depth_slopes
 
 BLOCKS = (("sss_level", ()), ("correction", ()), ("maxdd", ()), ("weights", (2,)), ("mix", (2, 3)),
           ("variances", (4,)), ("gain_ratio", (2,)), (SCALED_BLOCKS[0], (2,)))

@@ -13,7 +13,7 @@ import pytest
 
 import invsss
 from invsss.estimator import fit as fit_module
-from invsss.light_terms import LAW_TRUST, LightBuffers, LightTerms, reflectance_law
+from invsss.forward.light_terms import LAW_TRUST, LightBuffers, LightTerms, reflectance_law
 
 from _lit_scenes import FIX, PROFILE, dome_with_two_lights, lit_target
 

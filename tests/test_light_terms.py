@@ -10,7 +10,7 @@ import pytest
 from scipy import ndimage
 
 import invsss
-from invsss.light_terms import LightBuffers, LightTerms, apply_light_terms, shift_image
+from invsss.forward.light_terms import LightBuffers, LightTerms, apply_light_terms, shift_image
 
 
 

@@ -10,7 +10,7 @@ import pytest
 
 import invsss
 from invsss.cli import main
-from invsss.result_dir import MANIFEST_NAME, ResultDir, result_state
+from invsss.io.result_dir import MANIFEST_NAME, ResultDir, result_state
 from invsss.validation import InvalidInputError
 
 PARAMS = {"sss_level": 600.0, "correction": 300.0, "maxdd": 0.02,

@@ -6,7 +6,7 @@ import pytest
 from scipy.special import erf
 
 from invsss import InvalidInputError, SumOfGaussians, measure_profile
-from invsss.measure import column_average_gain
+from invsss.measurement.measure import column_average_gain
 
 PX = 0.1  # mm per pixel
 H, W = 64, 128

@@ -1,4 +1,4 @@
-"""The model table (invsss.models) and the shared pass plan (invsss.pass_plan).
+"""The model table (invsss.forward.models) and the shared pass plan (invsss.forward.pass_plan).
 
 What the table claims about a model is checked against what the model does:
 its parameter set against which parameters change the rendered image, its
@@ -21,9 +21,9 @@ import pytest
 import invsss
 from invsss.estimator.initial import data_scales
 from invsss.estimator.parametrisation import assign_roles
-from invsss.models import MODEL_NAMES, MODELS, ScreenSpaceModel, get_model, resolve_tap_weights
-from invsss.params import PARAM_NAMES
-from invsss.pass_plan import pass_plan
+from invsss.forward.models import MODEL_NAMES, MODELS, ScreenSpaceModel, get_model, resolve_tap_weights
+from invsss.forward.params import PARAM_NAMES
+from invsss.forward.pass_plan import pass_plan
 from invsss.validation import InvalidInputError
 
 # docs/model.md, section 3, typed in again.
@@ -57,7 +57,7 @@ CHANGED = dict(sss_level=700.0, correction=80.0, maxdd=1.5, weights=[0.7, 0.3], 
 
 def test_table_names_and_lookup():
     assert MODEL_NAMES == tuple(MODELS) == ("sog", "thesis", "separable")
-    assert invsss.MODELS == invsss.screen_space.MODELS == MODEL_NAMES
+    assert invsss.MODELS == invsss.forward.screen_space.MODELS == MODEL_NAMES
     for name in MODEL_NAMES:
         assert get_model(name).name == name
     # docs/model.md, sections 3 and 5: jimenez is the default set, the thesis shipped its own.

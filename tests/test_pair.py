@@ -8,7 +8,7 @@ import pytest
 
 import invsss
 from invsss.estimator.inputs import PairData, prepare_pair, prepare_pairs
-from invsss.pair import ImagePair
+from invsss.forward.pair import ImagePair
 from invsss.validation import InvalidInputError, check_pair
 
 H, W = 6, 8

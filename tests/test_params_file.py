@@ -13,7 +13,7 @@ import pytest
 import invsss
 from invsss.io import PARAMS_KEYS, PARAMS_OPTIONAL_KEYS, read_params, write_params
 from invsss.io.params_file import MANIFEST_NAME, SCHEMA_VERSION, params_json_schema
-from invsss.params import PARAM_NAMES, check_plausible
+from invsss.forward.params import PARAM_NAMES, check_plausible
 from invsss.validation import InputNotice, InvalidInputError
 
 PARAMS = {"sss_level": 600.0, "correction": 250.0, "maxdd": 0.01,

@@ -15,7 +15,7 @@ from scipy.ndimage import gaussian_filter
 
 import invsss
 from invsss.cli import main
-from invsss.photo_pair import HELD_WITH_CONSTANT_DEPTH, MASK_FILE, constant_depth_pair
+from invsss.io.photo_pair import HELD_WITH_CONSTANT_DEPTH, MASK_FILE, constant_depth_pair
 
 SIZE = 44
 PROFILE = {"weights": [0.5, 0.5], "variances": [0.6, 3.0]}

@@ -18,9 +18,9 @@ import pytest
 
 import invsss
 from invsss.cli import main
-from invsss.dipole_fit import fit_dipole
-from invsss.measure import measure_profile
-from invsss.profiles import jensen_dipole
+from invsss.measurement.dipole_fit import fit_dipole
+from invsss.measurement.measure import measure_profile
+from invsss.forward.profiles import jensen_dipole
 from invsss.validation import InvalidInputError
 
 PITCH = 0.1  # mm per pixel

@@ -15,7 +15,7 @@ import pytest
 from scipy import ndimage
 
 import invsss
-from invsss.light_terms import LightBuffers, LightTerms, apply_law, reflectance_law
+from invsss.forward.light_terms import LightBuffers, LightTerms, apply_law, reflectance_law
 
 from _lit_scenes import FIX, PROFILE, dome_with_two_lights, lit_target
 
@@ -267,7 +267,7 @@ class _Vector(np.ndarray):
 
 
 def _hlsl_function_as_python(text: str, name: str):
-    """The body of an HLSL function of :data:`invsss.export.LAW_HLSL`, run as NumPy.
+    """The body of an HLSL function of :data:`invsss.io.export.LAW_HLSL`, run as NumPy.
 
     The snippet is plain arithmetic on float and float3 values; a handful of
     substitutions make each statement Python, so the test runs the shader's own
@@ -361,7 +361,7 @@ def test_fit_recovers_an_albedo_per_channel_and_the_blur():
     # Without the law the same data give a biased blur and a worse fit.
     plain = invsss.fit_pair(source, target, depth, mask, profile=PROFILE, fix=FIX, n_starts=2)
     assert plain.psnr < fit.psnr - 5.0
-    from invsss.report import _parameter_lines
+    from invsss.cli.report import _parameter_lines
 
     assert "law albedo 0.9" in "\n".join(_parameter_lines(fit))
 

@@ -1,4 +1,4 @@
-"""Registration of the target onto the source (invsss.registration, fit_pair(align=...))."""
+"""Registration of the target onto the source (invsss.estimator.registration, fit_pair(align=...))."""
 
 import json
 
@@ -8,7 +8,7 @@ from scipy import ndimage
 
 import invsss
 from invsss.io.params_file import ParamsFile
-from invsss.registration import Warp, align_source, align_target, estimate_warp, match_photometry, warp_image
+from invsss.estimator.registration import Warp, align_source, align_target, estimate_warp, match_photometry, warp_image
 from invsss.validation import InvalidInputError
 
 

@@ -1,4 +1,4 @@
-"""The output-directory protocol (invsss.result_dir): locks, overwrite, atomic commits.
+"""The output-directory protocol (invsss.io.result_dir): locks, overwrite, atomic commits.
 
 The interruption tests run a real writer in a subprocess and kill it with a real
 signal at several moments, then look at what is on disk.
@@ -16,7 +16,7 @@ import time
 
 import pytest
 
-from invsss.result_dir import MANIFEST_NAME, ResultDir, ResultDirBusy, ResultWriteError, result_state
+from invsss.io.result_dir import MANIFEST_NAME, ResultDir, ResultDirBusy, ResultWriteError, result_state
 from invsss.validation import InvalidInputError
 
 
@@ -138,7 +138,7 @@ def test_bad_file_names_are_rejected(tmp_path):
 _HOLDER = textwrap.dedent(
     """
     import sys, time
-    from invsss.result_dir import ResultDir
+    from invsss.io.result_dir import ResultDir
     out, mode = sys.argv[1], sys.argv[2]
     files = {"params.json": "new", "fit.exr": "new pixels", "report.png": "new report"}
     def write(text):

@@ -287,7 +287,7 @@ def test_scene_command_writes_a_pair_folder(tmp_path, capsys):
 
 
 def test_scene_with_a_fitted_warp_renders_onto_the_photographs_grid(tmp_path, capsys):
-    from invsss.registration import Warp
+    from invsss.estimator.registration import Warp
 
     config = _write_toml(tmp_path)
     plain, moved = tmp_path / "plain", tmp_path / "moved"
@@ -415,7 +415,7 @@ def test_light_directions_follow_the_principal_point():
 
 
 def test_with_warp_refuses_a_warp_no_camera_move_makes():
-    from invsss.registration import Warp
+    from invsss.estimator.registration import Warp
 
     shear = Warp("affine", (0.5, 0.5, 0.0, 0.02, 0.0, 0.0), (16.0, 16.0))
     with pytest.raises(invsss.InvalidInputError, match="affine warp is not a camera move"):
@@ -423,7 +423,7 @@ def test_with_warp_refuses_a_warp_no_camera_move_makes():
 
 
 def test_with_warp_keeps_the_camera_where_the_warp_is_the_identity():
-    from invsss.registration import Warp
+    from invsss.estimator.registration import Warp
 
     config = _config()
     same = config.with_warp(Warp("similarity", (0.0, 0.0, 0.0, 0.0), (10.0, 20.0))).camera

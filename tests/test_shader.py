@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 
 from invsss import LightBuffers, LightTerms, SSSParams, render
-from invsss.export import shader_constants, to_hlsl
+from invsss.io.export import shader_constants, to_hlsl
 from invsss.io import read_depth, read_image, read_mask
-from invsss.pair import fill_background_depth
+from invsss.forward.pair import fill_background_depth
 from invsss.shaders import find_compiler, run_shader, vulkan_adapters
 
 DATA = Path(__file__).resolve().parent.parent / "data_synthetic"
@@ -200,7 +200,7 @@ def _blend_unsorted(c, params):
 
 
 def _other_taps(c):
-    from invsss.passes import TAP_WEIGHTS
+    from invsss.forward.passes import TAP_WEIGHTS
 
     c["tapWeights"] = list(TAP_WEIGHTS["thesis" if c["model"] == "sog" else "jimenez"])
 

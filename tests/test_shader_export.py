@@ -12,7 +12,7 @@ import pytest
 
 from invsss import InvalidInputError, SSSParams, render, write_params
 from invsss.cli import main
-from invsss.export import export_params, scale_to_resolution, shader_constants, to_hlsl
+from invsss.io.export import export_params, scale_to_resolution, shader_constants, to_hlsl
 from invsss.shaders import SHADER_FILES, compile_entry, find_compiler
 
 #: Entry points and the constants they need (a file is built only where its constants exist).

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 import invsss
-from invsss.skin_mask import skin_mask_from_pair
+from invsss.io.skin_mask import skin_mask_from_pair
 
 DATA = Path(__file__).resolve().parent.parent / "data_synthetic"
 TUNING = ["pt_face_940", "pt_face_940_turned", "pt_face_skin1", "pt_proc_area_940"]

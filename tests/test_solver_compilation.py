@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 import invsss
-from invsss import executable_cache
+from invsss.runtime import executable_cache
 from invsss.estimator import FitOptions, build_problem
 from invsss.estimator.fit import SOLVER_JACOBIAN
 from invsss.estimator.solve import NOISE_TOL, RTOL, SCREEN_TOL, compile_solver, make_solver, run_solver
-from invsss.executable_cache import persistent_jit
+from invsss.runtime.executable_cache import persistent_jit
 
 from _compilations import Compilations
 from _estimator_scenes import make_pair

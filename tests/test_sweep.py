@@ -22,7 +22,7 @@ import invsss
 import invsss.experiments as ex
 from invsss import InvalidInputError
 from invsss.experiments.runner import trial_folder
-from invsss.result_dir import result_state
+from invsss.io.result_dir import result_state
 
 TRUTH = invsss.SSSParams(600.0, 800.0, 0.5, [0.6, 0.4], [0.5, 2.0])
 PROFILE = '{weights = [0.5, 0.5], variances = [0.5, 2.0]}'

@@ -145,7 +145,7 @@ def test_undetermined_weights_are_those_of_coinciding_gaussians(name):
     # their weights (every channel for an RGB target), each with a reason. It may
     # list more (a weight whose standard error is too large in one scene).
     from invsss.estimator.uncertainty import COINCIDENT_PX
-    from invsss.stretch import stretch_factors
+    from invsss.forward.stretch import stretch_factors
 
     _, target, depth, mask, truth = load(name)
     assert set(truth["undetermined_why"]) == set(truth["undetermined"])

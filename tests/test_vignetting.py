@@ -94,7 +94,7 @@ def test_fitted_vignetting_recovers_the_unshaded_fit(fits):
     # The same noise is left over (PSNR differs only through the darker peak).
     assert fitted.sigma == pytest.approx(reference.sigma, rel=0.02)
     assert fits["reference"].vignetting is None and fitted.to_dict()["vignetting"] == record
-    from invsss.report import _parameter_lines
+    from invsss.cli.report import _parameter_lines
 
     shown = [line for line in _parameter_lines(fitted) if line.startswith("vignetting:")]
     assert len(shown) == 1 and f"corner gain {record['corner_gain']:.3f}" in shown[0]

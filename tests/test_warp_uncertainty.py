@@ -20,8 +20,8 @@ import invsss
 from invsss.estimator import FitOptions, build_problem
 from invsss.estimator.fit import _WarpSensitivity
 from invsss.estimator.uncertainty import gauss_newton_uncertainty, linearise
-from invsss.pair import ImagePair
-from invsss.registration import Warp, align_source
+from invsss.forward.pair import ImagePair
+from invsss.estimator.registration import Warp, align_source
 
 from _estimator_scenes import make_pair
 

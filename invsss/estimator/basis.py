@@ -33,9 +33,9 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ..models import get_model
-from ..params import SSSParams
-from ..screen_space import LAYOUT_RENDERERS, sog_layers
+from ..forward.models import get_model
+from ..forward.params import SSSParams
+from ..forward.screen_space import LAYOUT_RENDERERS, sog_layers
 from .inputs import PairData
 
 __all__ = ["basis_images", "model_source"]
@@ -53,7 +53,7 @@ def basis_images(
 ) -> Float[Array, "nb H W Cb"]:
     """The basis images of one pair for the natural parameter values ``natural``.
 
-    ``model`` is a name of :data:`invsss.models.MODEL_NAMES`; its table entry
+    ``model`` is a name of :data:`invsss.forward.models.MODEL_NAMES`; its table entry
     says whether the weights are linear (then the basis is the blurred layers)
     and which layout renders it. ``tap_weights`` is ignored by the kernel layout.
     """

@@ -36,13 +36,13 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import ndimage
 
-from ..light_terms import AFTER_BLUR, LightBuffers
-from ..pair import ImagePair
-from ..params import PARAM_NAMES, SSSParams
+from ..forward.light_terms import AFTER_BLUR, LightBuffers
+from ..forward.pair import ImagePair
+from ..forward.params import PARAM_NAMES, SSSParams
 from ..validation import InvalidInputError
 from .canvas import crop, frame_terms, unused_note
 from .diagnostics import MISALIGNMENT_PX, masked_psnr, masked_ssim, misalignment
-from ..registration import Warp, align_source, align_target, align_vectors, estimate_warp, match_photometry
+from .registration import Warp, align_source, align_target, align_vectors, estimate_warp, match_photometry
 from .inputs import prepare_pairs
 from .options import FitOptions
 from .parametrisation import LIGHT_UNKNOWNS, by_unknown
@@ -165,7 +165,7 @@ def fit_pair(
         pixel-aligned with their render. The warp (source pixels to target pixels)
         is estimated against the photometrically matched source; the source, depth
         and mask are resampled onto the target's grid (the noisy target never is:
-        see :mod:`invsss.registration`) and fitted; the warp is refined against
+        see :mod:`invsss.estimator.registration`) and fitted; the warp is refined against
         that fit's prediction (which carries the blur, so the blur does not bias
         the warp), alternating (at most 4 rounds, each a one-start fit of at most
         30 steps per solve from the previous round's estimate) until the warp
@@ -621,7 +621,7 @@ def _fit_without_highlights(data, first, single, options, progress, stop, nuisan
 
 def _fit_aligned(pairs, single, options, progress, stop) -> FitResult:
     """A fit with the source side registered onto the target (``align``; see :func:`fit_pair`)."""
-    from ..screen_space import render
+    from ..forward.screen_space import render
 
     prepared = prepare_pairs(pairs)
     checked = [
@@ -760,7 +760,7 @@ class _WarpSensitivity:
     ``nuisance``), and the warps with their own standard errors for params.json.
 
     The derivative is a central difference of the whole resampling (source,
-    depth and mask moved by :func:`~invsss.registration.align_source`) with the
+    depth and mask moved by :func:`~invsss.estimator.registration.align_source`) with the
     scattering parameters, the linear unknowns and the residual's weights held.
     The fit's report calls :meth:`columns` and stores the warp parameters'
     standard errors in ``stderr``, which :meth:`records` then writes out.

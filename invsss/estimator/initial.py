@@ -17,7 +17,7 @@ from __future__ import annotations
 import equinox as eqx
 import numpy as np
 
-from ..stretch import depth_slopes, stretch_along
+from ..forward.stretch import depth_slopes, stretch_along
 from .parametrisation import softplus_inverse
 
 __all__ = ["DataScales", "data_scales", "blur_reference", "choose_starts"]

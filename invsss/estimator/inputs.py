@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..light_terms import LightBuffers
-from ..pair import ImagePair, fill_background_depth
+from ..forward.light_terms import LightBuffers
+from ..forward.pair import ImagePair, fill_background_depth
 from ..validation import InvalidInputError, check_pair
 
 __all__ = ["ImagePair", "PairData", "prepare_pair", "prepare_pairs"]
 
-#: The estimator's name for the float64 form of an :class:`~invsss.pair.ImagePair`
+#: The estimator's name for the float64 form of an :class:`~invsss.forward.pair.ImagePair`
 #: (the same type; kept so annotations elsewhere read naturally).
 PairData = ImagePair
 

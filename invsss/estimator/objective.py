@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ..light_terms import (
+from ..forward.light_terms import (
     AFTER_BLUR,
     LightTerms,
     grazing_field,
@@ -34,7 +34,7 @@ from ..light_terms import (
     propagation_offsets,
     reflectance_law,
 )
-from ..stretch import stretch_factors
+from ..forward.stretch import stretch_factors
 from .basis import basis_images
 from .parametrisation import LIGHT_UNKNOWNS, Parametrisation
 from .projection import combine, projected_jacobian, solve_linear

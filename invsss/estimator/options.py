@@ -17,9 +17,9 @@ import types
 import jax
 import numpy as np
 
-from ..light_terms import LIGHT_TERM_NAMES
-from ..models import get_model
-from ..passes import tap_weights as tap_weight_set
+from ..forward.light_terms import LIGHT_TERM_NAMES
+from ..forward.models import get_model
+from ..forward.passes import tap_weights as tap_weight_set
 from ..validation import InvalidInputError
 from .parametrisation import GAUGES, assign_roles, check_fix, resolve_profile
 from .robust import check_robust
@@ -70,11 +70,11 @@ class FitOptions:
     max_steps : int >= 1
         Solver steps per start and per refinement round.
     tap_weights : {"jimenez", "thesis"}, 7 numbers or None
-        None picks the model's default set (:attr:`invsss.models.ScreenSpaceModel.default_tap_weights`).
+        None picks the model's default set (:attr:`invsss.forward.models.ScreenSpaceModel.default_tap_weights`).
     robust : {"pseudo-huber", "cauchy"} or None
         ``"none"`` and False are stored as None.
     align : {"none", "translation", "similarity", "affine"}
-        Register the target onto the source inside the fit (:mod:`invsss.registration`).
+        Register the target onto the source inside the fit (:mod:`invsss.estimator.registration`).
     vignetting : bool
         Fit the camera's radial fall-off as a gain field (:mod:`invsss.estimator.vignetting`).
     highlights : bool
@@ -82,7 +82,7 @@ class FitOptions:
     saturation : float > 0 or None
         Target level at or above which a pixel is clipped and left out of the fit.
     light_terms : tuple of str
-        Light-aware terms in the model (:data:`invsss.light_terms.LIGHT_TERM_NAMES`:
+        Light-aware terms in the model (:data:`invsss.forward.light_terms.LIGHT_TERM_NAMES`:
         ``"shift"``, ``"grazing"``, ``"incidence"``, ``"law"``), stored as a tuple in
         that order. Given as names (a list, or a comma-separated string), each term
         is fitted; given as a mapping ``{name: value}`` (or ``"shift=1.3,grazing"``),
@@ -132,7 +132,7 @@ class FitOptions:
     canvas: tuple | None = None
 
     def __post_init__(self):
-        from ..registration import ALIGN_KINDS
+        from .registration import ALIGN_KINDS
 
         if self.canvas is not None:
             object.__setattr__(self, "canvas", check_canvas(self.canvas))

@@ -63,9 +63,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ..models import get_model
-from ..params import PARAM_NAMES
-from ..profiles import SumOfGaussians, load_profile
+from ..forward.models import get_model
+from ..forward.params import PARAM_NAMES
+from ..forward.profiles import SumOfGaussians, load_profile
 from ..validation import InvalidInputError
 
 __all__ = [

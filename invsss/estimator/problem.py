@@ -16,8 +16,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..executable_cache import persistent_jit
-from ..params import PARAM_NAMES
+from ..runtime.executable_cache import persistent_jit
+from ..forward.params import PARAM_NAMES
 from ..validation import InvalidInputError
 from .canvas import on_canvas
 from .initial import blur_reference, choose_starts, data_scales

@@ -8,7 +8,7 @@ import math
 import equinox as eqx
 import numpy as np
 
-from ..params import PARAM_NAMES, SSSParams
+from ..forward.params import PARAM_NAMES, SSSParams
 
 __all__ = ["FitResult", "masked_list"]
 
@@ -88,10 +88,10 @@ class FitResult(eqx.Module):
     start_profile : dict or None
         ``{"weights", "variances"}``: the profile the fit started from (weights
         normalised per channel, shaped like the fitted ones), for comparing the
-        fitted profile with it (:func:`invsss.report.plot_fit_report` does).
+        fitted profile with it (:func:`invsss.cli.report.plot_fit_report` does).
     alignment : tuple of dict
         With ``align``: per pair, the warp from source pixels to target pixels
-        (:meth:`invsss.registration.Warp.to_dict`); the fitted images are on the
+        (:meth:`invsss.estimator.registration.Warp.to_dict`); the fitted images are on the
         target's grid. Empty without ``align``.
         Not written by :meth:`to_dict`.
     vignetting : dict or None
@@ -157,7 +157,7 @@ class FitResult(eqx.Module):
         """The fitted light-aware terms as an :class:`invsss.LightTerms` (None without them)."""
         if self.light_terms is None:
             return None
-        from ..light_terms import LIGHT_TERM_FIELDS, LightTerms
+        from ..forward.light_terms import LIGHT_TERM_FIELDS, LightTerms
 
         return LightTerms(**{k: v for k, v in self.light_terms.items() if k in LIGHT_TERM_FIELDS})
 
@@ -228,7 +228,7 @@ class FitResult(eqx.Module):
         out["sigma"] = _number(self.sigma)
         out["solver"] = self.solver
         out["warnings"] = list(self.warnings)
-        # One warp per pair (invsss.registration.Warp.to_dict) when the fit registered
+        # One warp per pair (invsss.estimator.registration.Warp.to_dict) when the fit registered
         # the target, else null.
         out["alignment"] = [dict(a) for a in self.alignment] or None
         # The camera's fitted fall-off (fit --vignetting), else null.

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ..executable_cache import StaleStatics, persistent_jit
+from ..runtime.executable_cache import StaleStatics, persistent_jit
 from ..validation import InvalidInputError
 
 __all__ = [

@@ -21,7 +21,7 @@ process writes, always says what was started.
 Every worker process keeps its compiled JAX functions from one trial to the
 next, so a sweep over same-sized pairs compiles once per worker and options;
 local and Dask workers also share JAX's on-disk compilation cache
-(:mod:`invsss.compile_cache`) unless the sweep runs with ``--no-cache``.
+(:mod:`invsss.runtime.compile_cache`) unless the sweep runs with ``--no-cache``.
 
 Running on a cluster (``pip install "invsss[cluster]"`` on every machine):
 
@@ -87,7 +87,7 @@ def _worker_start(parent: int) -> None:
 
     threading.Thread(target=watch, name="invsss-parent-watchdog", daemon=True).start()
     # Workers of one sweep share the on-disk compilation cache (off with INVSSS_NO_CACHE=1).
-    from ..compile_cache import enable_compile_cache
+    from ..runtime.compile_cache import enable_compile_cache
 
     enable_compile_cache()
 
@@ -99,10 +99,10 @@ def _execute_on_dask_worker(trial: dict, out: str, use_cache: bool) -> dict:
     by invsss, and does not see the sweep's ``--no-cache``; the sweep's
     choice travels with every trial instead. Enabling is idempotent, so only
     a worker's first trial does any work. The cache lives where
-    :func:`~invsss.compile_cache.cache_directory` says on the worker's machine.
+    :func:`~invsss.runtime.compile_cache.cache_directory` says on the worker's machine.
     """
     if use_cache:
-        from ..compile_cache import enable_compile_cache
+        from ..runtime.compile_cache import enable_compile_cache
 
         enable_compile_cache()
     return execute(trial, out)
@@ -236,7 +236,7 @@ class DaskExecutor:
         return f"Dask: {where}"
 
     def submit(self, trial: dict, out: str):
-        from ..compile_cache import cache_disabled
+        from ..runtime.compile_cache import cache_disabled
 
         return self._client.submit(
             _execute_on_dask_worker, trial, out, not cache_disabled(),

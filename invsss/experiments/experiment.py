@@ -112,7 +112,7 @@ def _check_trial(trial: Trial, name: str, label: str) -> None:
     """Check the options as the task will use them, and that every pair has the
     buffers its light terms read."""
     from ..estimator.options import check_light_terms
-    from ..light_terms import NEEDED_BUFFERS
+    from ..forward.light_terms import NEEDED_BUFFERS
     from .data import BUFFER_FILES
     from .tasks import check_task_options
 

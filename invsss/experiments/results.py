@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import os
 
-from ..params import PARAM_NAMES
+from ..forward.params import PARAM_NAMES
 from ..validation import InvalidInputError
 from .store import DATABASE_NAME, ResultsStore
 

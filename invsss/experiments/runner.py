@@ -2,7 +2,7 @@
 
 The runner reads the pair(s), runs the task (:mod:`.tasks`), refuses a result
 whose loss is not finite, and commits the trial's files to ``OUT/trials/<id>/``
-through :class:`invsss.result_dir.ResultDir` (all files or none). Only then
+through :class:`invsss.io.result_dir.ResultDir` (all files or none). Only then
 does it return ``status: "done"``; the sweep marks the trial done in the
 database after that, so a done row always has its files. The manifest of
 those files holds the row the sweep records (``info.row``: the trial's
@@ -26,7 +26,7 @@ import socket
 import time
 import warnings
 
-from ..result_dir import ResultDir
+from ..io.result_dir import ResultDir
 from ..validation import InvalidInputError
 from .tasks import TrialInterrupted, run_task
 from .trials import Trial

@@ -18,7 +18,7 @@ One sweep at a time per folder: ``OUT/.sweep.lock`` is held (``fcntl.flock``,
 released by the kernel if the process dies) for the whole run, and a second
 sweep into the folder is refused with the first one's pid and host.
 
-A ``stop`` callable (:class:`invsss.interrupts.StopSignals`), polled between
+A ``stop`` callable (:class:`invsss.runtime.interrupts.StopSignals`), polled between
 trials, ends the sweep early: no new trial starts, the running ones finish (a
 fit running in this process is abandoned at its next solver step) and
 :func:`run` returns with ``interrupted=True``; rerunning resumes.

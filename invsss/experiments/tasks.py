@@ -3,7 +3,7 @@
 Each task takes the loaded pairs and the trial's options and returns a
 :class:`TaskOutput`: the numbers that go into the results database and the
 files that go into the trial's folder (as writers for
-:meth:`invsss.result_dir.ResultDir.commit`). Nothing is written here.
+:meth:`invsss.io.result_dir.ResultDir.commit`). Nothing is written here.
 
 * ``fit``: :func:`invsss.fit_pair` on one pair; files ``params.json`` (the fit's
   params file) and ``fit.exr`` (the fitted prediction).
@@ -22,7 +22,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..params import PARAM_NAMES, SSSParams
+from ..forward.params import PARAM_NAMES, SSSParams
 from ..validation import InvalidInputError
 
 __all__ = ["TaskOutput", "TrialInterrupted", "check_task_options", "run_task"]
@@ -84,13 +84,13 @@ def check_task_options(task: str, options: dict) -> None:
     ...
     invsss.validation.InvalidInputError: solver: expected one of lm, gauss-newton, bfgs, got 'adam'
     """
-    from ..models import get_model
+    from ..forward.models import get_model
 
     if task == "render":
         get_model(options["model"])
         _render_params(options)
         if options["tap_weights"] is not None:
-            from ..passes import tap_weights
+            from ..forward.passes import tap_weights
 
             try:
                 tap_weights(options["tap_weights"])
@@ -160,7 +160,7 @@ def run_task(task: str, options: dict, pairs: list, stop=None) -> TaskOutput:
 
 
 def _render(options: dict, pair) -> TaskOutput:
-    from ..screen_space import render
+    from ..forward.screen_space import render
     from .scoring import score_render
 
     params = _render_params(options)

@@ -45,7 +45,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..pair import ImagePair, fill_background_depth
+from ..forward.pair import ImagePair, fill_background_depth
 from ..validation import InputNotice, InvalidInputError, check_image, check_pair, depth_is_valid
 from .colour import linear_to_srgb, srgb_to_linear
 
@@ -629,7 +629,7 @@ def load_pair(
         Anything the readers reject, a file whose size differs from the source's,
         a target whose channels do not fit the source's (1 or the same count), or
         masked pixels without finite depth > 0 (off the mask, 0 or infinite depth
-        is accepted and replaced, see :func:`invsss.pair.fill_background_depth`).
+        is accepted and replaced, see :func:`invsss.forward.pair.fill_background_depth`).
 
     Warns
     -----

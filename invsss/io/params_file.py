@@ -25,10 +25,10 @@ from typing import Annotated, Any, Literal, Optional, Union
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from ..params import PARAM_NAMES, SSSParams
-from ..passes import TAP_WEIGHTS
-from ..result_dir import MANIFEST_NAME, result_state
-from ..screen_space import MODELS
+from ..forward.params import PARAM_NAMES, SSSParams
+from ..forward.passes import TAP_WEIGHTS
+from .result_dir import MANIFEST_NAME, result_state
+from ..forward.screen_space import MODELS
 from ..validation import InvalidInputError, number_array
 from .images import _one_line, write_text_atomic
 

@@ -5,7 +5,7 @@ Lambertian surface whose albedo is the medium's total diffuse reflectance, so
 that on a flat, uniformly lit patch the source and the target agree and only
 the spatial spread differs.
 
-The dipole's closed form (:func:`invsss.profiles.jensen_dipole_total`) is not
+The dipole's closed form (:func:`invsss.forward.profiles.jensen_dipole_total`) is not
 accurate enough for that against the path tracer. For the thesis's 940 nm medium
 Mitsuba 3.9.1 gives a diffuse albedo about 13 % lower than the dipole's 0.462
 behind a Beckmann boundary of alpha 0.5, and about 4 % lower at alpha 0.2: the

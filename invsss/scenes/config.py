@@ -427,7 +427,7 @@ class SceneConfig(_Strict):
     def with_warp(self, warp) -> "SceneConfig":
         """The scene seen by the camera that puts this config's render where ``warp`` maps it.
 
-        ``warp`` is a fit's registration (an :class:`invsss.registration.Warp`, or a
+        ``warp`` is a fit's registration (an :class:`invsss.estimator.registration.Warp`, or a
         params.json ``alignment`` entry) from this scene's pixels to a
         photograph's. The returned camera is rolled by its rotation, has its focal
         length multiplied by its scale and its principal point moved by its shift
@@ -438,7 +438,7 @@ class SceneConfig(_Strict):
         Examples
         --------
         >>> import numpy as np
-        >>> from invsss.registration import Warp
+        >>> from invsss.estimator.registration import Warp
         >>> config = parse_config({"object": {"primitive": "sphere", "radius": 10.0},
         ...     "camera": {"position": [0.0, 0.0, 100.0], "look_at": [0.0, 0.0, 0.0],
         ...                "focal_px": 100.0, "width": 64, "height": 32},
@@ -449,7 +449,7 @@ class SceneConfig(_Strict):
         >>> camera.principal_offset_px, round(camera.focal_px, 6)
         ([1.5, -2.0], 101.0)
         """
-        from ..registration import Warp
+        from ..estimator.registration import Warp
 
         warp = warp if isinstance(warp, Warp) else Warp.from_dict(warp)
         if warp.kind not in ("translation", "similarity"):

@@ -4,13 +4,13 @@ A medium is a homogeneous, isotropically scattering volume with reduced scatteri
 ``sigma_s'`` and absorption ``sigma_a`` in 1/mm (one value, or one per RGB channel)
 inside a boundary of relative index ``eta``. With an isotropic phase function the
 path tracer's scattering coefficient is ``sigma_s'`` itself, which is what the
-dipole (:func:`invsss.profiles.jensen_dipole`) is written in.
+dipole (:func:`invsss.forward.profiles.jensen_dipole`) is written in.
 
 The presets:
 
 ``thesis-940``
     The thesis measured a 940 nm profile on the inner forearm but published only its
-    sum-of-Gaussians fit (Table 5.1, :data:`invsss.profiles.THESIS_NIR_940`), not
+    sum-of-Gaussians fit (Table 5.1, :data:`invsss.forward.profiles.THESIS_NIR_940`), not
     coefficients. The numbers here are the Jensen dipole (eta 1.3, the value the
     thesis uses for skin) fitted to that profile by least squares on ``r R(r)`` for
     ``r`` in [0.05, 8] mm (:func:`dipole_fit_to_thesis_profile` reproduces them). They
@@ -18,7 +18,7 @@ The presets:
     thesis's remark that its 940 nm profile is close to red light's.
 ``jensen-skin1``
     Jensen et al. 2001's measured skin1, per RGB channel
-    (:data:`invsss.profiles.JENSEN_SKIN1`).
+    (:data:`invsss.forward.profiles.JENSEN_SKIN1`).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from ..profiles import JENSEN_SKIN1, THESIS_NIR_940
+from ..forward.profiles import JENSEN_SKIN1, THESIS_NIR_940
 
 __all__ = ["MEDIUM_PRESETS", "dipole_fit_to_thesis_profile"]
 
@@ -71,7 +71,7 @@ def dipole_fit_to_thesis_profile(r_max: float = 8.0, num: int = 200) -> tuple[fl
     # Imported here: only this derivation needs SciPy's solver and the JAX profile code.
     from scipy.optimize import least_squares
 
-    from ..profiles import jensen_dipole
+    from ..forward.profiles import jensen_dipole
 
     variances = np.asarray(THESIS_NIR_940["variances"])
     weights = np.asarray(THESIS_NIR_940["weights"])

@@ -2,7 +2,7 @@
 
 :func:`render_scene` runs the passes of :mod:`invsss.scenes.mitsuba_scene` and
 turns them into images; :func:`write_scene` (and ``invsss scene``) writes them as
-one unit through :class:`invsss.result_dir.ResultDir`:
+one unit through :class:`invsss.io.result_dir.ResultDir`:
 
 ==============  ==========================================================
 ``source.exr``  Lambertian render, albedo from :mod:`~invsss.scenes.calibration`
@@ -42,8 +42,8 @@ import numpy as np
 
 from .. import __version__
 from ..io import write_image, write_text_atomic
-from ..profiles import jensen_dipole_total
-from ..result_dir import ResultDir
+from ..forward.profiles import jensen_dipole_total
+from ..io.result_dir import ResultDir
 from .calibration import CALIBRATION_PIXELS, CALIBRATION_SPP, slab_albedo
 from .config import SceneConfig
 from .mitsuba_scene import import_mitsuba, load_mesh_ply, pigmented_mesh, scene_dict, write_attribute_ply
@@ -383,7 +383,7 @@ def _light_buffer(result: SceneRender) -> np.ndarray:
 
 
 def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
-    """``{file name: writer(path)}`` for :meth:`invsss.result_dir.ResultDir.commit`.
+    """``{file name: writer(path)}`` for :meth:`invsss.io.result_dir.ResultDir.commit`.
 
     Examples
     --------
@@ -416,7 +416,7 @@ def write_scene(result: SceneRender, out, *, overwrite: bool = False) -> list[st
     """Write a rendered scene into the folder ``out`` as one result (all files or none).
 
     Returns the paths written. A folder that already holds a result is refused
-    unless ``overwrite`` (see :class:`invsss.result_dir.ResultDir`).
+    unless ``overwrite`` (see :class:`invsss.io.result_dir.ResultDir`).
 
     Examples
     --------

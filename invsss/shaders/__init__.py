@@ -239,10 +239,10 @@ def run_shader(
         Linear radiance without scattering.
     depth : array, shape (H, W)
         Linear eye depth, > 0 everywhere (off the mask too: see
-        :func:`invsss.pair.fill_background_depth`, which ``invsss.render`` applies).
+        :func:`invsss.forward.pair.fill_background_depth`, which ``invsss.render`` applies).
     mask : array, shape (H, W)
     constants_hlsl : str
-        The text ``invsss export --format hlsl`` writes (or :func:`invsss.export.to_hlsl`);
+        The text ``invsss export --format hlsl`` writes (or :func:`invsss.io.export.to_hlsl`);
         it becomes ``invsss_constants.hlsl`` beside the shaders.
     model : {"sog", "thesis", "separable"}
     normal, light, key : arrays, optional

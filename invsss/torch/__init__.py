@@ -7,15 +7,15 @@ single definition both follow), module for module:
 ``invsss.torch``                        JAX core
 =====================================  ==========================================
 :class:`SSSParams` (dataclass)          :class:`invsss.SSSParams` (``eqx.Module``)
-:func:`depth_slopes`,                   :mod:`invsss.stretch`
+:func:`depth_slopes`,                   :mod:`invsss.forward.stretch`
 :func:`stretch_factors`
-:func:`sample_along`,                   :mod:`invsss.passes`
+:func:`sample_along`,                   :mod:`invsss.forward.passes`
 :func:`directional_pass`, ...
-:func:`gaussian`,                       :mod:`invsss.profiles`
+:func:`gaussian`,                       :mod:`invsss.forward.profiles`
 :func:`sum_of_gaussians`
-:func:`render`, :func:`sog_layers`,     :mod:`invsss.screen_space`
+:func:`render`, :func:`sog_layers`,     :mod:`invsss.forward.screen_space`
 :func:`separable_kernel`, ...
-:func:`apply_light_terms`,              :mod:`invsss.light_terms`
+:func:`apply_light_terms`,              :mod:`invsss.forward.light_terms`
 :func:`shift_image`, ...
 =====================================  ==========================================
 

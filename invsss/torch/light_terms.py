@@ -1,4 +1,4 @@
-"""Light-aware terms (twin of :mod:`invsss.light_terms`, docs/model.md, section 8).
+"""Light-aware terms (twin of :mod:`invsss.forward.light_terms`, docs/model.md, section 8).
 
 The shifted image is sampled with :func:`kornia.geometry.transform.remap`
 (bilinear, ``padding_mode="border"``, ``align_corners=True``) at the per-pixel
@@ -10,7 +10,7 @@ from __future__ import annotations
 import torch
 from kornia.geometry.transform import remap
 
-from ..light_terms import LAW_TRUST
+from ..forward.light_terms import LAW_TRUST
 from .stretch import stretch_factors
 
 __all__ = ["propagation_offsets", "grazing_field", "incidence_field", "chandrasekhar_h", "law_trust", "reflectance_law",
@@ -63,7 +63,7 @@ def law_source(source: torch.Tensor, key: torch.Tensor, mask: torch.Tensor, gain
 
 
 def apply_law(image, mask, albedo, normal, light, key, strength=1.0) -> torch.Tensor:
-    """Twin of :func:`invsss.light_terms.apply_law` with the buffers as (H, W, 3) and (H, W, C) tensors."""
+    """Twin of :func:`invsss.forward.light_terms.apply_law` with the buffers as (H, W, 3) and (H, W, C) tensors."""
     return law_source(image, key, mask, reflectance_law(normal, light, albedo), strength)
 
 

@@ -1,4 +1,4 @@
-"""The model parameters as a dataclass of torch tensors (twin of :mod:`invsss.params`)."""
+"""The model parameters as a dataclass of torch tensors (twin of :mod:`invsss.forward.params`)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import torch
 
-from ..params import PARAM_NAMES, check_parameter_values, parameter_arrays
+from ..forward.params import PARAM_NAMES, check_parameter_values, parameter_arrays
 
 __all__ = ["SSSParams"]
 

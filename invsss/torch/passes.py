@@ -1,4 +1,4 @@
-"""One directional pass (twin of :mod:`invsss.passes`, docs/model.md, section 3).
+"""One directional pass (twin of :mod:`invsss.forward.passes`, docs/model.md, section 3).
 
 Sampling is done by :func:`kornia.geometry.transform.remap`, i.e. ``grid_sample``
 with bilinear interpolation, ``padding_mode="border"`` (clamp-to-edge) and
@@ -13,7 +13,7 @@ from __future__ import annotations
 import torch
 from kornia.geometry.transform import remap
 
-from ..passes import TAP_OFFSETS, TAP_WEIGHTS
+from ..forward.passes import TAP_OFFSETS, TAP_WEIGHTS
 
 __all__ = [
     "TAP_OFFSETS",

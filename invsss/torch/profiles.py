@@ -1,4 +1,4 @@
-"""Radial diffusion profiles (twin of :mod:`invsss.profiles`, docs/model.md, section 4)."""
+"""Radial diffusion profiles (twin of :mod:`invsss.forward.profiles`, docs/model.md, section 4)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The three screen-space models (twin of :mod:`invsss.screen_space`, docs/model.md, section 5).
+"""The three screen-space models (twin of :mod:`invsss.forward.screen_space`, docs/model.md, section 5).
 
 The ``render_*`` functions take (H, W, C) tensors of one dtype and a
 :class:`~invsss.torch.SSSParams` in that dtype; :func:`render` is the checked
@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ..models import MODEL_NAMES, get_model, resolve_tap_weights
-from ..pass_plan import pass_plan
-from ..pair import fill_background_depth
+from ..forward.models import MODEL_NAMES, get_model, resolve_tap_weights
+from ..forward.pass_plan import pass_plan
+from ..forward.pair import fill_background_depth
 from ..validation import InvalidInputError, check_depth, check_image, check_mask
 from .params import SSSParams
 from .passes import directional_pass, sample_along, tap_spread
@@ -31,7 +31,7 @@ __all__ = [
 ]
 
 
-#: The model names (the table is :mod:`invsss.models`).
+#: The model names (the table is :mod:`invsss.forward.models`).
 MODELS = MODEL_NAMES
 
 
@@ -144,7 +144,7 @@ def _render_kernel(image, depth, mask, params, tap_w, taps=17, strength=1.0, fol
     return render_separable(image, depth, mask, params, taps, strength, follow_surface)
 
 
-#: The twin's renderer of each layout of :data:`invsss.models.LAYOUTS`, called
+#: The twin's renderer of each layout of :data:`invsss.forward.models.LAYOUTS`, called
 #: as ``f(image, depth, mask, params, tap_w, **kernel_options)``.
 LAYOUT_RENDERERS = {
     "layered": render_sog,
@@ -190,7 +190,7 @@ def render(
     params : invsss.torch.SSSParams
         Weights of shape (K, C) must have the image's C (or 1).
     model : {"sog", "thesis", "separable"}
-        A name from :data:`invsss.models.MODEL_NAMES`.
+        A name from :data:`invsss.forward.models.MODEL_NAMES`.
     tap_weights : {"jimenez", "thesis"} or 7 numbers, optional
         Default the model's ``default_tap_weights`` ("jimenez" for ``sog``,
         "thesis" for ``thesis``); unused by ``separable``.

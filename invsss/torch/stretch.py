@@ -1,4 +1,4 @@
-"""Jimenez's depth stretch factors (twin of :mod:`invsss.stretch`, docs/model.md, section 2)."""
+"""Jimenez's depth stretch factors (twin of :mod:`invsss.forward.stretch`, docs/model.md, section 2)."""
 
 from __future__ import annotations
 

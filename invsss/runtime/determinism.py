@@ -48,7 +48,7 @@ def use_deterministic_scheduler() -> bool:
     Examples
     --------
     >>> import os
-    >>> from invsss.determinism import use_deterministic_scheduler, SCHEDULER_FLAG
+    >>> from invsss.runtime.determinism import use_deterministic_scheduler, SCHEDULER_FLAG
     >>> use_deterministic_scheduler() == (SCHEDULER_FLAG in os.environ.get("XLA_FLAGS", ""))
     True
     """

@@ -44,7 +44,7 @@ import equinox as eqx
 import numpy as np
 
 from .profile_fit import ProfileFit, fit_sum_of_gaussians
-from .validation import InvalidInputError, check_image
+from ..validation import InvalidInputError, check_image
 
 __all__ = ["DIRECTIONS", "AVERAGINGS", "MeasuredProfile", "measure_profile", "column_average_gain"]
 

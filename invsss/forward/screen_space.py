@@ -31,7 +31,7 @@ from .passes import tap_weights as tap_weight_set
 from .profiles import sum_of_gaussians
 from .stretch import stretch_factors
 from .pair import fill_background_depth
-from .validation import InvalidInputError, check_depth, check_image, check_mask, is_concrete
+from ..validation import InvalidInputError, check_depth, check_image, check_mask, is_concrete
 
 __all__ = [
     "MODELS",
@@ -43,7 +43,7 @@ __all__ = [
     "separable_kernel",
 ]
 
-#: The model names (kept here for older imports; the table is :mod:`invsss.models`).
+#: The model names (kept here for older imports; the table is :mod:`invsss.forward.models`).
 MODELS = MODEL_NAMES
 
 
@@ -225,7 +225,7 @@ def _render_kernel(image, depth, mask, params, tap_w, taps=17, strength=1.0, fol
     return render_separable(image, depth, mask, params, taps, strength, follow_surface)
 
 
-#: The renderer of each layout of :data:`invsss.models.LAYOUTS`, called as
+#: The renderer of each layout of :data:`invsss.forward.models.LAYOUTS`, called as
 #: ``f(image, depth, mask, params, tap_w, **kernel_options)`` with (H, W, C)
 #: inputs; only the kernel layout takes options.
 LAYOUT_RENDERERS = {
@@ -295,7 +295,7 @@ def render(
         Stretch-factor and profile parameters. Weights of shape (K, C) must have
         the image's C.
     model : {"sog", "thesis", "separable"}
-        A name from :data:`invsss.models.MODEL_NAMES`.
+        A name from :data:`invsss.forward.models.MODEL_NAMES`.
     tap_weights : {"jimenez", "thesis"} or 7 numbers, optional
         Tap weights of the 7-tap passes; default the model's
         ``default_tap_weights`` ("jimenez" for ``sog``, "thesis" for
@@ -306,8 +306,8 @@ def render(
         ``k`` in ``lerp(sample, centre, clamp(k |d_s - d_c|, 0, 1))`` (0 disables it).
     light_terms : LightTerms, optional
         The light-aware terms of docs/model.md, section 8: ``law`` changes the
-        image before the blur (:func:`invsss.light_terms.apply_law`), the others
-        the blurred image (:func:`invsss.light_terms.apply_light_terms`).
+        image before the blur (:func:`invsss.forward.light_terms.apply_law`), the others
+        the blurred image (:func:`invsss.forward.light_terms.apply_light_terms`).
     light_buffers : LightBuffers, optional
         Their per-pixel buffers; required with ``light_terms``, and a term that is
         on (a parameter not 0; ``law`` not None) needs its buffers.

@@ -68,7 +68,7 @@ unchanged (``out = B + m (T(B) - B)``, as a pass blends).
 Examples
 --------
 >>> import jax.numpy as jnp
->>> from invsss.light_terms import shift_image
+>>> from invsss.forward.light_terms import shift_image
 >>> image = jnp.arange(4.0).reshape(1, 4, 1)
 >>> offset = jnp.zeros((1, 4, 2)).at[..., 0].set(0.5)   # half a pixel to the right
 >>> shift_image(image, offset)[0, :, 0].tolist()
@@ -84,7 +84,7 @@ from jaxtyping import Array, Float
 
 from .params import _as_float
 from .stretch import stretch_factors
-from .validation import InvalidInputError, is_concrete
+from ..validation import InvalidInputError, is_concrete
 
 __all__ = [
     "LIGHT_TERM_NAMES",
@@ -157,7 +157,7 @@ class LightTerms(eqx.Module):
 
     Examples
     --------
-    >>> from invsss.light_terms import LightTerms
+    >>> from invsss.forward.light_terms import LightTerms
     >>> LightTerms(shift=0.4).grazing.item()
     0.0
     >>> LightTerms(law=[0.93, 0.8, 0.7]).law.shape   # one albedo per channel
@@ -272,7 +272,7 @@ class LightBuffers(eqx.Module):
     Examples
     --------
     >>> import numpy as np
-    >>> from invsss.light_terms import LightBuffers
+    >>> from invsss.forward.light_terms import LightBuffers
     >>> up = np.zeros((2, 3, 3)); up[..., 1] = 1.0
     >>> LightBuffers(light=up).light.shape
     (2, 3, 3)
@@ -475,7 +475,7 @@ def apply_law(image, mask, albedo, buffers: LightBuffers, strength=1.0):
     Examples
     --------
     >>> import numpy as np
-    >>> from invsss.light_terms import LightBuffers, apply_law
+    >>> from invsss.forward.light_terms import LightBuffers, apply_law
     >>> facing = np.zeros((1, 2, 3)); facing[..., 2] = 1.0   # normal and light towards the camera
     >>> source = np.full((1, 2, 1), 0.5); key = np.full((1, 2, 1), 0.3)
     >>> apply_law(source, np.ones((1, 2)), 0.9, LightBuffers(facing, facing, key))[..., 0].tolist()

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .validation import InvalidInputError, is_concrete, number_array
+from ..validation import InvalidInputError, is_concrete, number_array
 
 __all__ = [
     "gaussian",
@@ -340,7 +340,7 @@ def check_profile_arrays(
 ) -> None:
     """Check sum-of-Gaussians weights and variances: shapes always, values when concrete.
 
-    The one check behind :class:`SumOfGaussians` and :class:`~invsss.params.SSSParams`.
+    The one check behind :class:`SumOfGaussians` and :class:`~invsss.forward.params.SSSParams`.
     Weights are (K,) or (K, C) for K variances; weights >= 0 with a positive
     sum (per channel); variances > 0, or >= 0 with ``zero_variances`` (the
     screen-space model takes a zero-variance Gaussian as "no blur"). ``values=False``

@@ -55,7 +55,7 @@ import sys
 import time
 from collections.abc import Callable, Iterable, Mapping
 
-from .validation import InvalidInputError
+from ..validation import InvalidInputError
 
 __all__ = [
     "MANIFEST_NAME",
@@ -152,7 +152,7 @@ def _fsync_directory(directory: str) -> None:
 
 def _write_json_atomic(path: str, content: Mapping) -> None:
     # Imported here, not at the top: invsss.io's params reader imports this module.
-    from .io.images import write_text_atomic
+    from .images import write_text_atomic
 
     write_text_atomic(path, json.dumps(content, indent=2) + "\n")
 

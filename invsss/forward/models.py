@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 from .params import PARAM_NAMES
 from .pass_plan import LAYOUTS_WITH_PASSES, PassPlan, pass_plan
-from .validation import InvalidInputError
+from ..validation import InvalidInputError
 
 __all__ = [
     "LAYOUTS",
@@ -34,7 +34,7 @@ WEIGHTS_ROLES = ("linear", "free", "unused")
 #: ``"layered"``: pass pairs of variance differences whose vertical passes are
 #: mixed by the weights; ``"chained"``: K horizontal then K vertical passes of
 #: the full variances, the last one the output (both 7-tap, planned by
-#: :func:`invsss.pass_plan.pass_plan`); ``"kernel"``: one pass pair with a
+#: :func:`invsss.forward.pass_plan.pass_plan`); ``"kernel"``: one pass pair with a
 #: precomputed N-tap kernel.
 LAYOUTS = ("layered", "chained", "kernel")
 
@@ -53,7 +53,7 @@ class ScreenSpaceModel:
         The 7-tap weight set used when the caller names none; ``None`` for a
         model without 7-tap passes.
     parameters : frozenset of str
-        The names from :data:`invsss.params.PARAM_NAMES` that change its image.
+        The names from :data:`invsss.forward.params.PARAM_NAMES` that change its image.
     weights_role : {"linear", "free", "unused"}
         How the estimator treats the weights (see :data:`WEIGHTS_ROLES`).
     layout : {"layered", "chained", "kernel"}
@@ -61,7 +61,7 @@ class ScreenSpaceModel:
 
     Examples
     --------
-    >>> from invsss.models import get_model
+    >>> from invsss.forward.models import get_model
     >>> m = get_model("thesis")
     >>> m.default_tap_weights, "weights" in m.parameters, m.weights_role
     ('thesis', False, 'unused')
@@ -94,7 +94,7 @@ class ScreenSpaceModel:
             raise ValueError(f"model {self.name}: 7-tap passes need a default tap weight set")
 
     def pass_plan(self, variances, spread, xp) -> PassPlan:
-        """Its 7-tap passes and their widths per unit stretch (:func:`invsss.pass_plan.pass_plan`).
+        """Its 7-tap passes and their widths per unit stretch (:func:`invsss.forward.pass_plan.pass_plan`).
 
         Examples
         --------

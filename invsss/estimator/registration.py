@@ -42,8 +42,8 @@ import numpy as np
 import optimistix as optx
 from scipy import ndimage
 
-from .pair import fill_background_depth
-from .validation import InvalidInputError
+from ..forward.pair import fill_background_depth
+from ..validation import InvalidInputError
 
 __all__ = ["ALIGN_KINDS", "Warp", "estimate_warp", "warp_image", "align_target", "align_source", "match_photometry"]
 
@@ -313,7 +313,7 @@ def align_source(source, depth, mask, warp: Warp, shape):
 
     Returns ``(source, depth, mask)``: the source (cubic spline), the depth
     (linear, after its renderer background is filled, see
-    :func:`invsss.pair.fill_background_depth`) and the mask (linear), 0 where the
+    :func:`invsss.forward.pair.fill_background_depth`) and the mask (linear), 0 where the
     target pixel comes from outside the source's frame.
 
     Examples
@@ -338,7 +338,7 @@ def align_source(source, depth, mask, warp: Warp, shape):
 def align_vectors(vectors, warp: Warp, shape):
     """A buffer of unit vectors (H, W, 3) resampled onto the target's grid, renormalised.
 
-    For the light-aware terms' normal and light buffers (:mod:`invsss.light_terms`):
+    For the light-aware terms' normal and light buffers (:mod:`invsss.forward.light_terms`):
     linear interpolation, then unit length again. The vectors themselves are not
     rotated with a similarity warp; a rotation of a degree or two turns them by as
     much, far below what the terms resolve. ``None`` passes through.

@@ -14,7 +14,7 @@ Exit codes, all without a traceback:
 * 2: bad input, reported as ``invsss: error: <message>`` (an
   :class:`~invsss.validation.InvalidInputError`), or an output directory that
   already holds a result (``--overwrite``) or is in use by another run;
-* 130 / 143: interrupted by SIGINT (Ctrl-C) / SIGTERM (:mod:`invsss.interrupts`).
+* 130 / 143: interrupted by SIGINT (Ctrl-C) / SIGTERM (:mod:`invsss.runtime.interrupts`).
   ``fit`` then writes the best estimate so far, marked ``"interrupted": true``,
   when at least one solver step has finished.
 """
@@ -34,15 +34,15 @@ import warnings
 
 import numpy as np
 
-from . import __version__
-from .determinism import use_deterministic_scheduler
-from .estimator import FitInterrupted, fit_pair, fit_pairs
-from .interrupts import Interrupted, StopSignals
-from .estimator.options import check_canvas
-from .estimator.parametrisation import GAUGES
-from .estimator.solve import SOLVERS
-from .export import EXPORT_FORMATS, export_params
-from .io import (
+from .. import __version__
+from ..runtime.determinism import use_deterministic_scheduler
+from ..estimator import FitInterrupted, fit_pair, fit_pairs
+from ..runtime.interrupts import Interrupted, StopSignals
+from ..estimator.options import check_canvas
+from ..estimator.parametrisation import GAUGES
+from ..estimator.solve import SOLVERS
+from ..io.export import EXPORT_FORMATS, export_params
+from ..io import (
     image_extension,
     read_depth,
     read_image,
@@ -52,15 +52,15 @@ from .io import (
     write_image,
     write_params,
 )
-from .passes import TAP_WEIGHTS
-from .profiles import PROFILE_NAMES
-from .result_dir import ResultDir, ResultWriteError
-from .screen_space import MODELS, render
-from .params import check_plausible
-from .light_terms import LIGHT_TERM_FIELDS, LIGHT_TERM_NAMES, NEEDED_BUFFERS, LightBuffers, LightTerms
-from .pair import ImagePair, fill_background_depth
-from . import photo_pair  # issue 33
-from .validation import InvalidInputError, check_depth, check_same_frame
+from ..forward.passes import TAP_WEIGHTS
+from ..forward.profiles import PROFILE_NAMES
+from ..io.result_dir import ResultDir, ResultWriteError
+from ..forward.screen_space import MODELS, render
+from ..forward.params import check_plausible
+from ..forward.light_terms import LIGHT_TERM_FIELDS, LIGHT_TERM_NAMES, NEEDED_BUFFERS, LightBuffers, LightTerms
+from ..forward.pair import ImagePair, fill_background_depth
+from .. import photo_pair  # issue 33
+from ..validation import InvalidInputError, check_depth, check_same_frame
 
 __all__ = ["build_parser", "main"]
 
@@ -261,7 +261,7 @@ def _add_fit_parser(subparsers) -> None:
                         help="linear image without scattering (repeat for several pairs)")
     parser.add_argument("--target", action="append", required=True,
                         help="linear photograph to match, 1 or 3 channels (repeat)")
-    # --- issue 33: photographs without a 3D model (invsss/photo_pair.py) ---
+    # --- issue 33: photographs without a 3D model (invsss/io/photo_pair.py) ---
     parser.add_argument("--depth", action="append", default=[],
                         help="eye-space depth in mm: float EXR or NPY, or a 16-bit PNG whose integer codes are "
                         "read as mm (times --depth-scale) (repeat; or give --distance)")
@@ -482,7 +482,7 @@ class _ProgressLine:
             # Everything the first step needs is compiled once it has run.
             self.close()
             seconds = self._compile_seconds()
-            # A warm cache (invsss.executable_cache) leaves nothing to compile.
+            # A warm cache (invsss.runtime.executable_cache) leaves nothing to compile.
             self._stream.write(f"fit: compiling ... {seconds:.1f} s\n" if seconds >= 0.05
                                else "fit: compiled code loaded from the cache\n")
             self._compile_seconds = None
@@ -570,7 +570,7 @@ def _run_fit(args: argparse.Namespace, stop: StopSignals) -> int:
         # while a daemon thread runs compiled code (a fit interrupted at once) can
         # abort in C++ during shutdown (seen in CI: exit status -6 instead of 130).
         threading.Thread(
-            target=importlib.import_module, args=("invsss.report",), name="invsss-import-report"
+            target=importlib.import_module, args=("invsss.cli.report",), name="invsss-import-report"
         ).start()
         options = dict(
             model=args.model, profile=args.profile, fix=fix or None, gauge=args.gauge,
@@ -748,7 +748,7 @@ def _add_scene_parser(subparsers) -> None:
 
 def _warp_from_params(path: str):
     """The one warp in a fit's params.json (``alignment``), for ``scene --warp``."""
-    from .io import read_params
+    from ..io import read_params
 
     _, extras = read_params(path)
     warps = extras.get("alignment") or []
@@ -762,8 +762,8 @@ def _warp_from_params(path: str):
 
 def _run_scene(args: argparse.Namespace, stop: StopSignals) -> int:
     # Imported here: the scene code needs Mitsuba, which the other commands do not.
-    from .scenes import load_config
-    from .scenes.render import SCENE_FILES, render_scene, scene_writers
+    from ..scenes import load_config
+    from ..scenes.render import SCENE_FILES, render_scene, scene_writers
 
     config = load_config(args.config)
     if args.warp is not None:
@@ -824,8 +824,8 @@ def _add_sweep_parser(subparsers) -> None:
 
 
 def _run_sweep(args: argparse.Namespace, stop: StopSignals) -> int:
-    from .experiments import load, run
-    from .experiments.experiment import MAX_TRIALS
+    from ..experiments import load, run
+    from ..experiments.experiment import MAX_TRIALS
 
     limit = MAX_TRIALS if args.max_trials is None else args.max_trials
     if limit < 1:
@@ -865,7 +865,7 @@ def _add_sweep_report_parser(subparsers) -> None:
 
 
 def _run_sweep_report(args: argparse.Namespace, stop: StopSignals) -> int:
-    from .experiments.report import write_report
+    from ..experiments.report import write_report
 
     table, written = write_report(args.out, plots=not args.no_plots, parquet=args.parquet)
     _print_out(table)
@@ -936,8 +936,8 @@ def _add_profile_parser(subparsers) -> None:
 
 
 def _run_profile(args: argparse.Namespace, stop: StopSignals) -> int:
-    from .dipole_fit import fit_dipole
-    from .measure import measure_profile
+    from ..measurement.dipole_fit import fit_dipole
+    from ..measurement.measure import measure_profile
 
     if os.path.exists(args.out):
         raise InvalidInputError(f"{args.out}: already exists; remove it or choose another --out")
@@ -1040,7 +1040,7 @@ def _use_compile_cache(args: argparse.Namespace) -> None:
         # Through the environment, so that a sweep's worker processes see it too.
         os.environ["INVSSS_NO_CACHE"] = "1"
         return
-    from .compile_cache import enable_compile_cache
+    from ..runtime.compile_cache import enable_compile_cache
 
     enable_compile_cache()
 

@@ -17,7 +17,7 @@ from typing import Any, NamedTuple
 
 __all__ = ["PassPlan", "pass_plan", "LAYOUTS_WITH_PASSES"]
 
-#: The layouts :func:`pass_plan` builds (see :class:`invsss.models.ScreenSpaceModel`).
+#: The layouts :func:`pass_plan` builds (see :class:`invsss.forward.models.ScreenSpaceModel`).
 LAYOUTS_WITH_PASSES = ("layered", "chained")
 
 
@@ -66,7 +66,7 @@ def pass_plan(layout: str, variances, spread, xp) -> PassPlan:
     variances : array, shape (K,)
         Gaussian variances (scene units squared), >= 0, of namespace ``xp``.
     spread : scalar or 0-d array
-        The tap weight set's ``c_W`` (:func:`invsss.passes.tap_spread`).
+        The tap weight set's ``c_W`` (:func:`invsss.forward.passes.tap_spread`).
     xp : module
         ``jax.numpy``, ``numpy`` or ``torch``.
 

@@ -15,8 +15,8 @@ import equinox as eqx
 import jax
 import numpy as np
 
-from .profiles import jensen_dipole
-from .validation import InvalidInputError
+from ..forward.profiles import jensen_dipole
+from ..validation import InvalidInputError
 
 __all__ = ["DipoleFit", "fit_dipole"]
 
@@ -105,7 +105,7 @@ def fit_dipole(r_mm, reflectance, eta: float = 1.3) -> DipoleFit:
     Examples
     --------
     >>> import numpy as np
-    >>> from invsss.profiles import jensen_dipole
+    >>> from invsss.forward.profiles import jensen_dipole
     >>> r = np.linspace(1.0, 8.0, 30)
     >>> fit = fit_dipole(r, np.asarray(jensen_dipole(r, 1.2, 0.05)))
     >>> round(float(fit.sigma_s_prime), 3), round(float(fit.sigma_a), 4)

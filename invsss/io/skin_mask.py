@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .validation import InvalidInputError
+from ..validation import InvalidInputError
 
 __all__ = ["LOG_FLOOR", "EDGE_FRACTION", "RIM_PX", "CLOSING_RADIUS_PX", "skin_mask_from_pair"]
 

@@ -13,7 +13,7 @@ import jax
 import numpy as np
 from jaxtyping import Array, Float
 
-from .validation import InvalidInputError, depth_is_valid, is_concrete
+from ..validation import InvalidInputError, depth_is_valid, is_concrete
 
 __all__ = ["ImagePair", "fill_background_depth"]
 
@@ -47,7 +47,7 @@ class ImagePair(eqx.Module):
         whose resampled values are least reliable).
     normal, light : array, shape (H, W, 3), or None
         Camera-space unit normals and unit vectors towards the light, the buffers
-        of the light-aware terms (:mod:`invsss.light_terms`; None without them).
+        of the light-aware terms (:mod:`invsss.forward.light_terms`; None without them).
     key : array, shape (H, W, C), or None
         The source lit by the key light alone (the ``law`` term; None without it).
 

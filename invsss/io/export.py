@@ -1,6 +1,6 @@
 """Constants for a real-time shader: fitted parameters in the form a renderer uses.
 
-A fitted :class:`~invsss.params.SSSParams` describes the model; a shader needs
+A fitted :class:`~invsss.forward.params.SSSParams` describes the model; a shader needs
 the numbers derived from it: per-pass widths, the 7 tap offsets and weights,
 the running blend factors that accumulate the ``sog`` layers, or the N-tap
 kernel of the ``separable`` model. :func:`shader_constants` computes them,
@@ -35,14 +35,14 @@ import os
 import jax
 import numpy as np
 
-from .io import read_params, write_text_atomic
-from .light_terms import AFTER_BLUR, LAW_TRUST, LightTerms
-from .models import get_model, resolve_tap_weights
-from .params import SSSParams
-from .passes import TAP_OFFSETS, tap_spread
-from .passes import tap_weights as tap_weight_set
-from .screen_space import separable_kernel
-from .validation import InvalidInputError
+from . import read_params, write_text_atomic
+from ..forward.light_terms import AFTER_BLUR, LAW_TRUST, LightTerms
+from ..forward.models import get_model, resolve_tap_weights
+from ..forward.params import SSSParams
+from ..forward.passes import TAP_OFFSETS, tap_spread
+from ..forward.passes import tap_weights as tap_weight_set
+from ..forward.screen_space import separable_kernel
+from ..validation import InvalidInputError
 
 __all__ = ["EXPORT_FORMATS", "shader_constants", "to_hlsl", "to_json", "export_params", "write_shader",
            "scale_to_resolution"]
@@ -103,7 +103,7 @@ def shader_constants(
     params : SSSParams
         Weights of shape (K,), (K, 1) or (K, 3).
     model : {"sog", "thesis", "separable"}
-        A name from :data:`invsss.models.MODEL_NAMES`.
+        A name from :data:`invsss.forward.models.MODEL_NAMES`.
     tap_weights : {"jimenez", "thesis"} or 7 numbers, optional
         7-tap weight set of ``sog`` and ``thesis`` (default: the model's
         ``default_tap_weights``). Not used by ``separable``.
@@ -318,7 +318,7 @@ def _separable_constants(weights, variances, taps, strength) -> dict:
     }
 
 
-#: How each layout of :data:`invsss.models.LAYOUTS` is exported.
+#: How each layout of :data:`invsss.forward.models.LAYOUTS` is exported.
 _RECIPES = {"layered": _pass_constants, "chained": _pass_constants, "kernel": _kernel_constants}
 
 
@@ -429,7 +429,7 @@ def write_shader(constants_path) -> list:
     here, they include ``constants_path``'s file name instead. Returns the paths
     written (each atomically).
     """
-    from .shaders import shader_sources
+    from ..shaders import shader_sources
 
     constants_path = os.fspath(constants_path)
     folder = os.path.dirname(os.path.abspath(constants_path))

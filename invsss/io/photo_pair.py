@@ -25,10 +25,10 @@ import warnings
 
 import numpy as np
 
-from .io.images import _note_grey, _one_channel, _read_colour, image_extension, load_pair, read_depth, read_mask
-from .pair import ImagePair, fill_background_depth
+from .images import _note_grey, _one_channel, _read_colour, image_extension, load_pair, read_depth, read_mask
+from ..forward.pair import ImagePair, fill_background_depth
 from .skin_mask import skin_mask_from_pair
-from .validation import InputNotice, InvalidInputError, check_pair
+from ..validation import InputNotice, InvalidInputError, check_pair
 
 __all__ = [
     "HELD_WITH_CONSTANT_DEPTH",
@@ -102,12 +102,12 @@ def constant_depth_pair(source, target, distance_mm, mask=None) -> ImagePair:
     distance_mm : float > 0
         The face's distance from the camera, mm (along the optical axis).
     mask : array, shape (H, W), optional
-        The skin mask; None makes one from the pair (:func:`invsss.skin_mask.skin_mask_from_pair`).
+        The skin mask; None makes one from the pair (:func:`invsss.io.skin_mask.skin_mask_from_pair`).
 
     Examples
     --------
     >>> import numpy as np
-    >>> from invsss.photo_pair import HELD_WITH_CONSTANT_DEPTH, constant_depth_pair
+    >>> from invsss.io.photo_pair import HELD_WITH_CONSTANT_DEPTH, constant_depth_pair
     >>> visible = np.zeros((16, 16)); visible[3:13, 4:12] = 0.6
     >>> pair = constant_depth_pair(visible, 0.8 * visible, 600.0)
     >>> float(pair.depth.min()), float(pair.depth.max()), int(pair.mask.sum())
@@ -131,7 +131,7 @@ def load_photo_pair(
     the images are read and decoded as there (sRGB for 8-bit codes unless
     ``linear_codes``; a grey stored as RGB becomes one channel), the depth is
     ``distance_mm`` everywhere, and the mask, if not given, is made from the two
-    images (:func:`~invsss.skin_mask.skin_mask_from_pair`).
+    images (:func:`~invsss.io.skin_mask.skin_mask_from_pair`).
 
     Returns
     -------
@@ -245,7 +245,7 @@ def photo_inputs(sources, targets, depths, distances, masks, *, fix=None, depth_
         pair_records.append({
             "depth": ({"kind": "distance", "distance_mm": distances[k]} if distances
                       else {"kind": "file", "file": os.fspath(depths[k]), "scale": depth_scale}),
-            "mask": ({"kind": "made from the pair", "file": name, "method": "invsss.skin_mask.skin_mask_from_pair"}
+            "mask": ({"kind": "made from the pair", "file": name, "method": "invsss.io.skin_mask.skin_mask_from_pair"}
                      if mask_made else {"kind": "file", "file": os.fspath(masks[k])}),
         })
     if not distances and not made:

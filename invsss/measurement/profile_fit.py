@@ -30,9 +30,9 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
-from .estimator.solve import run_solver
-from .profiles import SumOfGaussians, gaussian
-from .validation import InvalidInputError
+from ..estimator.solve import run_solver
+from ..forward.profiles import SumOfGaussians, gaussian
+from ..validation import InvalidInputError
 
 __all__ = ["WEIGHTINGS", "RELATIVE_ERROR_FLOOR", "MAX_GAUSSIANS", "ProfileFit", "fit_sum_of_gaussians"]
 

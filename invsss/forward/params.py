@@ -11,7 +11,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .profiles import SumOfGaussians, check_profile_arrays
-from .validation import InputNotice, InvalidInputError, is_concrete, number_array
+from ..validation import InputNotice, InvalidInputError, is_concrete, number_array
 
 __all__ = [
     "PARAM_NAMES",
@@ -71,7 +71,7 @@ class SSSParams(eqx.Module):
 
     @property
     def profile(self) -> SumOfGaussians:
-        """The weights and variances as a :class:`~invsss.profiles.SumOfGaussians`."""
+        """The weights and variances as a :class:`~invsss.forward.profiles.SumOfGaussians`."""
         return SumOfGaussians(self.weights, self.variances)
 
     @classmethod
@@ -96,7 +96,7 @@ class SSSParams(eqx.Module):
         Shapes are static and are checked under ``jit``/``vmap`` too; values
         only when they are concrete.
         """
-        from .validation import is_concrete
+        from ..validation import is_concrete
 
         concrete = all(is_concrete(getattr(self, k)) for k in PARAM_NAMES)
         check_parameter_values({k: getattr(self, k) for k in PARAM_NAMES}, name, values=concrete)
@@ -119,7 +119,7 @@ def check_parameter_values(params, name: str = "params", *, values: bool = True)
 
     Shared by :class:`SSSParams` and its PyTorch twin so both give the same
     messages; weights and variances go through the same check as a
-    :class:`~invsss.profiles.SumOfGaussians` (zero variances allowed here).
+    :class:`~invsss.forward.profiles.SumOfGaussians` (zero variances allowed here).
     Arrays may be anything ``numpy.asarray`` accepts (or, with
     ``values=False``, anything with a shape, tracers included).
     """

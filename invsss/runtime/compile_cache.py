@@ -28,7 +28,7 @@ be had within JAX's 10 s, or an unreadable entry, costs a compilation and a
 warning, never a wrong result: JAX checks every cache read and compiles
 afresh on failure.
 
-The same switch turns on :mod:`invsss.executable_cache`, which keeps the
+The same switch turns on :mod:`invsss.runtime.executable_cache`, which keeps the
 estimator's largest functions whole (traced, lowered and compiled) in the
 directory's ``executables`` folder.
 
@@ -49,7 +49,7 @@ import threading
 import warnings
 from pathlib import Path
 
-from .validation import InvalidInputError
+from ..validation import InvalidInputError
 
 __all__ = [
     "MAX_CACHE_BYTES",

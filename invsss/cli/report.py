@@ -29,10 +29,10 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import LogFormatter, MaxNLocator
 
-from .estimator.diagnostics import masked_psnr, masked_ssim
-from .params import PARAM_NAMES
-from .profiles import sum_of_gaussians
-from .validation import InvalidInputError
+from ..estimator.diagnostics import masked_psnr, masked_ssim
+from ..forward.params import PARAM_NAMES
+from ..forward.profiles import sum_of_gaussians
+from ..validation import InvalidInputError
 
 __all__ = ["plot_fit_report"]
 
@@ -279,7 +279,7 @@ def plot_fit_report(result, pairs, path) -> None:
     Examples
     --------
     >>> import numpy as np, os, tempfile, invsss
-    >>> from invsss.report import plot_fit_report
+    >>> from invsss.cli.report import plot_fit_report
     >>> y, x = np.mgrid[0:24, 0:24]
     >>> source = 0.5 + 0.3 * np.sin(x / 2.0) * np.cos(y / 3.0)
     >>> depth, mask = 600.0 + 0.5 * x, np.ones((24, 24))
@@ -297,7 +297,7 @@ def plot_fit_report(result, pairs, path) -> None:
     ]
     if result.alignment:
         # An aligned fit's images are on the target's grid: show the source there too.
-        from .registration import Warp, align_source
+        from ..estimator.registration import Warp, align_source
 
         moved = []
         for (source, target, depth, mask), record in zip(pairs, result.alignment):

@@ -1,6 +1,6 @@
 """Compiled functions kept whole on disk, so a new process skips tracing as well.
 
-JAX's persistent compilation cache (:mod:`invsss.compile_cache`) saves XLA's
+JAX's persistent compilation cache (:mod:`invsss.runtime.compile_cache`) saves XLA's
 work, but every new process still traces each jitted function to a jaxpr and
 lowers it to find the cache key. For the estimator's three big functions (the
 solver's ``init`` and ``step``, and ``_evaluate``) that took 1.8 s of a fit of
@@ -18,7 +18,7 @@ would produce, so a hit needs neither tracing nor lowering:
 - the settings that change a trace or a compilation: float64 mode, the default
   matmul precision, dtype promotion, ``XLA_FLAGS``, the backend and its device.
 
-It is on exactly when the compilation cache is (:func:`invsss.compile_cache.enable_compile_cache`
+It is on exactly when the compilation cache is (:func:`invsss.runtime.compile_cache.enable_compile_cache`
 was called and ``$INVSSS_NO_CACHE`` is unset); its files live in the
 ``executables`` folder of that cache directory. Otherwise the decorated
 function is plain :func:`equinox.filter_jit`.
@@ -104,7 +104,7 @@ def _code_fingerprint() -> str:
         except metadata.PackageNotFoundError:
             version = "absent"
         digest.update(f"{name} {version}\n".encode())
-    package = Path(__file__).resolve().parent
+    package = Path(__file__).resolve().parent.parent  # invsss/, every layer
     for path in sorted(package.rglob("*.py")):
         digest.update(str(path.relative_to(package)).encode())
         digest.update(path.read_bytes())
@@ -330,7 +330,7 @@ def _write_atomic(path: Path, data: bytes) -> bool:
 # argv[4] options (JSON). It prints "ok" after the call has finished.
 _TRY = """
 import sys
-from invsss.executable_cache import _try_entry
+from invsss.runtime.executable_cache import _try_entry
 _try_entry(*sys.argv[1:5])
 print("ok", flush=True)
 """
@@ -341,7 +341,7 @@ def _try_in_child(data: bytes, digest: str, leaves) -> str | None:
     import numpy as np
 
     env = dict(os.environ, INVSSS_NO_CACHE="1")
-    package_root = str(Path(__file__).resolve().parent.parent)
+    package_root = str(Path(__file__).resolve().parents[2])  # the folder holding invsss/
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
     weak = [bool(getattr(jax.typeof(leaf), "weak_type", False)) for leaf in leaves]
     options = json.dumps({"x64": bool(jax.config.jax_enable_x64), "weak": weak})
