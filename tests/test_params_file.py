@@ -129,6 +129,9 @@ def test_a_fit_result_round_trips_with_every_report_key(tmp_path):
                        "corner_gain": 0.81},
         "highlights": {"method": "residual", "excluded_pixels": [12], "fraction": [0.01]},
         "light_terms": {"shift": 1.3, "grazing": 0.2, "stderr": {"shift": 0.1, "grazing": None}},
+        "inputs": {"pairs": [{"depth": {"kind": "distance", "distance_mm": 600.0},
+                              "mask": {"kind": "made from the pair", "file": "mask_used.png"}}],
+                   "held": {"correction": {"value": 0.0, "why": "constant depth"}}},
     }
     path = tmp_path / "p.json"
     write_params(path, {**PARAMS, **report})

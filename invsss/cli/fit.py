@@ -22,7 +22,7 @@ import numpy as np
 
 from ..estimator import FitInterrupted
 from ..runtime.interrupts import StopSignals
-from ..io import load_pair, shared_clipping_level, write_image, write_params
+from ..io import photo_pair, shared_clipping_level, write_image, write_params
 from ..io.result_dir import ResultDir, ResultWriteError
 from ..forward.pair import ImagePair
 from ..validation import InvalidInputError
@@ -56,10 +56,18 @@ def add_parser(subparsers) -> None:
                         help="linear image without scattering (repeat for several pairs)")
     parser.add_argument("--target", action="append", required=True,
                         help="linear photograph to match, 1 or 3 channels (repeat)")
-    parser.add_argument("--depth", action="append", required=True,
-                        help="depth: float EXR, NPY or 16-bit PNG (repeat)")
-    parser.add_argument("--mask", action="append", required=True,
-                        help="skin mask, values in [0, 1] (repeat)")
+    # Photographs without a 3D model (invsss.io.photo_pair, docs/capture.md): --distance
+    # instead of --depth, and a mask made from the pair when --mask is left out.
+    parser.add_argument("--depth", action="append", default=[],
+                        help="eye-space depth in mm: float EXR or NPY, or a 16-bit PNG whose integer codes are "
+                        "read as mm (times --depth-scale) (repeat; or give --distance)")
+    parser.add_argument("--distance", action="append", default=[], type=float, metavar="MM",
+                        help="instead of --depth: the face's distance from the camera in mm, one depth for the "
+                        "whole face; correction and maxdd then have no effect and are held (at 0 and 1 unless "
+                        "--fix gives them; params.json's inputs.held says so) (once, or once per pair)")
+    parser.add_argument("--mask", action="append", default=[],
+                        help="skin mask, values in [0, 1] (repeat); without it a mask is made from the pair "
+                        "and written to DIR/mask_used.png (docs/capture.md)")
     parser.add_argument(
         "--depth-scale",
         type=float,
@@ -148,7 +156,9 @@ def saturation_level(text: str, targets: list[str]) -> float | None:
 
 
 def _check_pair_counts(args: argparse.Namespace) -> int:
-    counts = {flag: len(getattr(args, flag)) for flag in _PAIR_FLAGS}
+    # --depth and --mask may be left out (photo_pair.check_photo_arguments says when).
+    counts = {flag: len(getattr(args, flag)) for flag in _PAIR_FLAGS
+              if flag in ("source", "target") or getattr(args, flag)}
     if len(set(counts.values())) > 1:
         given = ", ".join(f"{n} --{flag}" for flag, n in counts.items())
         raise InvalidInputError(
@@ -182,14 +192,19 @@ def _fit_file_names(count: int) -> list[str]:
 def run(args: argparse.Namespace, stop: StopSignals) -> int:
     options = fit_options_from(args)
     count = _check_pair_counts(args)
-    names = _fit_file_names(count)
+    # --depth/--distance/--mask checked before the output directory is touched.
+    made_mask_names = photo_pair.check_photo_arguments(count, args.depth, args.distance, args.mask)
+    names = _fit_file_names(count) + made_mask_names
     # Lock and check the output directory before reading anything, so a rerun
     # into a finished result or a busy directory is refused at once.
     with ResultDir(args.out, overwrite=args.overwrite, names=names) as out:
-        pairs = [
-            load_pair(s, t, d, m, depth_scale=args.depth_scale, linear_codes=args.linear_codes)
-            for s, t, d, m in zip(args.source, args.target, args.depth, args.mask)
-        ]
+        inputs = photo_pair.photo_inputs(args.source, args.target, args.depth, args.distance, args.mask,
+                                         fix=dict(options.fix), depth_scale=args.depth_scale,
+                                         linear_codes=args.linear_codes)
+        pairs = inputs.pairs
+        if args.distance:
+            # One distance holds correction and maxdd (inputs.held says at what).
+            options = dataclasses.replace(options, fix=inputs.fix)
         pairs = _with_light_buffers(pairs, args)
         if args.saturation == "auto":
             options = dataclasses.replace(options, saturation=saturation_level("auto", args.target))
@@ -227,7 +242,7 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
                 progress.close()
             for message in result.warnings:
                 print(f"invsss: warning: {message}", file=sys.stderr)
-            written = _write_fit(out, names, result, pairs)
+            written = _write_fit(out, names, result, pairs, inputs)
         if written is None:
             return 1
     if stop.exit_status is not None:
@@ -245,16 +260,20 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
     return 0
 
 
-def _write_fit(out: ResultDir, names: list[str], result, pairs) -> list[str] | None:
+def _write_fit(out: ResultDir, names: list[str], result, pairs, inputs=None) -> list[str] | None:
     """Commit the fit's files to ``out``; on failure keep the estimate elsewhere and say where."""
     # matplotlib is only needed here; `invsss render` should not pay for importing it.
     from .report import plot_fit_report
 
     content = result.to_dict()
+    if inputs is not None and inputs.record is not None:
+        content["inputs"] = inputs.record  # a distance, made masks, held parameters
     writers = {"params.json": lambda path: write_params(path, content)}
-    for name, image in zip(names[1:-1], result.fitted):
+    for name, image in zip(names[1:], result.fitted):
         writers[name] = lambda path, image=image: write_image(path, np.asarray(image, np.float32))
     writers["report.png"] = lambda path: plot_fit_report(result, pairs, path)
+    for name, mask in ({} if inputs is None else inputs.made_masks).items():
+        writers[name] = lambda path, mask=mask: write_image(path, mask)  # DIR/mask_used.png
     info = {"command": "fit", "converged": bool(result.converged),
             "interrupted": bool(content.get("interrupted", False))}
     try:

@@ -123,14 +123,14 @@ def read_image(path, *, linear: bool = False, grey: bool = False) -> np.ndarray:
     >>> image.shape, round(float(image[0, 0, 0]), 2)
     ((4, 4, 1), 0.5)
     """
-    image, is_grey = _read_colour(path, linear)
+    image, is_grey = read_colour(path, linear)
     if grey and is_grey:
-        _note_grey(os.fspath(path), "")
-        return _one_channel(image)
+        note_grey(os.fspath(path), "")
+        return one_channel(image)
     return image
 
 
-def _read_colour(path, linear: bool) -> tuple[np.ndarray, bool]:
+def read_colour(path, linear: bool) -> tuple[np.ndarray, bool]:
     """:func:`read_image`'s image, and whether it is a grey stored as three channels."""
     name, raster = read_raster(path, "image")
     if raster.file_format == "npy" and raster.codes.dtype.kind != "f":
@@ -182,12 +182,12 @@ def _is_grey_rgb(raster: Raster) -> bool:
     return bool(np.all(np.abs(others - first) <= raster.float_eps * scale))
 
 
-def _one_channel(image: np.ndarray) -> np.ndarray:
+def one_channel(image: np.ndarray) -> np.ndarray:
     """The mean of ``image``'s channels as one channel (exactly the value where they agree)."""
     return image.astype(np.float64).mean(axis=2, keepdims=True).astype(np.float32)
 
 
-def _note_grey(name: str, what: str) -> None:
+def note_grey(name: str, what: str) -> None:
     warnings.warn(
         f"{name}: its three channels are identical (a grey image stored as RGB); read as one "
         f"grey channel{what}",
@@ -322,8 +322,8 @@ def load_pair(
     >>> pair.source.shape, pair.target.shape, pair.depth.shape
     ((4, 6, 3), (4, 6, 1), (4, 6))
     """
-    source_image, source_grey = _read_colour(source, linear_codes)
-    target_image, target_grey = _read_colour(target, linear_codes)
+    source_image, source_grey = read_colour(source, linear_codes)
+    target_image, target_grey = read_colour(target, linear_codes)
     depth_map = read_depth(depth, scale=depth_scale)
     mask_map = read_mask(mask)
     names = {"source": source, "target": target, "depth": depth, "mask": mask}
@@ -332,13 +332,13 @@ def load_pair(
     # channel from one channel's information (fran_front: sss_level 1081.7 against
     # 598.1 from the same target stored as one channel).
     if target_grey:
-        target_image = _one_channel(target_image)
-        _note_grey(names["target"], "")
+        target_image = one_channel(target_image)
+        note_grey(names["target"], "")
     # A grey source stays RGB before a colour target (each channel gets its weights);
     # before a grey one its mix to grey would be undetermined.
     if source_grey and target_image.shape[2] == 1:
-        source_image = _one_channel(source_image)
-        _note_grey(names["source"], ", as the target is grey")
+        source_image = one_channel(source_image)
+        note_grey(names["source"], ", as the target is grey")
     check_pair(source_image, target_image, depth_map, mask_map, names)
     if image_extension(names["target"], "image") in (".jpg", ".jpeg"):
         # Measured (docs/capture.md): JPEG q90 of a model-made face moved sss_level

@@ -136,6 +136,8 @@ class ParamsFile(BaseModel):
     """Fit report: the fitted light-aware terms (fit --light-terms; docs/model.md, section 8): shift (mm), grazing, incidence, law (an albedo per source channel), law_strength (0 Lambert, 1 the law; absent means 1), stderr, fixed, psnr_plain and psnr_without (dB, measured), fallback; or null."""
     warnings: Optional[list[str]] = None
     """Fit report: warnings the fit raised."""
+    inputs: Any = None
+    """Fit report: how each pair's depth and mask were obtained when not both given as files (fit --distance, a mask made from the pair), and held: the parameters the inputs cannot determine, each with its value and why; or null."""
 
 
 #: Keys a params JSON file may have besides :data:`PARAMS_KEYS`: the schema

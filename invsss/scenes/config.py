@@ -59,6 +59,7 @@ __all__ = [
     "DirectionalLight",
     "Occluder",
     "Medium",
+    "Pigment",
     "load_config",
     "parse_config",
 ]
@@ -84,6 +85,30 @@ class Pose(_Strict):
 
     translate: Vec3 = [0.0, 0.0, 0.0]
     rotate: Vec3 = [0.0, 0.0, 0.0]
+
+
+class Pigment(_Strict):
+    """A pigment layer on the skin's surface: melanin in the epidermis, above the scattering.
+
+    The colour map ``map`` (an image file, relative to the scene file; sampled at the
+    mesh's texture coordinates, v up, bilinearly) gives a pattern ``P = min(c / c_ref, 1)``
+    from one ``channel`` of its linear values (``c_ref`` the 99th percentile over the
+    mesh's vertices). Light that enters and leaves the skin there is multiplied by
+    ``P ** strength``: each crossing of the surface by ``P ** (strength / 2)``, as a
+    thin absorbing layer acts. ``strength`` 1 gives the map's own contrast (visible
+    light); melanin absorbs far less at 940 nm, so a near-infrared render of the same
+    skin takes a smaller ``strength`` (docs/capture.md). The Lambertian source is the
+    same surface with albedo ``a * P ** strength`` (``a`` the calibrated albedo), as a
+    renderer's albedo map holds it. The mesh is split ``subdivide`` times (each splits
+    every triangle into four; the surface is unchanged) so that the pattern, carried
+    by the vertices, is finer than a pixel. Needs a mesh with texture coordinates and an
+    index-matched boundary.
+    """
+
+    map: str
+    channel: Literal["red", "green", "blue", "luminance"] = "green"
+    strength: Annotated[float, Field(ge=0.0, le=4.0)] = 1.0
+    subdivide: Annotated[int, Field(ge=0, le=3)] = 2
 
 
 class SceneObject(_Strict):
@@ -120,6 +145,7 @@ class SceneObject(_Strict):
     wrinkles: bool | None = None
     bumps: Annotated[float, Field(ge=0.0, lt=60.0)] = 0.0
     pose: Pose = Pose()
+    pigment: Pigment | None = None
 
     @model_validator(mode="after")
     def _one_kind(self):
@@ -136,6 +162,8 @@ class SceneObject(_Strict):
             raise ValueError(f'{", ".join(face_keys)}: only for primitive "face"')
         if self.bumps > 0 and self.primitive in ("slab", "sphere"):
             raise ValueError('bumps: only for a mesh or primitive "face" (Mitsuba\'s slab and sphere have their own normals)')
+        if self.pigment is not None and (self.mesh is None or self.bumps > 0):
+            raise ValueError("pigment: only for a mesh (with texture coordinates) without bumps")
         if self.primitive == "face" and (self.size is not None or self.radius is not None):
             raise ValueError('primitive "face" has a fixed size: leave out size and radius (scale it with the camera)')
         return self
@@ -343,6 +371,13 @@ class SceneConfig(_Strict):
     occluders: list[Occluder] = []
     medium: Medium
 
+    @model_validator(mode="after")
+    def _pigment_needs_index_matching(self):
+        if self.object.pigment is not None and self.medium.boundary != "index-matched":
+            raise ValueError('object.pigment: needs medium.boundary = "index-matched" (the pigment layer is the '
+                             "medium's surface)")
+        return self
+
     @field_validator("spp")
     @classmethod
     def _even_spp(cls, spp: int) -> int:
@@ -472,7 +507,14 @@ def load_config(path) -> SceneConfig:
         mesh = os.path.join(os.path.dirname(os.path.abspath(name)), os.path.expanduser(config.object.mesh))
         if not os.path.isfile(mesh):
             raise InvalidInputError(f"{name}: object.mesh: file {config.object.mesh} not found (looked at {mesh})")
-        config = config.model_copy(update={"object": config.object.model_copy(update={"mesh": mesh})})
+        update = {"mesh": mesh}
+        pigment = config.object.pigment
+        if pigment is not None:
+            image = os.path.join(os.path.dirname(os.path.abspath(name)), os.path.expanduser(pigment.map))
+            if not os.path.isfile(image):
+                raise InvalidInputError(f"{name}: object.pigment.map: file {pigment.map} not found (looked at {image})")
+            update["pigment"] = pigment.model_copy(update={"map": image})
+        config = config.model_copy(update={"object": config.object.model_copy(update=update)})
     return config
 
 

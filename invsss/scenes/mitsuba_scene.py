@@ -19,14 +19,15 @@ Scene units are millimetres. Mitsuba is imported by :func:`import_mitsuba` only.
 from __future__ import annotations
 
 import os
+import warnings
 
 import numpy as np
 
-from ..validation import InvalidInputError
+from ..validation import InputNotice, InvalidInputError
 from .config import SceneConfig
 
 __all__ = ["import_mitsuba", "scene_dict", "medium_dict", "boundary_bsdf", "load_mesh_ply", "bumped_normals",
-           "write_mesh_ply", "SCENE_KINDS"]
+           "write_mesh_ply", "pigmented_mesh", "write_attribute_ply", "SCENE_KINDS"]
 
 SCENE_KINDS = ("source", "target", "specular", "geometry", "visible")
 
@@ -194,6 +195,129 @@ def load_mesh_ply(mesh_path: str, folder: str, *, bumps: float = 0.0, mm_per_uni
     if mesh.volume < 0:
         mesh.invert()  # inward-facing triangles would swap the inside and outside of the medium
     return write_mesh_ply(mesh, folder, bumps=bumps, mm_per_unit=mm_per_unit)
+
+
+_CHANNEL_WEIGHTS = {"red": (1.0, 0.0, 0.0), "green": (0.0, 1.0, 0.0), "blue": (0.0, 0.0, 1.0),
+                    "luminance": (0.2126, 0.7152, 0.0722)}
+
+
+def pigmented_mesh(mesh_path: str, pigment) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """The closed mesh split ``pigment.subdivide`` times, and its pigment at every vertex.
+
+    ``pigment`` is a :class:`~invsss.scenes.config.Pigment`. The mesh is read with its
+    texture coordinates (seams keep their own vertices), split (each triangle into
+    four; the surface does not change), the map sampled at every vertex, and then the
+    coincident vertices merged (their pigment averaged) so that the surface is closed.
+
+    Returns
+    -------
+    vertices : (N, 3) float64, the mesh's units
+    faces : (F, 3) int64, outward winding
+    transmittance : (N,) float64 in [0, 1]
+        ``P ** strength``: what the pigment leaves of light that enters and leaves there.
+    info : dict
+        For ``scene.json``: the map's SHA-256, ``c_ref``, the vertex and triangle counts
+        and the transmittance's mean, 5th and 95th percentiles over the vertices.
+
+    Raises
+    ------
+    InvalidInputError
+        A mesh without texture coordinates, an unreadable map, or a surface that is not closed.
+    """
+    import hashlib
+
+    import trimesh
+    from trimesh.remesh import subdivide
+
+    from ..io import read_image
+
+    try:
+        mesh = trimesh.load(mesh_path, force="mesh", process=False)
+    except Exception as err:  # trimesh raises many types for bad files
+        raise InvalidInputError(f"object.mesh: cannot read {mesh_path} ({' '.join(str(err).split())})") from None
+    uv = getattr(mesh.visual, "uv", None)
+    if uv is None or len(uv) != len(mesh.vertices):
+        raise InvalidInputError(f"object.pigment: {mesh_path} has no texture coordinates to sample the map at")
+    vertices, faces = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
+    uv = np.asarray(uv, np.float64)
+    for _ in range(pigment.subdivide):
+        vertices, faces, attributes = subdivide(vertices, faces, vertex_attributes={"uv": uv})
+        uv = attributes["uv"]
+    with warnings.catch_warnings():
+        # A colour map is sRGB-coded by convention: the decoding notice says nothing new.
+        warnings.simplefilter("ignore", InputNotice)
+        image = read_image(pigment.map, linear=False).astype(np.float64)
+    if image.ndim == 2:
+        image = image[..., None]
+    image = np.repeat(image, 3, axis=2) if image.shape[2] == 1 else image[..., :3]
+    value = _bilinear(image @ np.asarray(_CHANNEL_WEIGHTS[pigment.channel]), uv)
+    # Merge the seams' copies: the medium needs one closed surface.
+    key = np.round(vertices, 6)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    merged_value = np.bincount(inverse, weights=value) / np.bincount(inverse)
+    vertices, faces = vertices[first], inverse[faces]
+    closed = trimesh.Trimesh(vertices, faces, process=False)
+    if not closed.is_watertight:
+        raise InvalidInputError(f"object.mesh: {mesh_path} is not closed once its seams are merged")
+    if closed.volume < 0:
+        faces = faces[:, ::-1]
+    reference = float(np.percentile(merged_value, 99.0))
+    pattern = np.clip(merged_value / reference, 0.0, 1.0)
+    transmittance = pattern ** pigment.strength
+    with open(pigment.map, "rb") as f:
+        digest = hashlib.sha256(f.read()).hexdigest()
+    info = {"map": os.path.basename(pigment.map), "sha256": digest, "channel": pigment.channel,
+            "strength": pigment.strength, "subdivide": pigment.subdivide, "c_ref": reference,
+            "vertices": int(len(vertices)), "triangles": int(len(faces)),
+            "transmittance_mean": float(transmittance.mean()),
+            "transmittance_p5_p95": [float(np.percentile(transmittance, 5)), float(np.percentile(transmittance, 95))]}
+    return vertices, faces, transmittance, info
+
+
+def _bilinear(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Bilinear lookup of a (H, W) image at ``uv`` (N, 2), v up, clamped to the edge."""
+    h, w = image.shape
+    x = np.clip(uv[:, 0] * w - 0.5, 0, w - 1)
+    y = np.clip((1.0 - uv[:, 1]) * h - 0.5, 0, h - 1)
+    x0 = np.minimum(np.floor(x).astype(int), w - 2)
+    y0 = np.minimum(np.floor(y).astype(int), h - 2)
+    fx, fy = x - x0, y - y0
+    top = image[y0, x0] * (1 - fx) + image[y0, x0 + 1] * fx
+    bottom = image[y0 + 1, x0] * (1 - fx) + image[y0 + 1, x0 + 1] * fx
+    return top * (1 - fy) + bottom * fy
+
+
+def write_attribute_ply(path: str, vertices, faces, attributes: dict) -> str:
+    """A binary PLY with float per-vertex attributes that Mitsuba reads as ``vertex_<name>``.
+
+    ``attributes`` maps a name to an (N,) array (one channel, stored as ``<name>_x``) or
+    an (N, 3) array (stored as ``<name>_r``, ``_g``, ``_b``); Mitsuba's
+    ``mesh_attribute`` texture then looks them up as ``vertex_<name>`` (one channel) or
+    ``vertex_<name>_color`` (three; Mitsuba 3.9's PLY reader names them so). Floats, not
+    bytes: a trimesh colour would round them to 8 bits.
+    """
+    vertices = np.asarray(vertices, np.float32)
+    fields = [("position", "<f4", (3,))]
+    header = ["property float x", "property float y", "property float z"]
+    for name, values in attributes.items():
+        values = np.asarray(values, np.float32)
+        suffixes = ("x",) if values.ndim == 1 else ("r", "g", "b")
+        fields.append((name, "<f4", (len(suffixes),)))
+        header += [f"property float {name}_{s}" for s in suffixes]
+    data = np.zeros(len(vertices), dtype=fields)
+    data["position"] = vertices
+    for name, values in attributes.items():
+        data[name] = np.asarray(values, np.float32).reshape(len(vertices), -1)
+    triangles = np.zeros(len(faces), dtype=[("count", "u1"), ("index", "<i4", (3,))])
+    triangles["count"], triangles["index"] = 3, faces
+    text = "\n".join(["ply", "format binary_little_endian 1.0", f"element vertex {len(vertices)}", *header,
+                      f"element face {len(faces)}", "property list uchar int vertex_indices", "end_header"]) + "\n"
+    with open(path, "wb") as f:
+        f.write(text.encode("ascii"))
+        f.write(data.tobytes())
+        f.write(triangles.tobytes())
+    return path
 
 
 def medium_dict(sigma_s_prime, sigma_a) -> dict:
@@ -386,9 +510,19 @@ def scene_dict(mi, config: SceneConfig, kind: str, *, albedo=None, mesh_ply: str
         sampler = {"type": "stratified", "sample_count": spp or config.geometry_spp}
     else:
         sampler = {"type": "independent", "sample_count": spp or config.spp}
+        pigment = config.object.pigment is not None
         if kind == "source":
-            shape["bsdf"] = {"type": "diffuse", "reflectance": _colour(albedo)}
+            # With a pigment the albedo map (albedo times the pigment) is in the mesh's vertices.
+            reflectance = {"type": "mesh_attribute", "name": "vertex_albedo_color"} if pigment else _colour(albedo)
+            shape["bsdf"] = {"type": "diffuse", "reflectance": reflectance}
             integrator = {"type": "path", "max_depth": config.max_depth}
+        elif pigment and kind == "target":
+            # The pigment layer: each crossing of the (index-matched) surface is absorbed
+            # with probability vertex_absorb, passed unchanged otherwise.
+            shape["bsdf"] = {"type": "mask", "opacity": {"type": "mesh_attribute", "name": "vertex_absorb"},
+                             "material": {"type": "diffuse", "reflectance": _colour(0.0)}}
+            shape["interior"] = medium_dict(coefficients["sigma_s_prime"], coefficients["sigma_a"])
+            integrator = {"type": "volpath", "max_depth": config.max_depth}
         else:
             shape["bsdf"] = boundary_bsdf(coefficients)
             if kind == "target":

@@ -46,7 +46,7 @@ from ..forward.profiles import jensen_dipole_total
 from ..io.result_dir import ResultDir
 from .calibration import CALIBRATION_PIXELS, CALIBRATION_SPP, slab_albedo
 from .config import SceneConfig
-from .mitsuba_scene import import_mitsuba, load_mesh_ply, scene_dict
+from .mitsuba_scene import import_mitsuba, load_mesh_ply, pigmented_mesh, scene_dict, write_attribute_ply
 from .noise import half_render_noise
 
 __all__ = ["SCENE_FILES", "SceneRender", "light_directions", "render_scene", "scene_writers", "write_scene"]
@@ -111,6 +111,11 @@ def _portable(config: dict) -> dict:
         relative = os.path.relpath(mesh)
         if not relative.startswith(os.pardir):
             config = {**config, "object": {**config["object"], "mesh": relative}}
+    pigment = config["object"].get("pigment")
+    if pigment is not None:
+        relative = os.path.relpath(pigment["map"])
+        if not relative.startswith(os.pardir):
+            config = {**config, "object": {**config["object"], "pigment": {**pigment, "map": relative}}}
     return config
 
 
@@ -179,7 +184,14 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
              "specular_halves": [2 * config.seed, 2 * config.seed + 1], "calibration": 0}
     with tempfile.TemporaryDirectory(prefix="invsss-scene-") as folder:
         mesh_ply, mesh_record = None, _mesh_record(config.object.mesh)
-        if config.object.mesh:
+        pigment = config.object.pigment
+        if pigment is not None:
+            # The pigment rides on the vertices of a finer copy of the same surface.
+            vertices, faces, transmittance, pigment_record = pigmented_mesh(config.object.mesh, pigment)
+            mesh_record = {**mesh_record, "pigment": pigment_record}
+            mesh_ply = write_attribute_ply(os.path.join(folder, "object.ply"), vertices, faces,
+                                           {"absorb": 1.0 - np.sqrt(transmittance)})
+        elif config.object.mesh:
             mesh_ply = load_mesh_ply(config.object.mesh, folder, bumps=config.object.bumps,
                                      mm_per_unit=config.object.mm_per_unit)
         elif config.object.primitive == "face":
@@ -211,7 +223,17 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         albedo_error = np.concatenate([error for _, error in calibrated])
         albedo_list = albedo.tolist()
         source_albedo = albedo_list if albedo.size > 1 else albedo_list[0]
-        source_scene = mi.load_dict(build("source", albedo=source_albedo))
+        source_ply = mesh_ply
+        if pigment is not None:
+            # The renderer's albedo map: the calibrated albedo times what the pigment leaves.
+            source_ply = write_attribute_ply(os.path.join(folder, "source.ply"), vertices, faces,
+                                             {"albedo": np.outer(transmittance, np.resize(albedo, 3))})
+
+        def build_source(scene_config: SceneConfig = config):
+            return scene_dict(mi, scene_config, "source", mesh_ply=source_ply, coefficients=coefficients,
+                              albedo=source_albedo)
+
+        source_scene = mi.load_dict(build_source())
         source = timed("source", lambda: _channels(mi.render(source_scene, spp=config.spp, seed=seeds["source"]),
                                                    channels))
         # The first (key) light's part of the source: a deferred renderer's lighting
@@ -219,7 +241,7 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         # section 8). Same seed as the source, so source - key is the other lights'.
         if len(config.lights) > 1:
             alone = config.model_copy(update={"lights": config.lights[:1]})
-            key_scene = mi.load_dict(build("source", alone, albedo=source_albedo))
+            key_scene = mi.load_dict(build_source(alone))
             key = timed("key light", lambda: _channels(mi.render(key_scene, spp=config.spp, seed=seeds["source"]),
                                                        channels))
         else:

@@ -1,0 +1,269 @@
+"""A visible-light photograph as the source: how far is its fit from the truth? (issue 33)
+
+The bundled two-wavelength pair ``data_synthetic/twowave_face`` is one face, pose and
+lights path-traced twice by ``invsss scene``: ``visible/`` with Jensen's skin1 green
+channel and the scan's colour map as a pigment layer at full contrast, ``nir/`` with the
+thesis's 940 nm medium and the pigment's contrast reduced as melanin's absorption falls
+(experiments/scenes/face_twowave_*.toml). Each folder also has its Lambertian source
+(albedo map = calibrated albedo times that wavelength's pigment), depth and mask.
+
+Two routes to the near-infrared blur:
+
+``render``
+    each wavelength's target fitted against its own Lambertian source (a renderer's
+    route, with a face scan): profiles ``P_vis`` and ``P_nir``. The blur that takes
+    the visible image to the near-infrared one has, for any kernels, the second moment
+    ``sigma_nir^2 - sigma_vis^2`` (variances of independent spreads add: ``P_nir =
+    P_vis * P_extra``);
+``photo``
+    the near-infrared target fitted against the *visible* target as the source (the
+    user's route, two photographs): its profile is ``P_extra`` directly.
+
+Each fit is made with the depth map and with ``distance`` (one depth for the face, the
+median skin depth rounded to 10 mm; ``correction``, ``maxdd`` held), on the clean renders
+and on a simulated one-camera capture (``camera``: shot noise of 2000 electrons at the 99th
+percentile and 2 e- read noise, 8-bit sRGB codes exposed so the 99.5th percentile is at
+90 % of full scale, clipped pixels left out; ``splitter``: the same with the near-infrared
+image moved by (0.4, -0.3) px as a beam splitter's second sensor would, fitted with
+``align="translation"``). ``photo, pigment matched`` fits the photo route with the
+visible photograph's pigment contrast brought down to the near-infrared one's
+(multiplied by ``source_nir / source_vis``, the two albedo maps' ratio): a user cannot
+do that, but it isolates the bias that the pigment's fading brings. ``photo, mask made``
+uses the skin mask made from the pair (:mod:`invsss.io.skin_mask`) instead of the scene's.
+
+Blur of a fitted profile, in mm on the skin: each Gaussian's variance ``v`` becomes
+``v (L / f)^2`` (``L`` the fitted sss_level, ``f`` the camera's focal length in pixels
+from scene.json; depth in mm), then ``r50`` is the radius holding half the profile's
+energy and ``sigma`` the root of its per-axis second moment ``sum w v / sum w``::
+
+    python experiments/twowave_fit.py [--pair data_synthetic/twowave_face] [--conditions clean,camera,splitter]
+        [--starts 4] [--seed 1] [--masks]
+
+``--masks`` prints the mask maker's IoU against every bundled pair's mask instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import brentq
+
+import invsss
+from invsss.runtime.determinism import use_deterministic_scheduler
+from invsss.io.photo_pair import HELD_WITH_CONSTANT_DEPTH, constant_depth_pair
+from invsss.io.skin_mask import skin_mask_from_pair
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from photo_robustness import eight_bit_srgb, misregister, shot_noise  # noqa: E402
+
+REPO = Path(__file__).resolve().parent.parent
+SPLITTER_SHIFT_PX = (0.4, -0.3)
+
+
+def effective_level(params, depth, mask) -> float:
+    """The median over the skin of ``L d / (d + c min(|dd|, maxdd))`` (both axes): the
+    sss_level that gives the same blur without the slope correction."""
+    from invsss.forward.stretch import depth_slopes
+
+    d = np.asarray(depth, np.float64)
+    skin = np.asarray(mask) > 0.5
+    level, c, delta = float(params.sss_level), float(params.correction), float(params.maxdd)
+    values = [level * d / (d + c * np.minimum(slope, delta)) for slope in depth_slopes(d)]
+    return float(np.median(np.concatenate([v[skin] for v in values])))
+
+
+def profile_mm(params, focal_px: float, level: float) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised weights (K,) and variances in mm^2 on the skin (K,) of a fitted
+    one-channel profile: ``v (level / f)^2``, ``level`` the sss_level without correction."""
+    w = np.asarray(params.weights, np.float64).reshape(len(params.variances), -1)[:, 0]
+    v = np.asarray(params.variances, np.float64) * (level / focal_px) ** 2
+    return w / w.sum(), v
+
+
+def half_energy_radius(weights, variances) -> float:
+    """The radius (mm) within which half of a 2D sum of Gaussians' energy lies."""
+    def inside(r):
+        return float(np.sum(weights * (1.0 - np.exp(-r * r / (2.0 * variances))))) - 0.5
+
+    return brentq(inside, 0.0, 50.0 * np.sqrt(variances.max()))
+
+
+def rms_width(weights, variances) -> float:
+    """The root of the per-axis second moment (mm): variances of convolved kernels add."""
+    return float(np.sqrt(np.sum(weights * variances)))
+
+
+def read_folder(folder: Path) -> dict:
+    return {
+        "source": invsss.read_image(folder / "source.exr"),
+        "target": invsss.read_image(folder / "target.exr"),
+        "depth": invsss.read_depth(folder / "depth.exr"),
+        "mask": invsss.read_mask(folder / "mask.png"),
+        "info": json.loads((folder / "scene.json").read_text()),
+    }
+
+
+def capture(image: np.ndarray, condition: str, rng, shift=None) -> tuple[np.ndarray, float | None]:
+    """The photograph of ``image`` under ``condition``, and its clipping level (None: none)."""
+    if condition == "clean":
+        return image, None
+    if shift is not None:
+        image = misregister(image, shift=shift)
+    return eight_bit_srgb(shot_noise(image, 2000.0, 2.0, rng))
+
+
+def fit(source, target, depth, mask, distance, *, starts, saturation, align="none"):
+    if distance is None:
+        pair = invsss.ImagePair(source, target, invsss.forward.pair.fill_background_depth(depth), mask)
+        fix = None
+    else:
+        pair = constant_depth_pair(source, target, distance, mask)
+        fix = HELD_WITH_CONSTANT_DEPTH
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = invsss.fit_pairs([pair], fix=fix, n_starts=starts, saturation=saturation, align=align)
+    return result, time.perf_counter() - t0, pair
+
+
+def run(args) -> None:
+    folder = Path(args.pair)
+    vis, nir = read_folder(folder / "visible"), read_folder(folder / "nir")
+    focal = float(vis["info"]["focal_px"])
+    mask = vis["mask"]
+    skin = mask > 0.5
+    distance = float(np.round(np.median(vis["depth"][skin]), -1))
+    made_mask = skin_mask_from_pair(vis["target"], nir["target"])
+    iou = float((made_mask > 0.5)[skin].sum() / ((made_mask > 0.5) | skin).sum())
+    print(f"pair {folder}: focal {focal:.1f} px, median skin depth {np.median(vis['depth'][skin]):.1f} mm "
+          f"(--distance {distance:g}), mask made from the pair: IoU {iou:.4f} against the scene's")
+    # The visible photograph with the near-infrared pigment contrast (the albedo maps' ratio).
+    # The media's own (dipole) profiles as sums of Gaussians: what the widths would be
+    # if the screen-space fit recovered them exactly.
+    from invsss.forward.profiles import JENSEN_SKIN1_SOG, THESIS_NIR_940
+
+    refs = {}
+    for label, table, column in (("skin1 green", JENSEN_SKIN1_SOG, 1), ("thesis-nir", THESIS_NIR_940, None)):
+        w = np.asarray(table["weights"], np.float64)
+        w = w[:, column] if column is not None else w
+        v = np.asarray(table["variances"], np.float64)
+        refs[label] = (half_energy_radius(w / w.sum(), v), rms_width(w / w.sum(), v))
+    print("published profiles: " + ", ".join(f"{k} r50 {r:.3f} mm, sigma {s:.3f} mm" for k, (r, s) in refs.items())
+          + f"; sigma_extra {np.sqrt(refs['thesis-nir'][1] ** 2 - refs['skin1 green'][1] ** 2):.3f} mm")
+    # Rendered with the visible source's seed (--matched-source), the two albedo maps'
+    # ratio has next to no Monte Carlo noise of its own.
+    nir_source = invsss.read_image(args.matched_source) if args.matched_source else nir["source"]
+    ratio = np.where(vis["source"] > 0, nir_source / np.maximum(vis["source"], 1e-12), 0.0)
+    rows = []
+    for condition in args.conditions.split(","):
+        rng = np.random.default_rng(args.seed)
+        shift = SPLITTER_SHIFT_PX if condition == "splitter" else None
+        vis_photo, vis_clip = capture(vis["target"], condition, rng)
+        nir_photo, nir_clip = capture(nir["target"], condition, rng, shift)
+        align = "translation" if shift is not None else "none"
+        for depth_kind in ("depth map", "distance"):
+            d = None if depth_kind == "depth map" else distance
+            plans = {
+                "render, visible": lambda: fit(vis["source"], vis_photo, vis["depth"], mask, d, starts=args.starts,
+                                               saturation=vis_clip),
+                "render, 940 nm": lambda: fit(nir["source"], nir_photo, nir["depth"], mask, d, starts=args.starts,
+                                              saturation=nir_clip, align=align),
+                "photo": lambda: fit(vis_photo, nir_photo, vis["depth"], mask, d, starts=args.starts,
+                                     saturation=nir_clip, align=align),
+                "photo, pigment matched": lambda: fit(vis_photo * ratio, nir_photo, vis["depth"], mask, d,
+                                                      starts=args.starts, saturation=nir_clip, align=align),
+            }
+            if depth_kind == "distance":
+                plans["photo, mask made"] = lambda: fit(vis_photo, nir_photo, vis["depth"], made_mask, d,
+                                                        starts=args.starts, saturation=nir_clip, align=align)
+            wanted = None if args.rows is None else [r.strip() for r in args.rows.split(";")]
+            fits = {name: plan() for name, plan in plans.items() if wanted is None or name in wanted}
+            widths = {}
+            for name, (result, seconds, pair) in fits.items():
+                level = effective_level(result.params, pair.depth, pair.mask)
+                w, v = profile_mm(result.params, focal, level)
+                widths[name] = (half_energy_radius(w, v), rms_width(w, v))
+                rows.append((condition, depth_kind, name, float(result.params.sss_level),
+                             float(result.params.correction), level, widths[name][0], widths[name][1], result.psnr,
+                             seconds))
+            if "render, visible" not in widths or "render, 940 nm" not in widths:
+                continue
+            s_vis, s_nir = widths["render, visible"][1], widths["render, 940 nm"][1]
+            extra = np.sqrt(max(s_nir**2 - s_vis**2, 0.0))
+            rows.append((condition, depth_kind, "render: nir - vis (variances subtract)", np.nan, np.nan, np.nan,
+                         1.1774 * extra, extra, np.nan, 0.0))
+            for name in [n for n in fits if n.startswith("photo")]:
+                r50, sigma = widths[name]
+                rows.append((condition, depth_kind, f"{name} - render (sigma, %)", np.nan, np.nan, np.nan, np.nan,
+                             100.0 * (sigma - extra) / extra, np.nan, 0.0))
+            print_table(rows)
+    print_table(rows, final=True)
+
+
+def print_table(rows, final: bool = False) -> None:
+    if not final:
+        return
+    print("| capture | depth | fit | sss_level | correction | L without c | r50 (mm) | sigma (mm) | PSNR (dB) | time (s) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for condition, depth_kind, name, level, correction, flat, r50, sigma, psnr, seconds in rows:
+        if name.endswith("(sigma, %)"):
+            print(f"| {condition} | {depth_kind} | {name} | | | | | {sigma:+.1f} % | | |")
+            continue
+        if name.startswith("render: nir"):
+            print(f"| {condition} | {depth_kind} | {name} | | | | ({r50:.3f}) | {sigma:.3f} | | |")
+            continue
+        print(f"| {condition} | {depth_kind} | {name} | {level:.1f} | {correction:.1f} | {flat:.1f} | {r50:.3f} | "
+              f"{sigma:.3f} | {psnr:.2f} | {seconds:.0f} |")
+    sys.stdout.flush()
+
+
+def masks() -> None:
+    """The mask maker's IoU against each bundled pair's own mask (source and target as the pair)."""
+    from invsss.scenes.split import read_split
+
+    split = read_split(REPO / "data_synthetic" / "SPLIT.toml")
+    print("| pair | part | IoU | mask pixels | made | missed | extra |")
+    print("|---|---|---|---|---|---|---|")
+    folders = sorted(p for p in (REPO / "data_synthetic").iterdir() if (p / "mask.png").is_file())
+    for folder in folders:
+        name = folder.name
+        part = split.get(name, "model-made")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            made = skin_mask_from_pair(invsss.read_image(folder / "source.exr"),
+                                       invsss.read_image(folder / "target.exr")) > 0.5
+            truth = invsss.read_mask(folder / "mask.png") > 0.5
+        iou = (made & truth).sum() / (made | truth).sum()
+        print(f"| `{name}` | {part} | {iou:.4f} | {truth.sum()} | {made.sum()} | {(truth & ~made).sum()} | "
+              f"{(made & ~truth).sum()} |")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--pair", default=str(REPO / "data_synthetic" / "twowave_face"))
+    parser.add_argument("--conditions", default="clean,camera,splitter")
+    parser.add_argument("--starts", type=int, default=4)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--matched-source", default=None, metavar="EXR",
+                        help="the near-infrared Lambertian source rendered with the visible one's seed "
+                        "(invsss scene experiments/scenes/face_twowave_940.toml --source-only --seed 5 --spp 4096), "
+                        "for the pigment-matched rows (default: nir/source.exr, whose own noise then enters)")
+    parser.add_argument("--rows", default=None, metavar="NAMES",
+                        help="only these fits, separated by ';' (e.g. 'photo;photo, pigment matched'); default all")
+    parser.add_argument("--masks", action="store_true", help="the mask maker's IoU on every bundled pair instead")
+    args = parser.parse_args()
+    use_deterministic_scheduler()
+    if args.masks:
+        masks()
+    else:
+        run(args)
+
+
+if __name__ == "__main__":
+    main()
