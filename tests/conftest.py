@@ -31,12 +31,25 @@ def pytest_configure(config):
     os.environ["INVSSS_CACHE_DIR"] = _session_cache
 
 
-#: Docstring examples that run a whole fit (more than about 5 s on 2 cores).
+#: Docstring examples over about 2 s on an idle 2-core machine (a fit, a profile fit,
+#: a kernel in interpret mode): in the slow tier, as the tests marked slow are.
 SLOW_DOCTESTS = frozenset({
-    "invsss.estimator.result.FitResult.history_by_stage",
     "invsss.cli.report.plot_fit_report",
     "invsss.estimator.fit.fit_pair",
     "invsss.estimator.problem.build_problem",
+    "invsss.estimator.registration.estimate_warp",
+    "invsss.estimator.result.FitResult.history_by_stage",
+    "invsss.estimator.solve.gauss_newton_distance",
+    "invsss.forward.burley_screen_space.render_burley",
+    "invsss.forward.burley_screen_space.sample_bilinear",
+    "invsss.forward.light_terms",
+    "invsss.forward.light_terms.apply_law",
+    "invsss.forward.pass_kernels.directional_pass_kernel",
+    "invsss.forward.profiles.jensen_dipole",
+    "invsss.forward.profiles.total_diffuse_reflectance",
+    "invsss.measurement.dipole_fit.fit_dipole",
+    "invsss.measurement.profile_fit.fit_sum_of_gaussians",
+    "invsss.scenes.media.dipole_fit_to_thesis_profile",
 })
 
 

@@ -59,6 +59,7 @@ def test_padded_pair_has_the_loss_of_the_pair_at_its_own_size():
     np.testing.assert_allclose(padded, own, rtol=1e-13)
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("ignore::invsss.InputNotice")
 def test_a_mask_on_the_last_row_would_change_the_blur_and_keeps_the_pair_at_its_own_size():
     source, target, depth, _ = _scene(36)

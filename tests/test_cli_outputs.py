@@ -216,6 +216,7 @@ def test_a_signal_during_the_fit_saves_the_best_estimate_and_exits_cleanly(tmp_p
                  "--out", str(rendered)]) == 0
 
 
+@pytest.mark.slow
 def test_a_signal_before_any_solver_step_leaves_nothing_behind(small_pair, tmp_path):
     out = tmp_path / "run"
     proc = _start(["fit", *small_pair, "--out", str(out)])

@@ -176,6 +176,7 @@ def test_version_and_missing_command(capsys):
     assert "command" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_console_script_entry_point(scene):
     # The installed `invsss` script if this interpreter has one, else `python -m invsss`.
     script = Path(sys.executable).with_name("invsss")

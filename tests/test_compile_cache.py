@@ -119,6 +119,7 @@ def test_a_second_process_loads_instead_of_compiling(tmp_path):
     assert second["total"] == first["total"]
 
 
+@pytest.mark.slow
 def test_without_filelock_the_cache_stays_off_with_one_warning(tmp_path):
     # A child where importing filelock fails, as in an install that lacks it: JAX's
     # size-bounded cache would fail every read; the cache is left off instead.
@@ -133,6 +134,7 @@ def test_without_filelock_the_cache_stays_off_with_one_warning(tmp_path):
     assert not _entries(tmp_path / "c")
 
 
+@pytest.mark.slow
 def test_no_cache_in_a_child_process(tmp_path):
     result, _ = _finish(_child(tmp_path / "c", {"INVSSS_NO_CACHE": "1"}))
     assert result["used"] == "None" and result["hits"] == 0

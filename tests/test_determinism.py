@@ -4,6 +4,7 @@ deterministic); a value the user gave is kept, and a started backend is left alo
 
 from __future__ import annotations
 
+import pytest
 import json
 import os
 import subprocess
@@ -31,12 +32,14 @@ _CLI = (
 )
 
 
+@pytest.mark.slow
 def test_the_command_line_sets_the_flag_before_jax_starts():
     started, flags = json.loads(_child(_CLI, None).splitlines()[-1])
     assert started is False  # so XLA will read it
     assert flags == SCHEDULER_FLAG
 
 
+@pytest.mark.slow
 def test_other_flags_are_kept_and_a_given_value_wins():
     _, flags = json.loads(_child(_CLI, "--xla_cpu_multi_thread_eigen=false").splitlines()[-1])
     assert flags == f"--xla_cpu_multi_thread_eigen=false {SCHEDULER_FLAG}"

@@ -95,6 +95,7 @@ def test_result_report_and_progress(recovered):
     assert all(isinstance(d["stderr"][k], float) and d["stderr"][k] > 0 for k in ("sss_level", "correction", "maxdd"))
 
 
+@pytest.mark.slow
 def test_standard_errors_match_the_scatter():
     """Over a few noise seeds the error / stderr ratios look like unit normals."""
     z = []
@@ -322,6 +323,7 @@ def test_bad_pairs_are_named():
 # ----------------------------------------------------------------- pieces
 
 
+@pytest.mark.slow
 def test_projection_is_weighted_least_squares():
     from invsss.estimator.projection import solve_linear
 
@@ -495,6 +497,7 @@ def test_stop_interrupts_and_reports_the_best_point_so_far():
     assert d["estimate"]["sss_level"] == pytest.approx(float(result.values["sss_level"]))
 
 
+@pytest.mark.slow
 def test_stop_before_the_first_step_raises():
     source, target, depth, mask, _ = scene("face", size=32, seed=12)
     with pytest.raises(FitInterrupted):

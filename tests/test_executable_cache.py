@@ -241,6 +241,7 @@ def test_a_damaged_entry_is_warned_about_once_and_compiled_again(cache_dir):
     assert _call()[1:] == (0, [])  # compiled again and stored whole
 
 
+@pytest.mark.slow
 def test_an_entry_that_crashes_its_loader_is_tried_in_a_separate_process_first(cache_dir):
     # Bytes that were wrong when written pass their checksum: such an entry (here
     # a pickle that aborts the process loading it, as a flipped bit in compiled
@@ -343,6 +344,7 @@ def read_only(tmp_path):
             path.chmod(path.stat().st_mode | 0o200)
 
 
+@pytest.mark.slow
 def test_a_read_only_cache_is_used_for_reading_quietly(cache_dir, read_only):
     import jax
     import jax.numpy as jnp

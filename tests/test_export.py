@@ -148,6 +148,7 @@ def test_thesis_listing_width_is_seven_pixels():
     assert c["passWidths"][0] == pytest.approx(7.0, rel=1e-6)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("weights", [[0.4, 0.6], [[0.2, 0.5, 0.9], [0.6, 0.4, 0.1]]], ids=["shared", "rgb"])
 def test_separable_constants_reproduce_render(x64, weights):
     image, depth, mask = make_scene()

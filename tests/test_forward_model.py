@@ -234,6 +234,7 @@ def test_stretch_factors_match_formula(x64):
     assert (slope_x > 2.3).any() and (slope_x < 2.3).any() and (slope_y > 2.3).any()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("axis", [0, 1])
 @pytest.mark.parametrize("taps", [JIMENEZ_TAPS, THESIS_TAPS], ids=["jimenez", "thesis"])
 def test_directional_pass_matches_loops(x64, axis, taps):
@@ -401,6 +402,7 @@ def _fd_gradient(f, theta, rel_step=1e-7):
     return grad
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "model,channels,kwargs",
     [
@@ -500,6 +502,7 @@ def test_float32_by_default_and_float64_under_x64():
 # ---------------------------------------------------------------- channels and shapes
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("model", ["sog", "separable"])
 def test_per_channel_weights_act_per_channel(x64, model):
     image, depth, mask = make_scene()
@@ -514,6 +517,7 @@ def test_per_channel_weights_act_per_channel(x64, model):
     assert np.abs(np.asarray(render(image[..., 1:2], depth, mask, other, model)) - rgb[..., 1:2]).max() > 1e-4
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("model", invsss.MODELS)
 def test_one_channel_and_2d_images(x64, model):
     image, depth, mask = make_scene(channels=1)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 import json
 import subprocess
 import sys
@@ -16,6 +17,7 @@ def _loaded_after(code: str) -> list[str]:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_rendering_arrays_imports_no_heavy_dependency():
     code = (
         "import numpy as np, invsss\n"
@@ -27,6 +29,7 @@ def test_rendering_arrays_imports_no_heavy_dependency():
     assert _loaded_after(code) == []
 
 
+@pytest.mark.slow
 def test_params_files_do_not_import_openimageio(tmp_path):
     path = json.dumps(str(tmp_path / "p.json"))
     code = (

@@ -29,6 +29,7 @@ def _fit(source, target, depth, mask, **options):
 # ---------------------------------------------------------------- the identity
 
 
+@pytest.mark.slow
 def test_every_term_has_an_identity():
     source, depth, mask, buffers = dome_with_two_lights(24)
     params = invsss.SSSParams(600.0, 0.0, 1.0, [0.6, 0.4], [0.5, 2.0])
@@ -59,6 +60,7 @@ def _awkward_buffers(size=32, seed=4):
     return normal, light
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("albedo", [1e-9, 0.5, 0.9, 0.99, 1.0 - 1e-9])
 def test_the_law_gain_is_bounded_and_one_where_the_buffers_cannot_resolve_it(albedo):
     normal, light = _awkward_buffers()
@@ -82,6 +84,7 @@ def test_the_law_gain_is_bounded_and_one_where_the_buffers_cannot_resolve_it(alb
     np.testing.assert_allclose(gain[trusted], h(mu) * h(mu0) / (mu + mu0) / (h(1.0) ** 2 / 2.0), rtol=1e-9)
 
 
+@pytest.mark.slow
 def test_nan_and_zero_buffers_off_the_mask_change_nothing_there():
     source, depth, mask, buffers = dome_with_two_lights(24)
     off = mask == 0

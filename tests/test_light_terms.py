@@ -59,6 +59,7 @@ def _reference(blurred, depth, mask, light, normal, params, shift, grazing, inci
     return blurred + mask[..., None] * (moved - blurred)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1])
 @pytest.mark.parametrize("shift, grazing, incidence", [(3.0, 0.3, 0.0), (-1.5, -0.4, 0.5), (0.0, 0.7, -0.3),
                                                         (0.0, 0.0, 0.8)])
@@ -75,6 +76,7 @@ def test_render_matches_the_definition(seed, shift, grazing, incidence):
     assert np.max(np.abs(np.asarray(out) - blurred)) > 0.05
 
 
+@pytest.mark.slow
 def test_shift_moves_an_edge_away_from_the_light():
     # A vertical edge lit from the camera's left (l_x < 0): light travels right,
     # so the edge moves right by kappa * s_x pixels.
@@ -100,6 +102,7 @@ def test_zero_terms_are_the_identity():
     np.testing.assert_array_equal(np.asarray(out), np.asarray(blurred))
 
 
+@pytest.mark.slow
 def test_gradients_match_finite_differences():
     image, depth, mask, light, normal, params = _scene()
     blurred = jnp.asarray(invsss.render(image, depth, mask, params))
@@ -123,6 +126,7 @@ def test_gradients_match_finite_differences():
     assert np.all(np.abs(grad) > 1e-3)
 
 
+@pytest.mark.slow
 def test_shift_image_composes_with_jit_and_vmap():
     rng = np.random.default_rng(5)
     images = jnp.asarray(rng.uniform(size=(4, 7, 9, 2)))
@@ -332,6 +336,7 @@ def test_params_file_keeps_the_terms(tmp_path):
     invsss.read_params(path)  # the strict params file accepts the new key
 
 
+@pytest.mark.slow
 def test_fit_without_the_buffer_names_it():
     source, depth, mask, buffers = _lit_pair(16)
     with pytest.raises(invsss.InvalidInputError, match=r"^normal: the 'grazing' term needs this buffer"):

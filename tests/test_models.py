@@ -195,6 +195,7 @@ def test_torch_gradients_flow_through_the_plan():
 # ------------------------------------------------------------------ every model everywhere
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", MODEL_NAMES)
 def test_every_model_renders_in_both_frameworks_and_exports(name):
     torch = pytest.importorskip("torch")

@@ -47,6 +47,7 @@ def _fns(mask, axis, interpret=True, block=BLOCK):
     return kernel, reference
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("axis", [1, 0])
 def test_kernel_matches_reference_values_and_derivatives(axis):
     image, footprint, mask, rng = _inputs()
@@ -67,6 +68,7 @@ def test_kernel_matches_reference_values_and_derivatives(axis):
     np.testing.assert_allclose(got[1], want[1], atol=5e-6)
 
 
+@pytest.mark.slow
 def test_kernel_gradient_matches_finite_differences():
     image, _, mask, rng = _inputs(seed=1)
     # Interpolation is piecewise linear: footprints near 1.2 px keep every tap
@@ -87,6 +89,7 @@ def test_kernel_gradient_matches_finite_differences():
     np.testing.assert_allclose(jax.jacfwd(loss)(0.0), finite, rtol=2e-3)
 
 
+@pytest.mark.slow
 def test_mask_and_tap_weight_gradients_match_reference():
     image, footprint, mask, rng = _inputs(seed=2)
     cotangent = jnp.asarray(rng.standard_normal(image.shape), jnp.float32)

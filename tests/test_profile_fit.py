@@ -43,6 +43,7 @@ def test_recovers_known_sum_of_gaussians():
     assert float(fit.rms) < 1e-9
 
 
+@pytest.mark.slow
 def test_fit_of_noisy_profile_behaves_like_least_squares():
     # White noise of deviation sigma on every sample, fitted unweighted: textbook
     # least squares with p = 2K = 10 parameters and N = 121 samples.
@@ -67,6 +68,7 @@ def test_fit_of_noisy_profile_behaves_like_least_squares():
     assert error / sigma < 6.6
 
 
+@pytest.mark.slow
 def test_refit_of_thesis_table_reproduces_its_curve():
     with jax.enable_x64(True):
         thesis = load_profile("thesis-nir")
@@ -99,6 +101,7 @@ def test_fits_jensen_dipole_skin1_per_channel():
     assert relative[visible].max() < 0.025
 
 
+@pytest.mark.slow
 def test_fits_burley_normalized_diffusion():
     d, albedo = 1.0, 0.8
     with jax.enable_x64(True):
@@ -116,6 +119,7 @@ def test_fits_burley_normalized_diffusion():
     assert total == pytest.approx(albedo, rel=0.05)
 
 
+@pytest.mark.slow
 def test_shared_weights_across_channels():
     with jax.enable_x64(True):
         r = jnp.linspace(0.0, 12.0, N)

@@ -63,6 +63,7 @@ def test_dipole_fit_recovers_the_slab_medium(sigma_s_prime, sigma_a):
     assert float(gaussians.rms) < 0.05
 
 
+@pytest.mark.slow
 def test_the_medium_is_told_apart():
     # A fit that ignored the data would pass the test above for one medium only.
     fits = [fit_dipole(*(lambda m: (m.r_mm, m.reflectance))(_measure(*_spot_images(*m))))
@@ -78,6 +79,7 @@ def test_fit_dipole_refuses_bad_samples():
         fit_dipole(r, np.ones(9))
 
 
+@pytest.mark.slow
 def test_cli_profile_feeds_fit(tmp_path, capsys):
     skin, reference = _spot_images(*MEDIA[0])
     invsss.write_image(tmp_path / "skin.exr", skin.astype(np.float32))

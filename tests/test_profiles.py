@@ -37,6 +37,7 @@ def _quad_plane_integral(profile_at):
 # ------------------------------------------------------------------ dipole
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("channel", [0, 1, 2])
 def test_dipole_integral_matches_closed_form(channel):
     s, a, eta = SKIN1[0][channel], SKIN1[1][channel], SKIN1[2]
@@ -54,6 +55,7 @@ def test_dipole_integral_matches_closed_form(channel):
     assert trapezoid == pytest.approx(closed, rel=1e-8)
 
 
+@pytest.mark.slow
 def test_dipole_matches_thesis_form_and_vectorises_over_channels():
     # Thesis eq. 3.4 writes the same function as alpha'/(4 pi) [z (s_tr + 1/d) e^{-s_tr d} / d^2 ...];
     # evaluate that form independently in NumPy.
@@ -80,6 +82,7 @@ def test_dipole_matches_thesis_form_and_vectorises_over_channels():
     np.testing.assert_allclose(per_channel, got, rtol=1e-14)
 
 
+@pytest.mark.slow
 def test_dipole_gradients_match_finite_differences():
     with jax.enable_x64(True):
         r = jnp.array([0.3, 1.7])
@@ -125,6 +128,7 @@ def test_burley_is_finite_and_differentiable_at_zero():
     assert away == pytest.approx(expected, rel=1e-12)
 
 
+@pytest.mark.slow
 def test_burley_gradient_matches_finite_differences():
     with jax.enable_x64(True):
         r = jnp.linspace(0.1, 3.0, 7)
@@ -162,6 +166,7 @@ def test_published_tables_are_consistent_and_immutable():
             table["variances"] = (1.0,)
 
 
+@pytest.mark.slow
 def test_sum_of_gaussians_module_matches_function_and_transforms():
     with jax.enable_x64(True):
         profile = load_profile("deon-skin")
@@ -240,6 +245,7 @@ def test_unknown_name_and_missing_file_raise(tmp_path):
         load_profile(3)
 
 
+@pytest.mark.slow
 def test_jensen_skin1_fit_table_follows_the_dipole():
     s, a, eta = SKIN1
     with jax.enable_x64(True):

@@ -36,6 +36,7 @@ def _random_problem(seed, active_first=1.0):
     return bases, targets, weights, ratios, active, d_bases, d_ratios
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("active_first", [1.0, 0.0])
 def test_projected_jacobian_matches_forward_mode_through_the_solve(active_first):
     def predictions(u):
@@ -62,6 +63,7 @@ def test_projected_jacobian_matches_forward_mode_through_the_solve(active_first)
         np.testing.assert_allclose(np.asarray(g), e, rtol=0, atol=1e-10 * np.abs(e).max())
 
 
+@pytest.mark.slow
 def test_projected_jacobian_without_moving_ratios_equals_zero_ratio_slopes():
     with jax.enable_x64(True):
         bases, targets, weights, ratios, active, d_bases, d_ratios = _random_problem(1)

@@ -74,6 +74,7 @@ def _reference_source(source, key, mask, normal, light, albedo, strength=1.0):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("albedo", [0.9, [0.95, 0.8, 0.6]])
 def test_render_applies_the_law_to_the_source_before_the_blur(albedo):
     source, key, depth, mask, normal, light = _scene()
@@ -101,6 +102,7 @@ def test_the_law_leaves_head_on_light_and_the_other_lights_alone():
     assert np.abs(changed[3:] - source[3:]).max() > 0.05
 
 
+@pytest.mark.slow
 def test_the_law_has_the_known_limits_and_order_in_albedo():
     # Low albedo: single scattering, the Lommel-Seeliger law 1 / (mu + mu0);
     # albedo near 1: H(x) -> 1 + 2x, the conservative medium. In between, the lower
@@ -136,6 +138,7 @@ def test_the_law_has_the_known_limits_and_order_in_albedo():
     assert ratios[0.5][1] > ratios[0.9][1] > ratios[0.99][1]
 
 
+@pytest.mark.slow
 def test_gradients_match_finite_differences():
     source, key, depth, mask, normal, light = _scene(2)
     buffers = LightBuffers(normal=jnp.asarray(normal), light=jnp.asarray(light), key=jnp.asarray(key))
@@ -206,11 +209,13 @@ class TestBadInput:
         with pytest.raises(invsss.InvalidInputError, match=message):
             FitOptions(light_terms=terms)
 
+    @pytest.mark.slow
     def test_a_fit_names_the_missing_key(self):
         with pytest.raises(invsss.InvalidInputError, match=r"^key: the 'law' term needs this buffer"):
             invsss.fit_pair(self.source, self.source, self.depth, self.mask, light_terms="law",
                             light_buffers=LightBuffers(self.normal, self.light))
 
+    @pytest.mark.slow
     def test_a_held_albedo_count_must_match_the_source(self):
         with pytest.raises(invsss.InvalidInputError, match=r"light_terms\['law'\]: expected one albedo or one per "
                                                            r"source channel \(3\), got 2"):
@@ -286,6 +291,7 @@ def _hlsl_function_as_python(text: str, name: str):
     return "\n".join(lines)
 
 
+@pytest.mark.slow
 def test_the_exported_law_is_the_model():
     source, key, _, mask, normal, light = _scene(8)
     albedo = [0.93, 0.8, 0.55]

@@ -33,6 +33,7 @@ def _photograph(image, warp):
                      for k in range(image.shape[-1])], axis=-1)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind, params", [
     ("translation", (1.3, -2.6)),
     ("similarity", (0.7, 1.1, float(np.radians(1.5)), float(np.log(1.02)))),

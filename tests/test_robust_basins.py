@@ -89,6 +89,7 @@ def _candidate(problem, level):
     return path
 
 
+@pytest.mark.slow
 def test_a_second_basin_that_fits_as_well_within_the_noise_is_reported():
     with jax.enable_x64(True):
         problem = _noisy_card_problem()

@@ -118,6 +118,7 @@ def test_the_cli_leaves_out_an_integer_targets_top_code_by_default(tmp_path):
     assert abs(kept["sss_level"] / 375.0 - 1.0) > 0.1
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("ignore::invsss.InputNotice")
 def test_a_float_target_is_not_clipped_by_default(tmp_path):
     paths, profile = _card_on_disk(tmp_path, ".exr")
@@ -143,6 +144,7 @@ def test_a_bad_saturation_word_is_a_one_line_error(tmp_path):
     assert err.strip().splitlines()[-1] == "invsss: error: --saturation 'clipped': expected auto, none or a number > 0"
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("ignore::invsss.InputNotice")
 def test_a_sweep_with_saturation_auto_leaves_the_top_code_out(tmp_path):
     import invsss.experiments as ex

@@ -70,6 +70,7 @@ def _pixel_rays(config, n: int = 8):
 # ------------------------------------------------------------------ geometry
 
 
+@pytest.mark.slow
 def test_depth_of_tilted_plane_is_analytic_eye_z():
     tilt = -35.0
     config = _config(object={"primitive": "slab", "size": [2000.0, 2000.0, 200.0],
@@ -136,6 +137,7 @@ def test_mask_and_coverage_match_the_silhouette_minus_occluder(camera):
 # ------------------------------------------------------------------- physics
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("medium", "spp"), [
     ({"preset": "thesis-940"}, 512),
     ({"sigma_s_prime": 2.4, "sigma_a": 0.1}, 512),
@@ -218,6 +220,7 @@ def test_coloured_light_gives_rgb_even_for_a_grey_medium():
     assert red > green > blue
 
 
+@pytest.mark.slow
 def test_chromatic_medium_gives_rgb_with_an_albedo_per_channel():
     config = _config(medium={"preset": "jensen-skin1"}, spp=8, camera={**CAMERA, "width": 16, "height": 16})
     result = render_scene(config)
@@ -343,6 +346,7 @@ def test_misspelt_key_is_one_line_naming_it_and_the_nearest_key(tmp_path, capsys
     assert load_config(_write_toml(tmp_path)).camera.fov == 20.0
 
 
+@pytest.mark.slow
 def test_mitsuba_is_imported_only_to_render():
     import subprocess
 
@@ -368,6 +372,7 @@ def test_missing_mitsuba_is_one_line_naming_the_extra(tmp_path, capsys, monkeypa
 EXAMPLES = os.path.join(os.path.dirname(__file__), "..", "experiments", "scenes")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(f for f in os.listdir(EXAMPLES) if f.endswith(".toml")))
 def test_example_scenes_render(name):
     config = load_config(os.path.join(EXAMPLES, name)).with_overrides(width=16, spp=2)

@@ -139,6 +139,7 @@ RGB_WEIGHTS = [[0.233, 0.455, 0.649], [0.100, 0.336, 0.344], [0.118, 0.198, 0.0]
                [0.358, 0.004, 0.0]]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("weights", ["truth", "rgb"])
 @pytest.mark.parametrize("model", ["sog", "thesis", "separable"])
 def test_shader_matches_render_on_fran_front(device, model, weights):
@@ -166,6 +167,7 @@ def test_shader_matches_render_on_pt_face(device, model):
     assert _relative_error(image, want) > 100 * TOLERANCE
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("term", sorted(PT_TERMS))
 @pytest.mark.parametrize("model", ["sog", "thesis", "separable"])
 def test_shader_light_terms_match_render(device, model, term):
@@ -237,6 +239,7 @@ BREAKS = {
 BREAK_CASES = [(m, b) for m, cases in BREAKS.items() for b in cases]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("model,mistake", BREAK_CASES, ids=[f"{m}-{b}" for m, b in BREAK_CASES])
 def test_wrong_constants_are_caught(device, model, mistake):
     image, depth, mask, params = _cached("fran", _fran)

@@ -105,6 +105,7 @@ def _half(a):
 PROFILE = ([0.1478, 0.1323, 0.0004, 0.0527, 0.090], [8.749, 2.099, 0.549, 0.5574, 1.194])
 
 
+@pytest.mark.slow
 def test_scale_to_resolution_rule():
     """Rendered at twice the resolution with the constants of scale_to_resolution(c, 2),
     the image averaged back to the fitted size is the fitted render to within 5 % of

@@ -54,6 +54,7 @@ def _scene(size, seed=0):
     return source, target, depth, mask
 
 
+@pytest.mark.slow
 def test_compile_solver_leaves_the_solve_nothing_to_compile():
     # A size no other test compiles, so the counts are this test's own.
     # start={}: no scan, so nothing but the solver compiles here.

@@ -25,6 +25,7 @@ from invsss.estimator.solve import gauss_newton_distance, run_solver, stalled
 from _estimator_scenes import make_pair
 
 
+@pytest.mark.slow
 def test_gauss_newton_distance_is_the_step_in_standard_errors():
     rng = np.random.default_rng(3)
     J = rng.standard_normal((40, 3))
@@ -48,6 +49,7 @@ class _Decay(eqx.Module):
         return z[0] * jnp.exp(-self.t * jnp.exp(-z[1])) + z[2] - self.y, None
 
 
+@pytest.mark.slow
 def test_noise_tolerance_stops_within_that_many_standard_errors_of_the_tight_solve():
     rng = np.random.default_rng(0)
     t = np.linspace(0.0, 5.0, 400)

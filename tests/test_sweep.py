@@ -283,6 +283,7 @@ def test_a_failing_trial_is_recorded_and_the_sweep_goes_on(root, capsys):
 # ------------------------------------------------------------------ executors
 
 
+@pytest.mark.slow
 def test_process_pool_gives_the_in_process_results(root):
     path = _experiment(root, "pool.toml", RENDER.replace('"data/*/"', '"data/a/"'))
     ex.run(path, root / "inproc", log=None)

@@ -125,6 +125,7 @@ def test_a_sweep_whose_trials_failed_exits_1(root, capsys):
 # ------------------------------------------------------------- closed output
 
 
+@pytest.mark.slow
 def test_a_closed_stdout_and_stderr_do_not_stop_the_sweep(root):
     """`invsss sweep ... 2>&1 | head -1`: the reader leaves after the first line."""
     path = _experiment(root, "piped.toml", RENDER)

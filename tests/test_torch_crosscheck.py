@@ -175,6 +175,7 @@ CASES = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "model, seed, channels, per_channel, degenerate, extras", CASES,
     ids=[f"{c[0]}-{c[1]}" for c in CASES],
@@ -199,6 +200,7 @@ def test_outputs_and_gradients_agree(model, seed, channels, per_channel, degener
         assert np.all(grads[name] == 0), name
 
 
+@pytest.mark.slow
 def test_separable_kernel_agrees():
     rng = np.random.default_rng(13)
     weights, variances = rng.uniform(0.1, 1.0, (4, 3)), rng.uniform(0.05, 2.0, 4)
@@ -227,6 +229,7 @@ def test_stretch_factors_agree():
 # --------------------------------------------------------------------------- finite differences
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("model", ["sog", "thesis", "separable"])
 def test_gradcheck_parameters(model):
     # Generic random values on a tiny scene: no tap lands exactly on a pixel

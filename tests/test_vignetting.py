@@ -36,6 +36,7 @@ def _photographs(seed=4):
     return source, depth, mask, clean + noise, shaded + noise
 
 
+@pytest.mark.slow
 @jax.enable_x64(True)
 def test_field_matches_its_definition():
     rho2 = np.asarray(radius_squared((4, 6), jnp.float64))

@@ -91,6 +91,7 @@ def test_a_copy_of_a_parameter_column_leaves_it_undetermined(linearised):
     assert np.isnan(got.nuisance_stderr[0])
 
 
+@pytest.mark.slow
 def test_the_shift_columns_are_the_gradient_of_the_prediction():
     source, target, depth, mask, _ = make_pair("wave", TRUTH, seed=2, contrast=3.0, size=48)
     warp = Warp("translation", (0.3, -0.2), (23.5, 23.5))
