@@ -49,7 +49,9 @@ from .rasters import Raster, checked_path, code_bits, image_extension, open_inpu
 __all__ = [
     "JPEG_GREY_CODES",
     "clipping_level",
+    "finish_pair",
     "load_pair",
+    "read_colour_pair",
     "read_image",
     "shared_clipping_level",
 ]
@@ -123,14 +125,14 @@ def read_image(path, *, linear: bool = False, grey: bool = False) -> np.ndarray:
     >>> image.shape, round(float(image[0, 0, 0]), 2)
     ((4, 4, 1), 0.5)
     """
-    image, is_grey = read_colour(path, linear)
+    image, is_grey = _read_colour(path, linear)
     if grey and is_grey:
-        note_grey(os.fspath(path), "")
-        return one_channel(image)
+        _note_grey(os.fspath(path), "")
+        return _one_channel(image)
     return image
 
 
-def read_colour(path, linear: bool) -> tuple[np.ndarray, bool]:
+def _read_colour(path, linear: bool) -> tuple[np.ndarray, bool]:
     """:func:`read_image`'s image, and whether it is a grey stored as three channels."""
     name, raster = read_raster(path, "image")
     if raster.file_format == "npy" and raster.codes.dtype.kind != "f":
@@ -182,12 +184,12 @@ def _is_grey_rgb(raster: Raster) -> bool:
     return bool(np.all(np.abs(others - first) <= raster.float_eps * scale))
 
 
-def one_channel(image: np.ndarray) -> np.ndarray:
+def _one_channel(image: np.ndarray) -> np.ndarray:
     """The mean of ``image``'s channels as one channel (exactly the value where they agree)."""
     return image.astype(np.float64).mean(axis=2, keepdims=True).astype(np.float32)
 
 
-def note_grey(name: str, what: str) -> None:
+def _note_grey(name: str, what: str) -> None:
     warnings.warn(
         f"{name}: its three channels are identical (a grey image stored as RGB); read as one "
         f"grey channel{what}",
@@ -322,23 +324,37 @@ def load_pair(
     >>> pair.source.shape, pair.target.shape, pair.depth.shape
     ((4, 6, 3), (4, 6, 1), (4, 6))
     """
-    source_image, source_grey = read_colour(source, linear_codes)
-    target_image, target_grey = read_colour(target, linear_codes)
+    source_image, target_image = read_colour_pair(source, target, linear_codes)
     depth_map = read_depth(depth, scale=depth_scale)
     mask_map = read_mask(mask)
     names = {"source": source, "target": target, "depth": depth, "mask": mask}
-    names = {k: os.fspath(v) for k, v in names.items()}
+    return finish_pair(source_image, target_image, depth_map, mask_map, {k: os.fspath(v) for k, v in names.items()})
+
+
+def read_colour_pair(source, target, linear_codes: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """The decoded source and target images of a pair, (H, W, C) each, with the grey rule
+    of :func:`load_pair` applied (a grey target is one channel, and so is a grey source
+    before a grey target)."""
+    source_image, source_grey = _read_colour(source, linear_codes)
+    target_image, target_grey = _read_colour(target, linear_codes)
+    names = {"source": os.fspath(source), "target": os.fspath(target)}
     # A grey photograph stored as RGB fitted as three photographs gets a weight per
     # channel from one channel's information (fran_front: sss_level 1081.7 against
     # 598.1 from the same target stored as one channel).
     if target_grey:
-        target_image = one_channel(target_image)
-        note_grey(names["target"], "")
+        target_image = _one_channel(target_image)
+        _note_grey(names["target"], "")
     # A grey source stays RGB before a colour target (each channel gets its weights);
     # before a grey one its mix to grey would be undetermined.
     if source_grey and target_image.shape[2] == 1:
-        source_image = one_channel(source_image)
-        note_grey(names["source"], ", as the target is grey")
+        source_image = _one_channel(source_image)
+        _note_grey(names["source"], ", as the target is grey")
+    return source_image, target_image
+
+
+def finish_pair(source_image, target_image, depth_map, mask_map, names: dict) -> ImagePair:
+    """The checked :class:`ImagePair` of arrays read from the files ``names`` (keys
+    ``source``, ``target``, ``depth``, ``mask``: what the messages call them)."""
     check_pair(source_image, target_image, depth_map, mask_map, names)
     if image_extension(names["target"], "image") in (".jpg", ".jpeg"):
         # Measured (docs/capture.md): JPEG q90 of a model-made face moved sss_level
@@ -347,7 +363,7 @@ def load_pair(
             f"{names['target']}: a JPEG target: its compression removes fine detail, which the fit reads as "
             "a wider blur (sss_level +1 to +6 % on a simulated face, docs/capture.md); prefer RAW or PNG",
             InputNotice,
-            stacklevel=2,
+            stacklevel=3,
         )
     # Background depth as a renderer writes it (0, inf) is replaced here, so
     # pair.depth is safe to pass to render() or any other model code.

@@ -21,17 +21,15 @@ from __future__ import annotations
 import math
 import numbers
 import os
-import warnings
 
 import numpy as np
 
 from .depth import read_depth
-from .images import load_pair, note_grey, one_channel, read_colour
+from .images import finish_pair, load_pair, read_colour_pair
 from .masks import read_mask
-from .rasters import image_extension
-from ..forward.pair import ImagePair, fill_background_depth
+from ..forward.pair import ImagePair
 from .skin_mask import skin_mask_from_pair
-from ..validation import InputNotice, InvalidInputError, check_pair
+from ..validation import InvalidInputError
 
 __all__ = [
     "HELD_WITH_CONSTANT_DEPTH",
@@ -157,16 +155,7 @@ def load_photo_pair(
         check_distance(distance_mm)
     if depth is not None and mask is not None:
         return load_pair(source, target, depth, mask, depth_scale=depth_scale, linear_codes=linear_codes), False
-    source_image, source_grey = read_colour(source, linear_codes)
-    target_image, target_grey = read_colour(target, linear_codes)
-    # The same rule as load_pair: a grey target is one channel, and so is a grey
-    # source before a grey target.
-    if target_grey:
-        target_image = one_channel(target_image)
-        note_grey(os.fspath(target), "")
-    if source_grey and target_image.shape[2] == 1:
-        source_image = one_channel(source_image)
-        note_grey(os.fspath(source), ", as the target is grey")
+    source_image, target_image = read_colour_pair(source, target, linear_codes)
     depth_map = read_depth(depth, scale=depth_scale) if depth is not None else constant_depth(
         source_image.shape, distance_mm)
     mask_made = mask is None
@@ -182,15 +171,7 @@ def load_photo_pair(
     names = {"source": os.fspath(source), "target": os.fspath(target),
              "depth": os.fspath(depth) if depth is not None else f"--distance {distance_mm:g}",
              "mask": os.fspath(mask) if mask is not None else "the mask made from the pair"}
-    check_pair(source_image, target_image, depth_map, mask_map, names)
-    if image_extension(names["target"], "image") in (".jpg", ".jpeg"):
-        warnings.warn(
-            f"{names['target']}: a JPEG target: its compression removes fine detail, which the fit reads as "
-            "a wider blur (docs/capture.md); prefer RAW or PNG",
-            InputNotice,
-            stacklevel=2,
-        )
-    return ImagePair(source_image, target_image, fill_background_depth(depth_map), mask_map), mask_made
+    return finish_pair(source_image, target_image, depth_map, mask_map, names), mask_made
 
 
 class PhotoInputs:
