@@ -47,7 +47,7 @@ import jax.numpy as jnp
 from jax.extend.core import Primitive
 from jax.interpreters import ad, batching, mlir
 
-from .passes import TAP_OFFSETS, _directional_pass_xla, sample_along
+from .passes import TAP_OFFSETS, _directional_pass_xla, tap_sum
 
 __all__ = [
     "PASS_KERNEL_VARIABLE",
@@ -432,14 +432,7 @@ def _pass_jvp(primals, tangents, *, interpret, block):
 
 
 def _weights_tangent(image, footprint, mask, d_weights, axis):
-    from .passes import pixel_coordinates
-
-    base = pixel_coordinates(image.shape, axis, image.dtype)
-    total = d_weights[3] * image
-    for k, t in enumerate(TAP_OFFSETS):
-        if t != 0.0:
-            total = total + d_weights[k] * sample_along(image, base + t * footprint, axis)
-    return mask[..., None] * total
+    return mask[..., None] * tap_sum(image, footprint, d_weights, axis)
 
 
 ad.primitive_jvps[pass_p] = _pass_jvp

@@ -19,6 +19,7 @@ __all__ = [
     "tap_weights",
     "tap_spread",
     "sample_along",
+    "tap_sum",
     "pixel_coordinates",
     "directional_pass",
 ]
@@ -132,12 +133,22 @@ def directional_pass(
 
 def _directional_pass_xla(image, footprint, mask, weights, axis):
     """:func:`directional_pass` in plain XLA (the reference)."""
+    blurred = tap_sum(image, footprint, weights, axis)
+    # I + m (P - I) equals m P + (1 - m) I and returns I bit-exactly where m = 0.
+    return image + mask[..., None] * (blurred - image)
+
+
+def tap_sum(image, footprint, weights, axis):
+    """``sum_k weights[k] image(x + t_k footprint(x))`` along ``axis``: a pass before the mask.
+
+    ``image`` (H, W, C), ``footprint`` (H, W), ``weights`` (7,); returns (H, W, C).
+    The pass's weights tangent is this sum with the tangent's weights.
+    """
     base = pixel_coordinates(image.shape, axis, image.dtype)
     # The centre tap (t = 0) reads the pixel itself; the other six are gathered
     # one at a time so that each gather fuses into the running sum.
-    blurred = weights[3] * image
+    total = weights[3] * image
     for k, t in enumerate(TAP_OFFSETS):
         if t != 0.0:
-            blurred = blurred + weights[k] * sample_along(image, base + t * footprint, axis)
-    # I + m (P - I) equals m P + (1 - m) I and returns I bit-exactly where m = 0.
-    return image + mask[..., None] * (blurred - image)
+            total = total + weights[k] * sample_along(image, base + t * footprint, axis)
+    return total
