@@ -50,6 +50,7 @@ import invsss
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 from fidelity import eroded, load_scene_pair, photometric_match  # noqa: E402
+from reflectance_probe import mixed_psnr  # noqa: E402
 
 SCENES = pathlib.Path(__file__).parent / "scenes"
 
@@ -84,14 +85,9 @@ def layer_gains(pair, fit, keep) -> dict:
     normal, light = (np.asarray(b, np.float64) for b in (pair["buffers"].normal, pair["buffers"].light))
     mu, mu0, fade = cosines(normal, light)
     prediction = np.asarray(fit.fitted[0], np.float64).reshape(target.shape)
-    peak = float(target[keep].max())
 
     def psnr(columns) -> float:
-        wanted = target[keep].ravel()
-        design = np.stack([np.broadcast_to(c, target.shape)[keep].ravel() for c in columns]
-                          + [np.ones_like(wanted)], axis=1)
-        coef, *_ = np.linalg.lstsq(design, wanted, rcond=None)
-        return 10.0 * np.log10(peak**2 / np.mean((wanted - design @ coef) ** 2))
+        return mixed_psnr(target, keep, columns)
 
     single = fade * key / np.maximum(mu + mu0, 1e-3)
     curvature = surface_curvature(normal, np.asarray(pair["depth"], np.float64))

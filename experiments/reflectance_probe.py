@@ -61,6 +61,16 @@ def cosines(normal, light):
     return mu, mu0
 
 
+def mixed_psnr(target, keep, columns) -> float:
+    """PSNR on ``keep`` (peak: the target's maximum there) of the least-squares mix of
+    ``columns`` (images broadcast to the target's shape) and an offset that best fits ``target``."""
+    wanted = target[keep].ravel()
+    design = np.stack([np.broadcast_to(c, target.shape)[keep].ravel() for c in columns]
+                      + [np.ones_like(wanted)], axis=1)
+    coef, *_ = np.linalg.lstsq(design, wanted, rcond=None)
+    return 10.0 * np.log10(float(target[keep].max()) ** 2 / np.mean((wanted - design @ coef) ** 2))
+
+
 def probe(folder: Path) -> None:
     pair = invsss.load_pair(*(folder / f for f in ("source.exr", "target.exr", "depth.exr", "mask.png")))
     normal = np.asarray(invsss.read_image(folder / "normal.exr"), np.float64)
@@ -69,15 +79,10 @@ def probe(folder: Path) -> None:
     source, target = np.asarray(pair.source, np.float64), np.asarray(pair.target, np.float64)
     key = np.asarray(invsss.read_image(folder / "key.exr"), np.float64)
     keep = ndimage.binary_erosion(np.asarray(pair.mask) > 0, iterations=2)
-    peak = float(target[keep].max())
     mu, mu0 = cosines(normal, light)
 
     def psnr(columns) -> float:
-        wanted = target[keep].ravel()
-        design = np.stack([np.broadcast_to(c, target.shape)[keep].ravel() for c in columns]
-                          + [np.ones_like(wanted)], axis=1)
-        coef, *_ = np.linalg.lstsq(design, wanted, rcond=None)
-        return 10.0 * np.log10(peak**2 / np.mean((wanted - design @ coef) ** 2))
+        return mixed_psnr(target, keep, columns)
 
     print(f"{folder.name}: the key light gives {key[keep].sum() / source[keep].sum():.0%} of the source on the mask")
     for terms in ("shift", "shift,grazing,incidence"):
