@@ -36,13 +36,13 @@ CONFIGS = {"pt_face_940": "face_940.toml", "pt_face_940_turned": "face_940_turne
 FIRST_PAIRS = ("pt_face_940", "pt_face_940_turned", "pt_face_skin1")
 #: Each pair folder stays about as small as the first ones (about 400 KB; 600 KB at most).
 MAX_FOLDER_BYTES = 600_000
-#: The lowest noise ceiling a rough-dielectric target may have: at 2048 spp (what the
-#: render time allowed) they are noise-limited, about 21.5 dB (docs/scenes.md).
-ROUGH_MIN_CEILING_DB = 20.0
+#: The lowest noise ceiling a rough-dielectric target may have: at 16384 spp about 28 dB
+#: (docs/scenes.md); the first renders, at 2048 spp (21.4 and 21.7 dB), would fail.
+ROUGH_MIN_CEILING_DB = 26.0
 #: The same for an index-matched target (32 dB for pt_proc_area_940 at 1024 spp, 38-43 dB for the others).
 INDEX_MATCHED_MIN_CEILING_DB = 30.0
 #: The median skin value over the target's per-pixel noise, at least: index-matched, rough.
-MIN_MEDIAN_TO_NOISE = {"index-matched": 8.0, "rough-dielectric": 3.0}
+MIN_MEDIAN_TO_NOISE = {"index-matched": 8.0, "rough-dielectric": 8.0}
 
 
 def _info(name: str) -> dict:
@@ -172,7 +172,7 @@ def test_pair_images_agree_with_scene_json(name):
     assert info["noise"]["noise_ceiling_db"] > (ROUGH_MIN_CEILING_DB if rough else INDEX_MATCHED_MIN_CEILING_DB)
     # And per pixel: the median skin pixel stands above the noise (index-matched: 10 times in
     # pt_face_ear_backlit_940, whose face has the weak fill light only, 20-50 times in the
-    # others; rough dielectric: 4-5 times).
+    # others; rough dielectric: 11 and 16 times at 16384 spp, 4-5 times at 2048).
     floor = MIN_MEDIAN_TO_NOISE[info["medium"]["boundary"]] * info["noise"]["noise_rms"]
     assert np.all(np.isfinite(target)) and float(np.median(target[skin])) > floor
     # Small renders, every file a renderer's buffer of the same size.
