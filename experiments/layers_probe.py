@@ -21,7 +21,25 @@ post hoc, on pairs written by ``invsss scene``:
    * ``key edges``: the key light's gradient magnitude (shadow edges);
    * ``P x (1 - n_z)``: the grazing gain, again;
    * ``wider blur``, ``much wider blur``: the source through the fitted blur with every
-     variance 3 and 10 times larger (a profile tail).
+     variance 3 and 10 times larger (a profile tail);
+   * ``any angular law``: ``K`` cut into 8 x 8 bins of ``(mu, mu0)`` and ``S - K`` into 8
+     bins of ``mu``, each through the fitted blur with its own weight: every reflectance
+     law that depends on the two cosines alone, the law's form left free;
+   * ``along the light``: the prediction's first and second derivatives along the key
+     light's image direction and the second across it, each in 5 bins of ``mu0`` (a
+     shift and an elongation of the profile that vary with the incidence);
+   * ``shape at 1-8 px``: convexity (smoothed normals' divergence) and a depth
+     difference (smoothed depth minus depth) at 1, 2, 4 and 8 px, alone and times the
+     prediction (16 images): light gathered in creases or lost at ridges over a few pixels.
+
+   With ``--thickness`` (ray casts into the scene file's mesh, a few seconds) it adds
+   ``light through thin parts``: the key light's irradiance where it enters the far
+   side of the object, attenuated as ``exp(-s d)`` over the distance ``d`` through it
+   (``s`` = 0.1, 0.26 and 0.6 per mm) and put through the fitted blur, as a renderer
+   estimates translucency from a shadow map's depth (Jimenez et al. 2010).
+
+   It also splits the residual by scale: the part a 1.5 px Gaussian keeps (structure
+   over a few pixels) and what is left (the pixel scale, where the target's noise is).
 
 2. **How much of it is the source's own noise?** The noise ceiling takes the
    prediction to be noise-free, but the source is a Monte Carlo render too. With
@@ -33,12 +51,13 @@ post hoc, on pairs written by ``invsss scene``:
 
 Run it on tuning pairs only (data_synthetic/SPLIT.toml)::
 
-    python experiments/layers_probe.py [--source-noise] data_synthetic/pt_face_940 ...
+    python experiments/layers_probe.py [--source-noise] [--thickness] data_synthetic/pt_face_940 ...
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import pathlib
@@ -53,6 +72,22 @@ from fidelity import eroded, load_scene_pair, photometric_match  # noqa: E402
 from reflectance_probe import mixed_psnr  # noqa: E402
 
 SCENES = pathlib.Path(__file__).parent / "scenes"
+
+
+@contextlib.contextmanager
+def scene_folder():
+    """Work in experiments/scenes while inside: scene files name their meshes relative to themselves."""
+    here = os.getcwd()
+    os.chdir(SCENES)
+    try:
+        yield
+    finally:
+        os.chdir(here)
+
+
+def scene_file(folder) -> str:
+    """The scene file a pair folder was rendered from (``pt_NAME`` from ``NAME.toml``)."""
+    return f"{folder.name.removeprefix('pt_')}.toml"
 
 
 def cosines(normal, light):
@@ -78,6 +113,50 @@ def through_blur(image, pair, params, variance_factor=1.0):
     return np.asarray(out, np.float64).reshape(np.shape(image))
 
 
+def cosine_bins(x, count: int) -> list[np.ndarray]:
+    """Indicator images of ``count`` equal bins of ``x`` in [0, 1] (the last one closed)."""
+    index = np.minimum((x * count).astype(int), count - 1)
+    return [(index == k).astype(np.float64) for k in range(count)]
+
+
+def along_the_light(prediction, light, mu0) -> list[np.ndarray]:
+    """The prediction's derivatives along the key light's image direction (first and
+    second) and across it (second), each cut into 5 bins of ``mu0``."""
+    px, py = -light[..., 0], light[..., 1]  # image x right, rows down (as the shift term)
+    norm = np.maximum(np.hypot(px, py), 1e-6)
+    ux, uy = px / norm, py / norm
+    gx, gy = np.gradient(prediction[..., 0], axis=1), np.gradient(prediction[..., 0], axis=0)
+    gxx, gyy, gxy = np.gradient(gx, axis=1), np.gradient(gy, axis=0), np.gradient(gx, axis=0)
+    first = ux * gx + uy * gy
+    along = ux * ux * gxx + 2 * ux * uy * gxy + uy * uy * gyy
+    across = uy * uy * gxx - 2 * ux * uy * gxy + ux * ux * gyy
+    return [(d * b[..., 0])[..., None] for b in cosine_bins(mu0, 5) for d in (first, along, across)]
+
+
+def shape_at_scales(prediction, normal, depth, mask) -> list[np.ndarray]:
+    """Convexity and a depth difference over 1 to 8 px, alone and times the prediction.
+
+    At each scale ``s`` the normals and the depth are smoothed on the mask (a Gaussian
+    of ``s`` px, normalised by the smoothed mask); the convexity is the divergence of
+    the smoothed normals, the depth difference ``(smoothed depth - depth) / median
+    depth``, as unsharp-masked depth buffers darken creases (Luft et al. 2006).
+    """
+    from scipy import ndimage
+
+    m = np.asarray(mask, np.float64)
+
+    def smoothed(x, s):
+        return ndimage.gaussian_filter(x * m, s) / np.maximum(ndimage.gaussian_filter(m, s), 1e-6)
+
+    layers = []
+    for s in (1, 2, 4, 8):
+        divergence = np.gradient(smoothed(normal[..., 0], s), axis=1) - np.gradient(smoothed(normal[..., 1], s), axis=0)
+        difference = (smoothed(depth, s) - depth) / np.median(depth[m > 0])
+        for field in (divergence[..., None], difference[..., None]):
+            layers += [field, prediction * field]
+    return layers
+
+
 def layer_gains(pair, fit, keep) -> dict:
     """The PSNR gain of each candidate layer mixed with the fit's prediction (dB)."""
     source, target = (np.asarray(pair[k], np.float64) for k in ("source", "target"))
@@ -99,6 +178,11 @@ def layer_gains(pair, fit, keep) -> dict:
         "key edges": [edges], "P x (1 - n_z)": [prediction * (1.0 - mu)],
         "wider blur": [through_blur(source, pair, fit.params, 3.0)],
         "much wider blur": [through_blur(source, pair, fit.params, 10.0)],
+        "any angular law": [through_blur(key * a * b, pair, fit.params)
+                            for a in cosine_bins(mu, 8) for b in cosine_bins(mu0, 8) if np.any((a * b)[keep])]
+                           + [through_blur((source - key) * a, pair, fit.params) for a in cosine_bins(mu, 8)],
+        "along the light": along_the_light(prediction, light, mu0),
+        "shape at 1-8 px": shape_at_scales(prediction, normal, np.asarray(pair["depth"], np.float64), pair["mask"]),
     }
     base = psnr([prediction])
     return {"fit": base, **{name: psnr([prediction, *images]) - base for name, images in layers.items()}}
@@ -110,14 +194,9 @@ def source_noise(folder, pair, fit, keep) -> dict:
     from invsss.scenes import load_config, render_scene
 
     info = json.loads((folder / "scene.json").read_text())
-    scene_file = SCENES / f"{folder.name.removeprefix('pt_')}.toml"
-    here = os.getcwd()
-    os.chdir(SCENES)  # scene files name their meshes relative to themselves
-    try:
-        config = load_config(scene_file.name)
+    with scene_folder():
+        config = load_config(scene_file(folder))
         again = render_scene(config.model_copy(update={"seed": config.seed + 1000}), target=False)
-    finally:
-        os.chdir(here)
     source = np.asarray(pair["source"], np.float64)
     noise = (source - np.asarray(again.source, np.float64).reshape(source.shape)) / np.sqrt(2.0)
     # The fit's photometric gain, from the prediction against the blurred source.
@@ -140,6 +219,140 @@ def source_noise(folder, pair, fit, keep) -> dict:
     return found
 
 
+def key_through_thin_parts(folder) -> tuple[np.ndarray, np.ndarray]:
+    """Ray-cast the scene file's object: for each pixel, the distance ``d`` (mm) from its
+    surface point through the object towards the key light, and the key light's
+    irradiance where that ray enters the object (cosine, visibility past the occluders,
+    a point light's falloff; 0 on the lit side, where the ray leaves at once)."""
+    import tempfile
+
+    from invsss.scenes import load_config
+    from invsss.scenes.mitsuba_scene import import_mitsuba, load_mesh_ply, scene_dict
+    from invsss.scenes.render import _render_aovs
+
+    mi = import_mitsuba("scalar_rgb")
+    with scene_folder(), tempfile.TemporaryDirectory(prefix="layers-probe-") as scratch:
+        config = load_config(scene_file(folder))
+        if config.object.mesh:
+            ply = load_mesh_ply(config.object.mesh, scratch, bumps=config.object.bumps,
+                                mm_per_unit=config.object.mm_per_unit)
+        else:
+            from invsss.scenes.procedural import write_face_ply
+
+            ply, _ = write_face_ply(config.object, scratch)
+        coefficients = config.medium.coefficients()
+        geometry = scene_dict(mi, config, "geometry", mesh_ply=ply, coefficients=coefficients)
+        aovs = _render_aovs(mi, geometry)
+        skin = mi.load_dict(geometry)
+        # The source's scene has the occluders too; it only answers "is the light blocked".
+        blockers = mi.load_dict(scene_dict(mi, config, "source", mesh_ply=ply, albedo=0.5))
+    coverage = aovs["cov"][..., 0]
+    points = aovs["pos"] / np.maximum(coverage, 1e-6)[..., None]
+    normals = aovs["nn"] / np.maximum(np.linalg.norm(aovs["nn"], axis=-1, keepdims=True), 1e-9)
+    key = config.lights[0]
+    place = None if key.type == "directional" else np.asarray(key.center if key.type == "area" else key.position)
+
+    def towards_light(x):
+        v = -np.asarray(key.direction, np.float64) if place is None else place - x
+        return v / np.linalg.norm(v)
+
+    def first_hit(scene, origin, direction):
+        found = scene.ray_intersect(mi.Ray3f(mi.Point3f(*origin), mi.Vector3f(*direction)))
+        return found if found.is_valid() else None
+
+    distance = np.full(coverage.shape, np.inf)
+    irradiance = np.zeros(coverage.shape)
+    for i, j in zip(*np.nonzero(coverage >= 0.5)):
+        p, n = points[i, j], normals[i, j]
+        l = towards_light(p)
+        entry = first_hit(skin, p - 0.05 * n, l)
+        if entry is None or float(entry.t) < 1.0:  # lit side: the ray leaves the object at once
+            continue
+        distance[i, j] = float(entry.t)
+        q = np.array(entry.p, np.float64)
+        nq = np.array(entry.sh_frame.n, np.float64)
+        lq = towards_light(q)
+        cosine = float(nq @ lq)
+        if cosine <= 0.0:
+            continue
+        block = first_hit(blockers, q + 0.05 * nq, lq)
+        reach = np.inf if place is None else np.linalg.norm(place - q)
+        if block is not None and float(block.t) < 0.98 * reach:
+            continue
+        irradiance[i, j] = cosine * (1.0 if place is None else 1.0 / reach ** 2)
+    return distance, irradiance / max(irradiance.max(), 1e-30)
+
+
+def thickness_gains(folder, pair, fit, keep, target) -> dict:
+    """The gain of the key light carried through thin parts (see the module docstring)."""
+    distance, irradiance = key_through_thin_parts(folder)
+    prediction = np.asarray(fit.fitted[0], np.float64).reshape(target.shape)
+    base = mixed_psnr(target, keep, [prediction])
+    gains = {}
+    for s in (0.1, 0.26, 0.6):
+        carried = (np.where(np.isfinite(distance), np.exp(-s * distance), 0.0) * irradiance)[..., None]
+        gains[f"s = {s}/mm"] = mixed_psnr(
+            target, keep, [prediction, through_blur(np.broadcast_to(carried, target.shape), pair, fit.params)]) - base
+    return gains
+
+
+def residual_scales(fit, target, keep) -> dict:
+    """The residual's rms, and that of its part a 1.5 px Gaussian keeps and of the rest."""
+    from scipy import ndimage
+
+    inside = keep[..., 0] if keep.ndim == 3 else keep
+    matched = photometric_match(np.asarray(fit.fitted[0], np.float32), target.astype(np.float32),
+                                inside.astype(np.float32))
+    residual = np.where(inside, (target - matched)[..., 0], 0.0)
+    weight = ndimage.gaussian_filter(inside.astype(np.float64), 1.5)
+    smooth = ndimage.gaussian_filter(residual, 1.5) / np.maximum(weight, 1e-6)
+
+    def rms(x):
+        return float(np.sqrt(np.mean(np.square(x[inside]))))
+
+    return {"residual": rms(residual), "over a few pixels": rms(smooth), "pixel scale": rms(residual - smooth)}
+
+
+def facet_normal_gains(folder, pair, terms, keep) -> dict:
+    """Fit again with the source, the key light and the normal buffer rendered with each
+    triangle's own normal instead of the smoothly interpolated shading normal.
+
+    The target's medium is bounded by the flat triangles themselves, while the source's
+    Lambertian shading follows the interpolated normals; on meshes whose triangles are
+    2-4 px wide the two differ at the pixel scale. A gain here is error that a smooth
+    real face would not show.
+    """
+    from invsss.scenes import load_config, render_scene
+    import invsss.scenes.render as scene_render
+
+    interpolated = scene_render.scene_dict
+
+    def flat(*args, **kwargs):
+        scene = interpolated(*args, **kwargs)
+        scene["object"]["face_normals"] = True  # Mitsuba's mesh option: ignore the vertex normals
+        return scene
+
+    scene_render.scene_dict = flat
+    try:
+        with scene_folder():
+            flat_render = render_scene(load_config(scene_file(folder)), target=False)
+    finally:
+        scene_render.scene_dict = interpolated
+    target = np.asarray(pair["target"], np.float64)
+    source = np.asarray(flat_render.source, np.float32).reshape(np.shape(pair["source"]))
+    buffers = invsss.LightBuffers(np.asarray(flat_render.normal, np.float32), pair["buffers"].light,
+                                  key=np.asarray(flat_render.key, np.float32).reshape(np.shape(pair["buffers"].key)))
+    turned = np.degrees(np.arccos(np.clip(np.sum(np.asarray(flat_render.normal, np.float64)
+                                                 * np.asarray(pair["buffers"].normal, np.float64), axis=-1), -1, 1)))
+    found = {"median angle to the shading normal (deg)": float(np.median(turned[keep]))}
+    for label, image, light_buffers in (("shading normals", pair["source"], pair["buffers"]),
+                                        ("facet normals", source, buffers)):
+        fit = invsss.fit_pair(image, pair["target"], pair["depth"], pair["mask"], light_terms=terms,
+                              light_buffers=light_buffers)
+        found[label] = mixed_psnr(target, keep, [np.asarray(fit.fitted[0], np.float64).reshape(target.shape)])
+    return found
+
+
 def photometric_gain(prediction, blurred, keep) -> float:
     """The least-squares gain from ``blurred`` to ``prediction`` on ``keep`` (with an offset)."""
     p, b = prediction[keep].ravel(), blurred[keep].ravel()
@@ -153,6 +366,11 @@ def main() -> None:
     parser.add_argument("--terms", default="shift,law", help="the light terms of the fit (default shift,law)")
     parser.add_argument("--source-noise", action="store_true",
                         help="render each source again with another seed and measure its noise (slow)")
+    parser.add_argument("--thickness", action="store_true",
+                        help="ray-cast the scene's mesh and try the key light carried through thin parts")
+    parser.add_argument("--facet-normals", action="store_true",
+                        help="render the source, key light and normals again with the triangles' own normals "
+                        "and fit again (a few minutes)")
     parser.add_argument("pairs", nargs="+", type=pathlib.Path)
     args = parser.parse_args()
     for folder in args.pairs:
@@ -164,6 +382,15 @@ def main() -> None:
         cells = " | ".join(f"{name} {gain:+.2f}" for name, gain in gains.items() if name != "fit")
         print(f"{folder.name}: fit + {args.terms} {gains['fit']:.2f} dB (noise ceiling "
               f"{pair['info']['noise']['noise_ceiling_db']:.2f}); gain with a layer: {cells}", flush=True)
+        scales = residual_scales(fit, np.asarray(pair["target"], np.float64), keep)
+        print("  residual rms: " + ", ".join(f"{name} {value:.4f}" for name, value in scales.items()), flush=True)
+        if args.thickness:
+            found = thickness_gains(folder, pair, fit, keep, np.asarray(pair["target"], np.float64))
+            print("  gain with the key light through thin parts: "
+                  + ", ".join(f"{name} {gain:+.2f}" for name, gain in found.items()), flush=True)
+        if args.facet_normals:
+            found = facet_normal_gains(folder, pair, args.terms, keep)
+            print("  " + ", ".join(f"{name} {value:.2f}" for name, value in found.items()), flush=True)
         if args.source_noise:
             found = source_noise(folder, pair, fit, keep)
             print("  rms: " + ", ".join(f"{name} {value:.4f}" for name, value in found.items()
