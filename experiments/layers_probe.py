@@ -28,6 +28,11 @@ post hoc, on pairs written by ``invsss scene``:
    * ``along the light``: the prediction's first and second derivatives along the key
      light's image direction and the second across it, each in 5 bins of ``mu0`` (a
      shift and an elongation of the profile that vary with the incidence);
+   * ``other lights' angular law``: ``S - K`` in 8 x 8 bins of ``mu`` and of the cosine to
+     the scene's second light (its direction rebuilt from the scene file), each blurred;
+     and ``the law on the other lights``: the fit's law applied to ``S - K`` with that
+     direction, ``(S - K)(g - 1)`` blurred, one image (the terms give the key light alone
+     the law);
    * ``shape at 1-8 px``: convexity (smoothed normals' divergence) and a depth
      difference (smoothed depth minus depth) at 1, 2, 4 and 8 px, alone and times the
      prediction (16 images): light gathered in creases or lost at ridges over a few pixels.
@@ -51,7 +56,7 @@ post hoc, on pairs written by ``invsss scene``:
 
 Run it on tuning pairs only (data_synthetic/SPLIT.toml)::
 
-    python experiments/layers_probe.py [--source-noise] [--thickness] data_synthetic/pt_face_940 ...
+    python experiments/layers_probe.py [--source-noise] [--thickness] [--facet-normals] data_synthetic/pt_face_940 ...
 """
 
 from __future__ import annotations
@@ -157,7 +162,32 @@ def shape_at_scales(prediction, normal, depth, mask) -> list[np.ndarray]:
     return layers
 
 
-def layer_gains(pair, fit, keep) -> dict:
+def other_lights(folder, depth) -> np.ndarray | None:
+    """Unit vectors (H, W, 3) towards the scene's second light (the first of the others),
+    rebuilt from the scene file as ``light.exr`` is for the key; None for one light."""
+    from invsss.scenes import load_config
+    from invsss.scenes.render import light_directions
+
+    with scene_folder():
+        config = load_config(scene_file(folder))
+    if len(config.lights) < 2:
+        return None
+    return light_directions(config.model_copy(update={"lights": config.lights[1:]}), depth)
+
+
+def fill_law(fit, pair, fill_light) -> list[np.ndarray]:
+    """The law (the fit's ``w``) applied to the other lights' part ``S - K`` as the fit
+    applies it to the key's, with the other light's direction: ``(S - K)(g - 1)`` blurred."""
+    from invsss.forward.light_terms import reflectance_law
+
+    albedo = np.asarray(fit.light_terms["law"], np.float32)  # one w, or one per channel
+    gain = np.asarray(reflectance_law(np.asarray(pair["buffers"].normal, np.float32),
+                                      fill_light.astype(np.float32), albedo), np.float64)
+    rest = np.asarray(pair["source"], np.float64) - np.asarray(pair["buffers"].key, np.float64)
+    return [through_blur(rest * (gain - 1.0), pair, fit.params)]
+
+
+def layer_gains(pair, fit, keep, fill_light=None) -> dict:
     """The PSNR gain of each candidate layer mixed with the fit's prediction (dB)."""
     source, target = (np.asarray(pair[k], np.float64) for k in ("source", "target"))
     key = np.asarray(pair["buffers"].key, np.float64)
@@ -184,6 +214,13 @@ def layer_gains(pair, fit, keep) -> dict:
         "along the light": along_the_light(prediction, light, mu0),
         "shape at 1-8 px": shape_at_scales(prediction, normal, np.asarray(pair["depth"], np.float64), pair["mask"]),
     }
+    if fill_light is not None:
+        _, fill_mu0, _ = cosines(normal, fill_light)
+        layers["other lights' angular law"] = [through_blur((source - key) * a * b, pair, fit.params)
+                                               for a in cosine_bins(mu, 8) for b in cosine_bins(fill_mu0, 8)
+                                               if np.any((a * b)[keep])]
+        if fit.light_terms and fit.light_terms.get("law") is not None:
+            layers["the law on the other lights"] = fill_law(fit, pair, fill_light)
     base = psnr([prediction])
     return {"fit": base, **{name: psnr([prediction, *images]) - base for name, images in layers.items()}}
 
@@ -203,8 +240,7 @@ def source_noise(folder, pair, fit, keep) -> dict:
     gain = photometric_gain(np.asarray(fit.fitted[0], np.float64).reshape(source.shape[:2] + (-1,)),
                             through_blur(source, pair, fit.params), keep)
     blurred_noise = gain * through_blur(noise, pair, fit.params)
-    matched = photometric_match(np.asarray(fit.fitted[0], np.float32), pair["target"], keep.astype(np.float32))
-    residual = np.asarray(pair["target"], np.float64) - matched
+    residual = fit_residual(fit, np.asarray(pair["target"], np.float64), keep)
 
     def rms(x):
         return float(np.sqrt(np.mean(np.square(x[keep]))))
@@ -296,14 +332,21 @@ def thickness_gains(folder, pair, fit, keep, target) -> dict:
     return gains
 
 
+def fit_residual(fit, target, keep) -> np.ndarray:
+    """The target minus the fit's prediction after the per-channel gain and offset on ``keep``
+    (as ``experiments/fidelity.py`` scores)."""
+    matched = photometric_match(np.asarray(fit.fitted[0], np.float32), target.astype(np.float32),
+                                keep.astype(np.float32))
+    return target - matched
+
+
 def residual_scales(fit, target, keep) -> dict:
-    """The residual's rms, and that of its part a 1.5 px Gaussian keeps and of the rest."""
+    """The residual's rms (first channel), and that of its part a 1.5 px Gaussian keeps
+    and of the rest."""
     from scipy import ndimage
 
     inside = keep[..., 0] if keep.ndim == 3 else keep
-    matched = photometric_match(np.asarray(fit.fitted[0], np.float32), target.astype(np.float32),
-                                inside.astype(np.float32))
-    residual = np.where(inside, (target - matched)[..., 0], 0.0)
+    residual = np.where(inside, fit_residual(fit, target, inside)[..., 0], 0.0)
     weight = ndimage.gaussian_filter(inside.astype(np.float64), 1.5)
     smooth = ndimage.gaussian_filter(residual, 1.5) / np.maximum(weight, 1e-6)
 
@@ -378,7 +421,7 @@ def main() -> None:
         keep = eroded(pair["mask"], 2) > 0
         fit = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"],
                               light_terms=args.terms, light_buffers=pair["buffers"])
-        gains = layer_gains(pair, fit, keep)
+        gains = layer_gains(pair, fit, keep, other_lights(folder, np.asarray(pair["depth"], np.float64)))
         cells = " | ".join(f"{name} {gain:+.2f}" for name, gain in gains.items() if name != "fit")
         print(f"{folder.name}: fit + {args.terms} {gains['fit']:.2f} dB (noise ceiling "
               f"{pair['info']['noise']['noise_ceiling_db']:.2f}); gain with a layer: {cells}", flush=True)
