@@ -356,9 +356,10 @@ def residual_scales(fit, target, keep) -> dict:
     return {"residual": rms(residual), "over a few pixels": rms(smooth), "pixel scale": rms(residual - smooth)}
 
 
-def facet_normal_gains(folder, pair, terms, keep) -> dict:
+def facet_normal_gains(folder, pair, fit, terms, keep) -> dict:
     """Fit again with the source, the key light and the normal buffer rendered with each
-    triangle's own normal instead of the smoothly interpolated shading normal.
+    triangle's own normal instead of the smoothly interpolated shading normal, beside
+    ``fit`` (the same terms on the pair as it is).
 
     The target's medium is bounded by the flat triangles themselves, while the source's
     Lambertian shading follows the interpolated normals; on meshes whose triangles are
@@ -387,13 +388,14 @@ def facet_normal_gains(folder, pair, terms, keep) -> dict:
                                   key=np.asarray(flat_render.key, np.float32).reshape(np.shape(pair["buffers"].key)))
     turned = np.degrees(np.arccos(np.clip(np.sum(np.asarray(flat_render.normal, np.float64)
                                                  * np.asarray(pair["buffers"].normal, np.float64), axis=-1), -1, 1)))
-    found = {"median angle to the shading normal (deg)": float(np.median(turned[keep]))}
-    for label, image, light_buffers in (("shading normals", pair["source"], pair["buffers"]),
-                                        ("facet normals", source, buffers)):
-        fit = invsss.fit_pair(image, pair["target"], pair["depth"], pair["mask"], light_terms=terms,
-                              light_buffers=light_buffers)
-        found[label] = mixed_psnr(target, keep, [np.asarray(fit.fitted[0], np.float64).reshape(target.shape)])
-    return found
+    flat_fit = invsss.fit_pair(source, pair["target"], pair["depth"], pair["mask"], light_terms=terms,
+                               light_buffers=buffers)
+
+    def psnr(result):
+        return mixed_psnr(target, keep, [np.asarray(result.fitted[0], np.float64).reshape(target.shape)])
+
+    return {"median angle to the shading normal (deg)": float(np.median(turned[keep])),
+            "shading normals": psnr(fit), "facet normals": psnr(flat_fit)}
 
 
 def photometric_gain(prediction, blurred, keep) -> float:
@@ -432,7 +434,7 @@ def main() -> None:
             print("  gain with the key light through thin parts: "
                   + ", ".join(f"{name} {gain:+.2f}" for name, gain in found.items()), flush=True)
         if args.facet_normals:
-            found = facet_normal_gains(folder, pair, args.terms, keep)
+            found = facet_normal_gains(folder, pair, fit, args.terms, keep)
             print("  " + ", ".join(f"{name} {value:.2f}" for name, value in found.items()), flush=True)
         if args.source_noise:
             found = source_noise(folder, pair, fit, keep)
