@@ -133,6 +133,8 @@ def load_scene_pair(folder: pathlib.Path) -> dict:
             normal=invsss.read_image(folder / "normal.exr") if (folder / "normal.exr").is_file() else None,
             light=invsss.read_image(folder / "light.exr") if (folder / "light.exr").is_file() else None,
             key=invsss.read_image(folder / "key.exr") if (folder / "key.exr").is_file() else None,
+            fill_light=(invsss.read_image(folder / "fill_light.exr") if (folder / "fill_light.exr").is_file()
+                        else None),
         ),
     }
 
@@ -354,7 +356,8 @@ def main() -> None:
     for group in (g for g in media.values() if len(g) > 1 and not args.lean):
         for terms in (t for t in TRANSFER_ROWS if t in term_rows):
             data = [invsss.ImagePair(p["source"], p["target"], p["depth"], p["mask"], normal=p["buffers"].normal,
-                                     light=p["buffers"].light, key=p["buffers"].key) for p in group]
+                                     light=p["buffers"].light, key=p["buffers"].key,
+                                     fill_light=p["buffers"].fill_light) for p in group]
             joint = invsss.fit_pairs(data, light_terms=terms, **fit_options)
             fitted_sets = [("", joint)]
             if terms in FREE_PROFILE_ROWS:

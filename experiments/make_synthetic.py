@@ -881,7 +881,10 @@ mm, 0 off the head), `mask.png`, `normal.exr` (the shading normals a renderer wo
 have), `coverage.exr`, `light.exr` (camera-space unit vectors towards the key light, the
 buffer of the `shift` light term), `key.exr` (the source lit by the key light alone, same
 spp and seed, the buffer of the `law` light term; `source - key` is the fill light's
-part, with Monte Carlo noise of both passes) and `scene.json` (the resolved scene, seeds,
+part, with Monte Carlo noise of both passes), `fill_light.exr` (camera-space unit vectors
+towards the second light, the buffer of the `fill` light term; written into the pairs
+rendered before it existed by `make_synthetic.py --fill-light-only`, from their
+`scene.json` and `depth.exr`) and `scene.json` (the resolved scene, seeds,
 spp, render times and the noise estimate). There are no true screen-space parameters:
 these pairs measure how well the model can match real light transport
 (`experiments/fidelity.py`).
@@ -913,6 +916,31 @@ def make_path_traced(name: str, out: Path) -> None:
     write_scene_folder(result, out / name, overwrite=True)
     print(f"{name}: {result.info['render_seconds']['total']:.0f} s, noise ceiling "
           f"{result.info['noise']['noise_ceiling_db']:.1f} dB", flush=True)
+
+
+def add_fill_light(name: str, out: Path) -> None:
+    """Write ``fill_light.exr`` into a path-traced pair rendered before that buffer existed.
+
+    It is the direction towards the scene's second light, computed from the folder's
+    own ``scene.json`` and ``depth.exr`` exactly as :func:`invsss.scenes.write_scene`
+    computes it now, so nothing is rendered; the folder's manifest gains the file.
+    """
+    from invsss.io import read_image, write_image
+    from invsss.io.result_dir import MANIFEST_NAME
+    from invsss.scenes import parse_config
+    from invsss.scenes.render import light_directions
+
+    folder = out / name
+    config = parse_config(json.loads((folder / "scene.json").read_text())["config"], "scene.json")
+    if len(config.lights) < 2:
+        return
+    depth = read_image(folder / "depth.exr")[..., 0]
+    write_image(folder / "fill_light.exr", light_directions(config, depth, light=1).astype(np.float32))
+    manifest = json.loads((folder / MANIFEST_NAME).read_text())
+    if "fill_light.exr" not in manifest["files"]:
+        manifest["files"].insert(manifest["files"].index("scene.json"), "fill_light.exr")
+        (folder / MANIFEST_NAME).write_text(json.dumps(manifest, indent=2) + "\n")
+    print(f"{name}: wrote fill_light.exr", flush=True)
 
 
 def _object_label(info: dict) -> str:
@@ -954,7 +982,14 @@ def main(argv=None) -> int:
     parser.add_argument("--scenes", nargs="+", choices=every, default=every)
     parser.add_argument("--skip-path-traced", action="store_true",
                         help="make the model-made pairs only (the path-traced ones take minutes each)")
+    parser.add_argument("--fill-light-only", action="store_true",
+                        help="render nothing: write fill_light.exr into the chosen path-traced pairs already "
+                        "in --out from their scene.json and depth.exr")
     args = parser.parse_args(argv)
+    if args.fill_light_only:
+        for name in (n for n in args.scenes if n in PATH_TRACED and (args.out / n / "scene.json").is_file()):
+            add_fill_light(name, args.out)
+        return 0
     chosen = [name for name in args.scenes if not (args.skip_path_traced and name in PATH_TRACED)]
     for name in chosen:
         if name in SCENES:

@@ -16,7 +16,8 @@ def _unit(v):
 
 def dome_with_two_lights(size=40, seed=2):
     """A textured dome lit by a key light from the upper left and a weaker fill
-    from the right, RGB: the source, the key light's part, and the buffers."""
+    from the right, RGB: the source, the key light's part, and the buffers (the
+    fill's direction too)."""
     rng = np.random.default_rng(seed)
     texture = ndimage.gaussian_filter(rng.uniform(0.0, 1.0, (size, size)), 1.5) * 2.0 + 0.3
     texture[:, 14:17] *= 0.3
@@ -30,8 +31,9 @@ def dome_with_two_lights(size=40, seed=2):
     key = albedo * 0.9 * np.clip(normal @ to_key, 0.0, 1.0)[..., None]
     source = key + albedo * 0.4 * np.clip(normal @ to_fill, 0.0, 1.0)[..., None]
     light = np.broadcast_to(to_key, normal.shape).copy()
+    fill_light = np.broadcast_to(to_fill, normal.shape).copy()
     mask = (x**2 + y**2 < 0.85).astype(float)
-    return source, depth, mask, LightBuffers(normal=normal, light=light, key=key)
+    return source, depth, mask, LightBuffers(normal=normal, light=light, key=key, fill_light=fill_light)
 
 
 PROFILE = {"weights": [0.5, 0.5], "variances": [0.5, 2.0]}

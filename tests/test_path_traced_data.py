@@ -19,7 +19,7 @@ import pytest
 import invsss
 from invsss.estimator.diagnostics import masked_psnr
 from invsss.scenes import load_config, parse_config
-from invsss.scenes.render import SCENE_FILES
+from invsss.scenes.render import SCENE_FILES, light_directions
 from invsss.scenes.split import read_split
 
 REPO = Path(__file__).resolve().parent.parent
@@ -31,7 +31,8 @@ CONFIGS = {"pt_face_940": "face_940.toml", "pt_face_940_turned": "face_940_turne
            "pt_face_ear_backlit_940": "face_ear_backlit_940.toml",
            "pt_fran_dir_940": "fran_dir_940.toml", "pt_fran_dir_rough_940": "fran_dir_rough_940.toml",
            "pt_proc_lowpoly_dir_940": "proc_lowpoly_dir_940.toml",
-           "pt_face_rough_area_940": "face_rough_area_940.toml"}
+           "pt_face_rough_area_940": "face_rough_area_940.toml",
+           "pt_fran_point_fill_940": "fran_point_fill_940.toml", "pt_proc_dir_fill_940": "proc_dir_fill_940.toml"}
 #: The pairs bundled before the split (issue 29): every one of them is a tuning pair.
 FIRST_PAIRS = ("pt_face_940", "pt_face_940_turned", "pt_face_skin1")
 #: Each pair folder stays about as small as the first ones (about 400 KB; 600 KB at most).
@@ -124,7 +125,7 @@ def test_pair_folder_is_small(name):
 @pytest.mark.parametrize("name", PAIRS)
 def test_pair_is_reproducible_from_its_scene_description(name, monkeypatch):
     folder = DATA / name
-    assert all((folder / f).is_file() for f in SCENE_FILES)
+    assert all((folder / f).is_file() for f in SCENE_FILES if f != "fill_light.exr")
     info = json.loads((folder / "scene.json").read_text())
     # The config recorded at render time is the shipped one, mesh path relative to
     # the repository (where make_synthetic runs) and mesh bytes pinned by hash.
@@ -182,6 +183,13 @@ def test_pair_images_agree_with_scene_json(name):
         assert vectors.shape == (camera["height"], camera["width"], 3)
         np.testing.assert_allclose(np.linalg.norm(vectors[skin], axis=-1), 1.0, atol=1e-3)
     assert invsss.read_image(folder / "key.exr").shape == source.shape
+    # The fill term's buffer: the directions towards the second light, as the scene file places it.
+    config = parse_config(info["config"], "scene.json")
+    assert (folder / "fill_light.exr").is_file() == (len(config.lights) > 1)
+    if len(config.lights) > 1:
+        fill = invsss.read_image(folder / "fill_light.exr")
+        depth = invsss.read_image(folder / "depth.exr")
+        np.testing.assert_allclose(fill[skin], light_directions(config, depth, light=1)[skin], atol=1e-5)
     coverage = invsss.read_image(folder / "coverage.exr")[..., 0]
     np.testing.assert_array_equal(coverage >= 0.5, skin)
 

@@ -85,6 +85,10 @@ def add_parser(subparsers) -> None:
                         help="the source lit by the key light alone (the light --light points to), the "
                         "source's size and channels, read as the source is (repeat per pair; "
                         "'invsss scene' writes it as key.exr)")
+    parser.add_argument("--fill-light", action="append", default=[], metavar="FILE",
+                        help="camera-space unit vectors towards the other lights (one direction standing "
+                        "for every light but the key), float EXR or NPY (H, W, 3), for the 'fill' light "
+                        "term (repeat per pair; 'invsss scene' writes the second light's as fill_light.exr)")
     parser.add_argument(
         "--linear-codes",
         action="store_true",
@@ -169,18 +173,22 @@ def _check_pair_counts(args: argparse.Namespace) -> int:
 
 
 def _with_light_buffers(pairs, args):
-    """The pairs with the --normal, --light and --key buffers attached (the vectors read
-    as linear floats, the key as the source is)."""
-    for flag in ("light", "normal", "key"):
+    """The pairs with the --normal, --light, --key and --fill-light buffers attached (the
+    vectors read as linear floats, the key as the source is)."""
+    for flag in ("light", "normal", "key", "fill_light"):
         given = getattr(args, flag)
         if given and len(given) != len(pairs):
-            raise InvalidInputError(f"--{flag}: expected one per pair ({len(pairs)}), got {len(given)}")
+            raise InvalidInputError(
+                f"--{flag.replace('_', '-')}: expected one per pair ({len(pairs)}), got {len(given)}")
     out = []
     for k, pair in enumerate(pairs):
         normal = read_light_buffer(args.normal[k], "normal", pair.mask.shape) if args.normal else None
         light = read_light_buffer(args.light[k], "light", pair.mask.shape) if args.light else None
         key = read_key_buffer(args.key[k], pair.source, args.linear_codes) if args.key else None
-        out.append(ImagePair(pair.source, pair.target, pair.depth, pair.mask, normal=normal, light=light, key=key))
+        fill = (read_light_buffer(args.fill_light[k], "fill-light", pair.mask.shape) if args.fill_light
+                else None)
+        out.append(ImagePair(pair.source, pair.target, pair.depth, pair.mask, normal=normal, light=light, key=key,
+                             fill_light=fill))
     return out
 
 

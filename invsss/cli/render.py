@@ -54,6 +54,9 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--key", metavar="FILE",
                         help="the image lit by the key light alone, the image's size and channels: needed "
                         "when PARAMS holds a fitted 'law' light term (with --normal and --light)")
+    parser.add_argument("--fill-light", metavar="FILE",
+                        help="camera-space unit vectors towards the other lights, float EXR or NPY "
+                        "(H, W, 3): needed when PARAMS holds a fitted 'fill' light term")
     parser.add_argument("--no-light-terms", action="store_true",
                         help="render the blur alone, leaving out the light terms PARAMS may hold")
     add_model_arguments(parser)
@@ -78,13 +81,13 @@ def _render_light_terms(args, extras, image):
             path = getattr(args, flag)
             if path is None:
                 raise InvalidInputError(
-                    f"{args.params}: holds the {term!r} light term, which needs --{flag} "
+                    f"{args.params}: holds the {term!r} light term, which needs --{flag.replace('_', '-')} "
                     f"(or --no-light-terms to render without the light terms)"
                 )
             if flag == "key" and flag not in buffers:
                 buffers[flag] = read_key_buffer(path, image, args.linear_codes)
             elif flag not in buffers:
-                buffers[flag] = read_light_buffer(path, flag, shape)
+                buffers[flag] = read_light_buffer(path, flag.replace("_", "-"), shape)
     return terms, LightBuffers(**buffers)
 
 

@@ -179,6 +179,10 @@ def _parameter_lines(result) -> list[str]:
             s_err = terms["stderr"].get("law_strength")
             parts.append(f"law albedo {shown} (stderr {spread}), strength {strength:.3g} "
                          f"(stderr {'?' if s_err is None else f'{s_err:.2g}'})")
+        if "fill" in terms:
+            f_err = terms["stderr"].get("fill")
+            parts.append(f"law on the other lights, strength {terms['fill']:.3g} "
+                         f"(stderr {'?' if f_err is None else f'{f_err:.2g}'})")
         lines.append("light terms: " + ", ".join(parts))
         if "psnr_plain" in terms:
             # Measured: the plain fit, and this fit with each term at its identity.

@@ -132,7 +132,7 @@ def fit_pair(
         pair = (source, target, depth, mask)
     elif isinstance(light_buffers, LightBuffers):
         pair = ImagePair(source, target, depth, mask, normal=light_buffers.normal, light=light_buffers.light,
-                         key=light_buffers.key)
+                         key=light_buffers.key, fill_light=light_buffers.fill_light)
     else:
         raise InvalidInputError(f"light_buffers: expected an invsss.LightBuffers, got {type(light_buffers).__name__}")
     return run_fit([pair], True, _options(options, keywords), progress, stop)

@@ -29,11 +29,11 @@ def _check_fit_weight(fit_weight, shape, mask, name: str):
 
 
 def prepare_pair(source, target, depth, mask=None, *, fit_weight=None, normal=None, light=None, key=None,
-                 name: str = "") -> ImagePair:
+                 fill_light=None, name: str = "") -> ImagePair:
     """Validate one pair and convert it to float64 (call under ``jax.enable_x64``).
 
     ``mask=None`` fits every pixel. ``name`` prefixes the input names in errors.
-    ``normal``, ``light`` and ``key`` are the optional buffers of the light-aware
+    ``normal``, ``light``, ``key`` and ``fill_light`` are the optional buffers of the light-aware
     terms (:class:`invsss.LightBuffers`), checked (and the vectors normalised) here.
 
     Examples
@@ -53,16 +53,18 @@ def prepare_pair(source, target, depth, mask=None, *, fit_weight=None, normal=No
     if fit_weight is not None:
         fit_weight = _check_fit_weight(fit_weight, np.shape(mask), mask, f"{name}fit_weight")
     channels = np.shape(source)[2] if np.ndim(source) == 3 else 1
-    buffers = LightBuffers(normal, light, key).checked(np.shape(mask), mask, prefix=name, channels=channels)
+    buffers = LightBuffers(normal, light, key, fill_light).checked(np.shape(mask), mask, prefix=name,
+                                                                   channels=channels)
     return ImagePair(source, target, depth, mask, fit_weight=fit_weight, normal=buffers.normal,
-                     light=buffers.light, key=buffers.key).as_float64()
+                     light=buffers.light, key=buffers.key, fill_light=buffers.fill_light).as_float64()
 
 
 def _unpack(pair, index: int):
     if isinstance(pair, ImagePair):
-        return pair.source, pair.target, pair.depth, pair.mask, pair.fit_weight, pair.normal, pair.light, pair.key
+        return (pair.source, pair.target, pair.depth, pair.mask, pair.fit_weight, pair.normal, pair.light,
+                pair.key, pair.fill_light)
     if isinstance(pair, (tuple, list)) and len(pair) in (3, 4):
-        return (*pair, *(None,) * (8 - len(pair)))
+        return (*pair, *(None,) * (9 - len(pair)))
     raise InvalidInputError(
         f"pairs[{index}]: expected a (source, target, depth, mask) tuple or an "
         f"invsss.ImagePair, got {type(pair).__name__}"
@@ -75,9 +77,9 @@ def prepare_pairs(pairs) -> tuple[ImagePair, ...]:
         raise InvalidInputError("pairs: expected a non-empty sequence of (source, target, depth, mask)")
     out = []
     for i, p in enumerate(pairs):
-        source, target, depth, mask, fit_weight, normal, light, key = _unpack(p, i)
+        source, target, depth, mask, fit_weight, normal, light, key, fill_light = _unpack(p, i)
         out.append(prepare_pair(source, target, depth, mask, fit_weight=fit_weight, normal=normal, light=light,
-                                key=key, name=f"pairs[{i}]." if len(pairs) > 1 else ""))
+                                key=key, fill_light=fill_light, name=f"pairs[{i}]." if len(pairs) > 1 else ""))
     out = tuple(out)
     layouts = {p.channels for p in out}
     if len(layouts) > 1:

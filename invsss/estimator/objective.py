@@ -47,17 +47,21 @@ _AFTER_BLUR = tuple(LIGHT_UNKNOWNS[term] for term in AFTER_BLUR)
 #: The unknowns the blurred basis images depend on (the grey mix apart: the blur is
 #: linear in the image); the others act after the blur.
 _BLURRED_BY = ("sss_level", "correction", "maxdd", "variances", "weights", LIGHT_UNKNOWNS["law"],
-               LIGHT_UNKNOWNS["law_strength"])
+               LIGHT_UNKNOWNS["law_strength"], LIGHT_UNKNOWNS["fill"])
 
 
 def _lit_source(pair, natural):
-    """The pair with the ``law`` term applied to its source (docs/model.md, section 8),
-    when ``w`` is among the natural values: the blur of the changed source is the
-    model's, and the difference Jacobian sees ``w`` as it sees any blur parameter."""
+    """The pair with the ``law`` term (and ``fill``, when its strength is among the
+    natural values) applied to its source (docs/model.md, section 8), when ``w`` is
+    among the natural values: the blur of the changed source is the model's, and
+    the difference Jacobian sees ``w`` as it sees any blur parameter."""
     if "law" not in natural:
         return pair
     gain = reflectance_law(pair.normal, pair.light, natural["law"])
     lit = law_source(pair.source, pair.key, pair.mask, gain, natural["law_strength"])
+    if "fill_strength" in natural:
+        fill_gain = reflectance_law(pair.normal, pair.fill_light, natural["law"])
+        lit = law_source(lit, pair.source - pair.key, pair.mask, fill_gain, natural["fill_strength"])
     return eqx.tree_at(lambda p: p.source, pair, lit)
 
 

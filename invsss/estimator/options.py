@@ -139,13 +139,14 @@ class FitOptions:
         :attr:`FitResult.warnings`. A clipped pixel reads darker than the light that
         reached it; about a hundred of them (0.4 % of a face) moved a photograph's
         fit to a basin with sss_level 50 % high.
-    light_terms : sequence of {"shift", "grazing", "incidence", "law"}, a mapping, or a string
+    light_terms : sequence of {"shift", "grazing", "incidence", "law", "fill"}, a mapping, or a string
         Add the light-aware terms of docs/model.md, section 8, to the blur: a
         shift of the scattered light away from the light (``kappa``, mm), a
         gain towards grazing view (``gamma``), a gain towards grazing
         incidence of the key light (``beta``), and a multiple-scattering
         reflectance law for the key light's part of the source (``w``, an
-        albedo in (0, 1) per source channel). Names are fitted; a mapping
+        albedo in (0, 1) per source channel), and the same law for the other
+        lights' part (``fill``, its strength; needs ``law``). Names are fitted; a mapping
         ``{"shift": 1.3, "grazing": None}`` holds a term at a value (a value
         measured on a registered pair, for an aligned fit of a photograph) and
         fits one given None; a comma-separated string (``"shift=1.3,grazing"``,
@@ -370,4 +371,8 @@ def check_light_terms(terms) -> tuple[tuple[str, ...], dict[str, float]]:
         if value is None:
             continue
         held[name] = _held_albedo(value) if name == "law" else _held_number(name, value)
+    if "fill" in entries and "law" not in entries:
+        raise InvalidInputError(
+            "light_terms: 'fill' applies the law's albedo to the other lights; name 'law' too (e.g. \"law,fill\")"
+        )
     return tuple(t for t in LIGHT_TERM_NAMES if t in entries), held

@@ -41,6 +41,7 @@ law            ``sigmoid(ref + z)``, one per source   ``logit(0.9)``: an albedo
                                                      visible skins of docs/model.md,
                                                      section 8
 law_strength   ``z``                                 0 (Lambert: the plain model)
+fill_strength  ``z``                                 0 (the other lights Lambertian)
 =============  ====================================  ===============================
 
 ``softplus`` keeps the correction non-negative while letting it approach 0
@@ -86,9 +87,10 @@ GAUGES = ("variances", "sss_level")
 #: The estimator's unknown for each light-aware term (docs/model.md, section 8);
 #: ``shift`` is ``light_shift`` here so that it is not read as a warp's shift. The
 #: law has two: its albedo and its strength (0 is the identity, so that a fit with
-#: the law contains the fit without it).
+#: the law contains the fit without it); ``fill``, the law on the other lights, has
+#: a strength of its own and shares the albedo.
 LIGHT_UNKNOWNS = {"shift": "light_shift", "grazing": "grazing", "incidence": "incidence", "law": "law",
-                  "law_strength": "law_strength"}
+                  "law_strength": "law_strength", "fill": "fill_strength"}
 
 
 

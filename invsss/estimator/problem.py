@@ -146,6 +146,12 @@ def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, 
         blocks.append(("law_strength", ()))
         start["law_strength"] = 1.0
         reference["law_strength"] = 1.0
+    if "fill" in light_terms and "fill" not in light_fixed:
+        # The law on the other lights: the same albedo, a strength of its own
+        # (0 leaves them Lambertian), on from the scan's starts like the law's.
+        blocks.append(("fill_strength", ()))
+        start["fill_strength"] = 1.0
+        reference["fill_strength"] = 1.0
     param = Parametrisation(
         tuple(blocks), {k_: _on_device(v) for k_, v in reference.items()}, values
     )

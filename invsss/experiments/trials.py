@@ -102,8 +102,9 @@ class Trial:
         options = {k: v for k, v in self.options.items()
                    if not (k in LATER_OPTIONS and v == LATER_OPTIONS[k])}
         # The buffers count only for a trial that reads them: a folder that
-        # gained light.exr keeps the ids of its trials without light terms, and
-        # one that gained key.exr those without the law.
+        # gained light.exr keeps the ids of its trials without light terms, one
+        # that gained key.exr those without the law, and one that gained
+        # fill_light.exr those without the fill.
         buffers = [role for role in BUFFER_FILES if role not in self.buffer_roles]
         return {
             "task": self.task,
@@ -116,13 +117,15 @@ class Trial:
     @property
     def buffer_roles(self) -> tuple[str, ...]:
         """The buffers this trial reads: none without light terms, the key light's
-        image only with the law."""
+        image only with the law, the other lights' direction only with the fill."""
         from ..estimator.options import check_light_terms
 
         if not self.options.get("light_terms"):
             return ()
         terms, held = check_light_terms(self.options["light_terms"])
-        return ("normal", "light", "key") if "law" in (*terms, *held) else ("normal", "light")
+        named = (*terms, *held)
+        return ("normal", "light", *(("key",) if "law" in named else ()),
+                *(("fill_light",) if "fill" in named else ()))
 
     def to_dict(self) -> dict:
         """A plain mapping (for another process, or JSON); :meth:`from_dict` reverses it."""

@@ -31,6 +31,16 @@ key, normal and light buffers)
     (the plain model), ``a = 1`` the law; no ``w`` alone is the identity, which
     is why the strength exists: a fit with the law contains the fit without it.
 
+``fill`` (a strength ``b``; needs the law and the key, normal and fill_light buffers)
+    The same law, with the same ``w``, for the other lights: their part ``S - K``
+    of the source, with the direction ``l_f`` towards them (one direction stands
+    for all of them; ``invsss scene`` writes the second light's as
+    ``fill_light.exr``):
+
+        S' = S + m a K (g(n, l) - 1) + m b (S - K) (g(n, l_f) - 1)
+
+    ``b = 0`` (the default) is the identity: the law on the key light alone.
+
 The other three act on the blurred image:
 
 ``shift`` (``kappa``, scene units, needs the light buffer)
@@ -106,12 +116,12 @@ __all__ = [
 ]
 
 #: The terms, in the order of docs/model.md, section 8, with the buffers each needs.
-LIGHT_TERM_NAMES = ("shift", "grazing", "incidence", "law")
+LIGHT_TERM_NAMES = ("shift", "grazing", "incidence", "law", "fill")
 #: The fields of :class:`LightTerms` (a params file's ``light_terms`` keys that set them).
 LIGHT_TERM_FIELDS = (*LIGHT_TERM_NAMES, "law_strength")
 NEEDED_BUFFERS = {"shift": ("light",), "grazing": ("normal",), "incidence": ("normal", "light"),
-                  "law": ("key", "normal", "light")}
-#: The terms applied to the blurred image (``law`` changes the source instead).
+                  "law": ("key", "normal", "light"), "fill": ("key", "normal", "fill_light")}
+#: The terms applied to the blurred image (``law`` and ``fill`` change the source instead).
 AFTER_BLUR = ("shift", "grazing", "incidence")
 
 #: Below this cosine of the view or of the key light's incidence the law's gain
@@ -154,6 +164,10 @@ class LightTerms(eqx.Module):
         ``a``: how much of the key light follows the law (0: Lambert, the
         identity; 1, the default: the law). Values outside [0, 1] extrapolate
         the blend; a fit warns about them.
+    fill : float
+        ``b``: how much of the other lights' part of the source follows the law
+        with the same albedo (0, the default: they stay Lambertian, the identity;
+        1: the law). Needs ``law``.
 
     Examples
     --------
@@ -164,6 +178,8 @@ class LightTerms(eqx.Module):
     (3,)
     >>> LightTerms(law=0.9, law_strength=0.0).used   # at strength 0 the law changes nothing
     ()
+    >>> LightTerms(law=0.9, fill=1.0).used            # the law on every light
+    ('law', 'fill')
     """
 
     shift: Float[Array, ""] = eqx.field(converter=float_array, default=0.0)
@@ -171,6 +187,7 @@ class LightTerms(eqx.Module):
     incidence: Float[Array, ""] = eqx.field(converter=float_array, default=0.0)
     law: Float[Array, "*C"] | None = eqx.field(converter=_albedo_or_none, default=None)
     law_strength: Float[Array, ""] = eqx.field(converter=float_array, default=1.0)
+    fill: Float[Array, ""] = eqx.field(converter=float_array, default=0.0)
 
     @property
     def used(self) -> tuple[str, ...]:
@@ -179,11 +196,13 @@ class LightTerms(eqx.Module):
             return not is_concrete(x) or float(x) != 0.0
 
         on = [t for t in AFTER_BLUR if nonzero(getattr(self, t))]
-        return tuple(on) + (("law",) if self.law is not None and nonzero(self.law_strength) else ())
+        if self.law is not None:
+            on += [t for t, strength in (("law", self.law_strength), ("fill", self.fill)) if nonzero(strength)]
+        return tuple(on)
 
     def check(self, name: str = "light_terms") -> None:
         """Raise :class:`InvalidInputError` for values outside the model's domain."""
-        for field in (*AFTER_BLUR, "law_strength"):
+        for field in (*AFTER_BLUR, "law_strength", "fill"):
             value = getattr(self, field)
             if not is_concrete(value):
                 continue
@@ -199,6 +218,10 @@ class LightTerms(eqx.Module):
                 raise InvalidInputError(
                     f"{name}.law: expected an albedo in (0, 1), or one per channel, got {w.tolist()!r}"
                 )
+        if self.law is None and (not is_concrete(self.fill) or float(self.fill) != 0.0):
+            raise InvalidInputError(
+                f"{name}.fill: the law on the other lights uses the law's albedo; give law too (an albedo in (0, 1))"
+            )
 
     def to_dict(self) -> dict:
         out = {field: float(getattr(self, field)) for field in AFTER_BLUR}
@@ -206,6 +229,8 @@ class LightTerms(eqx.Module):
             w = np.asarray(self.law, np.float64)
             out["law"] = float(w) if w.ndim == 0 else w.tolist()
             out["law_strength"] = float(self.law_strength)
+            if float(self.fill) != 0.0:
+                out["fill"] = float(self.fill)
         return out
 
 
@@ -266,8 +291,12 @@ class LightBuffers(eqx.Module):
         ``normalize(light_position - position)``.
     key : array, shape (H, W, C) or (H, W), optional
         The key light's part of the source: the source lit by that light alone,
-        in the source's units (the ``law`` term). Linear radiance; a noisy
-        render may dip slightly below 0.
+        in the source's units (the ``law`` and ``fill`` terms). Linear radiance; a
+        noisy render may dip slightly below 0.
+    fill_light : array, shape (H, W, 3), optional
+        Unit vectors from the surface point towards the other lights (the
+        ``fill`` term): one direction standing for every light but the key, such
+        as the strongest of them; ``invsss scene`` writes the second light's.
 
     Examples
     --------
@@ -281,18 +310,21 @@ class LightBuffers(eqx.Module):
     normal: Float[Array, "H W 3"] | None = None
     light: Float[Array, "H W 3"] | None = None
     key: Float[Array, "H W C"] | None = None
+    fill_light: Float[Array, "H W 3"] | None = None
 
     def checked(self, shape, mask, prefix: str = "light_buffers.", channels: int | None = None) -> "LightBuffers":
         """Validated, normalised float64 NumPy copies for an image of ``shape`` (H, W).
 
         ``channels`` is the source's channel count, which the key buffer must
         have (any count when None); a (H, W) key gets a channel axis. Errors
-        name the buffer as ``prefix + "normal"`` (or ``"light"``, ``"key"``).
+        name the buffer as ``prefix + "normal"`` (or ``"light"``, ``"key"``, ``"fill_light"``).
         """
         return LightBuffers(
             None if self.normal is None else _check_unit_vectors(self.normal, shape, mask, f"{prefix}normal"),
             None if self.light is None else _check_unit_vectors(self.light, shape, mask, f"{prefix}light"),
             None if self.key is None else _check_key(self.key, shape, channels, f"{prefix}key", mask),
+            None if self.fill_light is None else _check_unit_vectors(self.fill_light, shape, mask,
+                                                                     f"{prefix}fill_light"),
         )
 
     def require(self, terms, prefix: str = "light_buffers.") -> None:
@@ -361,9 +393,9 @@ def law_source(
     source: Float[Array, "H W C"], key: Float[Array, "H W C"], mask: Float[Array, "H W"],
     gain: Float[Array, "H W C"], strength=1.0,
 ) -> Float[Array, "H W C"]:
-    """``S + m a K (gain - 1)``: the key light's part of the source under the law's
-    ``gain`` (:func:`reflectance_law`) with strength ``a``, the rest of the source
-    as it is."""
+    """``S + m a K (gain - 1)``: the part ``K`` of the source lit by one light (the
+    key's, or ``S - K`` for the other lights) under the law's ``gain``
+    (:func:`reflectance_law`) with strength ``a``, the rest of the source as it is."""
     return source + strength * mask[..., None] * key * (gain - 1.0)
 
 
@@ -452,8 +484,8 @@ def apply_light_terms(blurred, depth, mask, params, terms: LightTerms, buffers: 
     return light_transport(blurred, mask, stretch, terms, offsets, grazing, incidence)
 
 
-def apply_law(image, mask, albedo, buffers: LightBuffers, strength=1.0):
-    """Apply the ``law`` term to a source image before :func:`invsss.render` blurs it.
+def apply_law(image, mask, albedo, buffers: LightBuffers, strength=1.0, fill=0.0):
+    """Apply the ``law`` (and ``fill``) term to a source image before :func:`invsss.render` blurs it.
 
     Parameters
     ----------
@@ -463,14 +495,18 @@ def apply_law(image, mask, albedo, buffers: LightBuffers, strength=1.0):
     albedo : float or array of shape (C,)
         ``w`` in (0, 1), one or one per channel.
     buffers : LightBuffers
-        With ``key`` (shape (H, W, C)), ``normal`` and ``light``.
+        With ``key`` (shape (H, W, C)), ``normal`` and ``light``; and
+        ``fill_light`` when ``fill`` is not 0.
     strength : float
-        ``a``: 0 leaves the image as it is, 1 (the default) applies the law.
+        ``a``: 0 leaves the key light's part as it is, 1 (the default) applies the law.
+    fill : float
+        ``b``: the same for the other lights' part ``S - K`` (0, the default: Lambert).
 
     Returns
     -------
     array, shape (H, W, C)
-        ``S + m a K (g - 1)``, ``g`` from :func:`reflectance_law`.
+        ``S + m a K (g(n, l) - 1) + m b (S - K) (g(n, l_f) - 1)``, ``g`` from
+        :func:`reflectance_law`.
 
     Examples
     --------
@@ -483,7 +519,11 @@ def apply_law(image, mask, albedo, buffers: LightBuffers, strength=1.0):
     """
     image = jnp.asarray(image)
     dtype = image.dtype
-    gain = reflectance_law(jnp.asarray(buffers.normal, dtype), jnp.asarray(buffers.light, dtype),
-                           jnp.asarray(albedo, dtype))
-    return law_source(image, jnp.asarray(buffers.key, dtype), jnp.asarray(mask, dtype), gain,
-                      jnp.asarray(strength, dtype))
+    normal, albedo = jnp.asarray(buffers.normal, dtype), jnp.asarray(albedo, dtype)
+    key, mask = jnp.asarray(buffers.key, dtype), jnp.asarray(mask, dtype)
+    gain = reflectance_law(normal, jnp.asarray(buffers.light, dtype), albedo)
+    out = law_source(image, key, mask, gain, jnp.asarray(strength, dtype))
+    if buffers.fill_light is None or (is_concrete(fill) and float(fill) == 0.0):
+        return out
+    fill_gain = reflectance_law(normal, jnp.asarray(buffers.fill_light, dtype), albedo)
+    return law_source(out, image - key, mask, fill_gain, jnp.asarray(fill, dtype))

@@ -50,6 +50,8 @@ class ImagePair(eqx.Module):
         of the light-aware terms (:mod:`invsss.forward.light_terms`; None without them).
     key : array, shape (H, W, C), or None
         The source lit by the key light alone (the ``law`` term; None without it).
+    fill_light : array, shape (H, W, 3), or None
+        Camera-space unit vectors towards the other lights (the ``fill`` term).
 
     Examples
     --------
@@ -70,13 +72,14 @@ class ImagePair(eqx.Module):
     normal: Float[Array, "H W 3"] | None = None
     light: Float[Array, "H W 3"] | None = None
     key: Float[Array, "H W C"] | None = None
+    fill_light: Float[Array, "H W 3"] | None = None
 
     @property
     def light_buffers(self):
         """The pair's buffers of the light-aware terms as an :class:`invsss.LightBuffers`."""
         from .light_terms import LightBuffers
 
-        return LightBuffers(self.normal, self.light, self.key)
+        return LightBuffers(self.normal, self.light, self.key, self.fill_light)
 
     @property
     def residual_weight(self) -> Float[Array, "H W"]:
@@ -105,6 +108,7 @@ class ImagePair(eqx.Module):
             _float64_or_none(self.normal),
             _float64_or_none(self.light),
             None if self.key is None else _as_hwc64(self.key),
+            _float64_or_none(self.fill_light),
         )
 
 

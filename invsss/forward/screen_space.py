@@ -366,8 +366,8 @@ def render(
             raise InvalidInputError(str(err)) from None
     depth, mask = jnp.asarray(depth, dtype), jnp.asarray(mask, dtype)
     buffers = None if light_terms is None else _light_buffers(light_terms, light_buffers, hw, mask, channels)
-    if buffers is not None and "law" in light_terms.used:
-        image = apply_law(image, mask, light_terms.law, buffers, light_terms.law_strength)
+    if buffers is not None and {"law", "fill"} & set(light_terms.used):
+        image = apply_law(image, mask, light_terms.law, buffers, light_terms.law_strength, light_terms.fill)
     out = _render(image, depth, mask, params, entry.name, tap_w, taps, strength, follow_surface)
     if buffers is not None and any(t in light_terms.used for t in AFTER_BLUR):
         out = apply_light_terms(out, depth, mask, params, light_terms, buffers)

@@ -121,7 +121,9 @@ def shader_constants(
         ``law`` term it adds ``lawAlbedo`` (``w`` for red, green and blue; one
         ``w`` is repeated), and :func:`to_hlsl` the key light's BRDF factor for
         the lighting pass (:data:`LAW_HLSL`); the three constants after the blur
-        are then written only when one of those terms is in use.
+        are then written only when one of those terms is in use. With the
+        ``fill`` term it adds ``lawFillStrength``, and :func:`to_hlsl` the same
+        factor for the other lights (``invsssOtherLightLaw``).
 
     Returns
     -------
@@ -177,11 +179,12 @@ def _light_constants(light_terms) -> dict:
     """``lightShift``, ``grazingGain``, ``incidenceGain`` and ``lawAlbedo`` of the terms in use."""
     if isinstance(light_terms, LightTerms):
         given = {term: getattr(light_terms, term) for term in light_terms.used}
-        if "law" in given:
-            given["law_strength"] = light_terms.law_strength
+        if "law" in given or "fill" in given:
+            given["law"], given["law_strength"] = light_terms.law, light_terms.law_strength
         after = [getattr(light_terms, term) for term in AFTER_BLUR]
     elif hasattr(light_terms, "get"):
-        given = {term: light_terms[term] for term in (*AFTER_BLUR, "law", "law_strength") if term in light_terms}
+        given = {term: light_terms[term] for term in (*AFTER_BLUR, "law", "law_strength", "fill")
+                 if term in light_terms}
         after = [light_terms.get(term, 0.0) for term in AFTER_BLUR]
     else:
         raise InvalidInputError(
@@ -193,7 +196,8 @@ def _light_constants(light_terms) -> dict:
     law = None if given.get("law") is None else np.asarray(given["law"], np.float64)
     # A params file from before the strength existed applied the law in full.
     strength = float(np.asarray(given.get("law_strength", 1.0), np.float64))
-    LightTerms(shift, grazing, incidence, law, strength).check()
+    fill = float(np.asarray(given.get("fill", 0.0), np.float64))
+    LightTerms(shift, grazing, incidence, law, strength, fill).check()
     out = {}
     if law is None or any(term in given for term in AFTER_BLUR):
         out.update(lightShift=shift, grazingGain=grazing, incidenceGain=incidence)
@@ -202,6 +206,8 @@ def _light_constants(light_terms) -> dict:
             raise InvalidInputError(f"light_terms.law: expected one albedo or three (RGB), got {law.size}")
         out["lawAlbedo"] = np.broadcast_to(law.ravel(), (3,)).tolist()
         out["lawStrength"] = strength
+        if fill != 0.0:
+            out["lawFillStrength"] = fill
     return out
 
 
@@ -241,7 +247,13 @@ float3 invsssHapkeH(float x, float3 w)
     return (1.0 + 2.0 * x) / (1.0 + 2.0 * x * sqrt(max(1.0 - w, 1e-12)));
 }
 
-float3 invsssKeyLightLaw(float3 normal, float3 toLight)
+"""
+
+#: One light's law factor, ``1 + a t (f_w / f_w(1, 1) - 1)``: LAW_NAME and
+#: LAW_STRENGTH are filled in for the key light (``lawStrength``) and, with the
+#: ``fill`` term, for the other lights (``lawFillStrength``).
+LAW_FACTOR_HLSL = """
+float3 LAW_NAME(float3 normal, float3 toLight)
 {
     float3 w = float3({prefix}lawAlbedo[0], {prefix}lawAlbedo[1], {prefix}lawAlbedo[2]);
     float nDotL = dot(normal, toLight);
@@ -250,8 +262,15 @@ float3 invsssKeyLightLaw(float3 normal, float3 toLight)
     float trust = saturate(min(normal.z, nDotL) / LAW_TRUST_PLACEHOLDER);
     float3 headOn = invsssHapkeH(1.0, w) * invsssHapkeH(1.0, w) / 2.0;
     float3 ratio = invsssHapkeH(mu, w) * invsssHapkeH(mu0, w) / max(mu + mu0, 1e-6) / headOn;
-    return 1.0 + {prefix}lawStrength * trust * (ratio - 1.0);
+    return 1.0 + {prefix}LAW_STRENGTH * trust * (ratio - 1.0);
 }
+"""
+
+#: The comment :func:`to_hlsl` puts before the other lights' factor (the ``fill`` term).
+FILL_LAW_HLSL = """
+// The same law for every other light (the fill term): in the lighting pass,
+// multiply each other light's Lambertian diffuse term by this factor, with
+// that light's own toLight. lawFillStrength 0 would make it 1 everywhere.
 """
 
 
@@ -399,7 +418,13 @@ def to_hlsl(constants: dict, prefix: str = "") -> str:
     if "lightShift" in constants:
         text += LIGHT_TERMS_HLSL.replace("{prefix}", prefix)
     if "lawAlbedo" in constants:
-        text += LAW_HLSL.replace("{prefix}", prefix).replace("LAW_TRUST_PLACEHOLDER", repr(LAW_TRUST))
+        factors = [("invsssKeyLightLaw", "lawStrength", "")]
+        if "lawFillStrength" in constants:
+            factors.append(("invsssOtherLightLaw", "lawFillStrength", FILL_LAW_HLSL))
+        text += LAW_HLSL
+        for name, strength, comment in factors:
+            text += comment + LAW_FACTOR_HLSL.replace("LAW_NAME", name).replace("LAW_STRENGTH", strength)
+        text = text.replace("{prefix}", prefix).replace("LAW_TRUST_PLACEHOLDER", repr(LAW_TRUST))
     return text
 
 

@@ -133,7 +133,7 @@ class ParamsFile(BaseModel):
     highlights: Any = None
     """Fit report: pixels left out as specular highlights (fit --highlights): method, excluded_pixels, fraction; or null."""
     light_terms: Any = None
-    """Fit report: the fitted light-aware terms (fit --light-terms; docs/model.md, section 8): shift (mm), grazing, incidence, law (an albedo per source channel), law_strength (0 Lambert, 1 the law; absent means 1), stderr, fixed, psnr_plain and psnr_without (dB, measured), fallback; or null."""
+    """Fit report: the fitted light-aware terms (fit --light-terms; docs/model.md, section 8): shift (mm), grazing, incidence, law (an albedo per source channel), law_strength (0 Lambert, 1 the law; absent means 1), fill (the law's strength on the other lights; absent means 0), stderr, fixed, psnr_plain and psnr_without (dB, measured), fallback; or null."""
     warnings: Optional[list[str]] = None
     """Fit report: warnings the fit raised."""
     inputs: Any = None

@@ -15,6 +15,8 @@ one unit through :class:`invsss.io.result_dir.ResultDir`:
                 the camera); 0 where no skin is seen
 ``light.exr``   unit vectors from the surface towards the first (key) light,
                 camera space (:func:`light_directions`); 0 where no skin is seen
+``fill_light.exr`` the same towards the second light, the direction the ``fill``
+                light term gives the other lights (scenes with two lights or more)
 ``coverage.exr`` fraction of the pixel where skin is seen (occluders excluded)
 ``scene.json``  the resolved scene, medium, calibration, seeds, spp, Mitsuba
                 version, render times and the noise estimate (:mod:`~invsss.scenes.noise`)
@@ -53,7 +55,7 @@ __all__ = ["SCENE_FILES", "SceneRender", "light_directions", "render_scene", "sc
 
 #: The files of a scene folder, in the order they are written.
 SCENE_FILES = ("source.exr", "target.exr", "depth.exr", "mask.png", "normal.exr", "coverage.exr", "light.exr",
-               "key.exr", "scene.json")
+               "key.exr", "fill_light.exr", "scene.json")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -336,8 +338,9 @@ def _depth_and_normal(config: SceneConfig, aovs: dict) -> tuple[np.ndarray, np.n
     return depth, normal
 
 
-def light_directions(config: SceneConfig, depth) -> np.ndarray:
-    """Unit vectors (H, W, 3) from each seen surface point towards the scene's first light.
+def light_directions(config: SceneConfig, depth, light: int = 0) -> np.ndarray:
+    """Unit vectors (H, W, 3) from each seen surface point towards one of the scene's
+    lights (``light``: its index; 0, the first, is the key).
 
     Camera space (x right, y up, z towards the camera), as the light-aware terms
     read them (:class:`invsss.LightBuffers`). The point is rebuilt from the eye-space
@@ -366,7 +369,7 @@ def light_directions(config: SceneConfig, depth) -> np.ndarray:
     x = (np.arange(w)[None, :] + 0.5 - w / 2 - offset_cols) / f * depth
     y = -(np.arange(h)[:, None] + 0.5 - h / 2 - offset_rows) / f * depth
     points = np.stack(np.broadcast_arrays(x, y, -depth), axis=-1)
-    key = config.lights[0]
+    key = config.lights[light]
     if key.type == "directional":
         towards = np.broadcast_to(-(rotation @ np.asarray(key.direction, np.float64)), points.shape)
     else:
@@ -384,6 +387,16 @@ def _light_buffer(result: SceneRender) -> np.ndarray:
     return light_directions(parse_config(result.info["config"], "scene.json"), result.depth).astype(np.float32)
 
 
+def _fill_light_buffer(result: SceneRender) -> np.ndarray | None:
+    """Unit vectors towards the second light (None with one light): the fill term's buffer."""
+    from .config import parse_config
+
+    config = parse_config(result.info["config"], "scene.json")
+    if len(config.lights) < 2:
+        return None
+    return light_directions(config, result.depth, light=1).astype(np.float32)
+
+
 def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
     """``{file name: writer(path)}`` for :meth:`invsss.io.result_dir.ResultDir.commit`.
 
@@ -392,7 +405,7 @@ def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
     >>> image, plane = np.ones((4, 4, 1), np.float32), np.ones((4, 4), np.float32)
     >>> flat = SceneRender(image, image, 500 * plane, plane, np.zeros((4, 4, 3), np.float32),
     ...                    plane, {"spp": 2}, (image, image), light=np.zeros((4, 4, 3), np.float32), key=image)
-    >>> list(scene_writers(flat)) == list(SCENE_FILES)
+    >>> list(scene_writers(flat)) == [name for name in SCENE_FILES if name != "fill_light.exr"]  # one light
     True
     """
     text = json.dumps(result.info, indent=2) + "\n"
@@ -405,8 +418,12 @@ def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
         "coverage.exr": lambda path: write_image(path, result.coverage),
         "light.exr": lambda path: write_image(path, _light_buffer(result)),
         "key.exr": lambda path: write_image(path, result.key),
+        "fill_light.exr": lambda path: write_image(path, fill),
         "scene.json": lambda path: write_text_atomic(path, text),
     }
+    fill = _fill_light_buffer(result)
+    if fill is None:
+        del writers["fill_light.exr"]
     if result.target is None:
         del writers["target.exr"]
     if result.key is None:
@@ -430,8 +447,8 @@ def write_scene(result: SceneRender, out, *, overwrite: bool = False) -> list[st
     ...     "lights": [{"type": "point", "position": [0.0, 100.0, 300.0], "intensity": 1e5}],
     ...     "medium": {"preset": "thesis-940"}, "spp": 2})
     >>> folder = os.path.join(tempfile.mkdtemp(), "pair")
-    >>> [os.path.basename(p) for p in write_scene(render_scene(config), folder)] == list(SCENE_FILES)
-    True
+    >>> [os.path.basename(p) for p in write_scene(render_scene(config), folder)]  # one light: no fill_light.exr
+    ['source.exr', 'target.exr', 'depth.exr', 'mask.png', 'normal.exr', 'coverage.exr', 'light.exr', 'key.exr', 'scene.json']
     """
     with ResultDir(os.fspath(out), overwrite=overwrite, names=SCENE_FILES, option="overwrite=True") as folder:
         return folder.commit(scene_writers(result), {"command": "scene"})

@@ -57,14 +57,19 @@ def reflectance_law(normal: torch.Tensor, light: torch.Tensor, albedo: torch.Ten
 
 def law_source(source: torch.Tensor, key: torch.Tensor, mask: torch.Tensor, gain: torch.Tensor,
                strength=1.0) -> torch.Tensor:
-    """(H, W, C) ``S + m a K (gain - 1)``: the key light's part under the law with
+    """(H, W, C) ``S + m a K (gain - 1)``: one light's part ``K`` under the law with
     strength ``a``, the rest as it is."""
     return source + strength * mask[..., None] * key * (gain - 1.0)
 
 
-def apply_law(image, mask, albedo, normal, light, key, strength=1.0) -> torch.Tensor:
-    """Twin of :func:`invsss.forward.light_terms.apply_law` with the buffers as (H, W, 3) and (H, W, C) tensors."""
-    return law_source(image, key, mask, reflectance_law(normal, light, albedo), strength)
+def apply_law(image, mask, albedo, normal, light, key, strength=1.0, fill_light=None, fill=0.0) -> torch.Tensor:
+    """Twin of :func:`invsss.forward.light_terms.apply_law` with the buffers as (H, W, 3) and (H, W, C)
+    tensors: the key light's part ``key`` under the law with strength ``strength``, and the
+    other lights' part ``image - key`` with direction ``fill_light`` under it with strength ``fill``."""
+    out = law_source(image, key, mask, reflectance_law(normal, light, albedo), strength)
+    if fill_light is None:
+        return out
+    return law_source(out, image - key, mask, reflectance_law(normal, fill_light, albedo), fill)
 
 
 def shift_image(image: torch.Tensor, offset: torch.Tensor) -> torch.Tensor:

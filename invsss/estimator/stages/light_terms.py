@@ -19,8 +19,8 @@ __all__ = ["against_plain", "plain_model", "term_bounds", "with_light_terms"]
 
 
 #: Every light term's unknown at its identity (docs/model.md, section 8): no
-#: shift, no gain, the law at strength 0 (its albedo then does nothing).
-IDENTITY = {"light_shift": 0.0, "grazing": 0.0, "incidence": 0.0, "law_strength": 0.0}
+#: shift, no gain, the law at strength 0 on every light (its albedo then does nothing).
+IDENTITY = {"light_shift": 0.0, "grazing": 0.0, "incidence": 0.0, "law_strength": 0.0, "fill_strength": 0.0}
 #: A term set that scores this much (dB) below the plain fit on the fit's own
 #: mask is not kept: the plain fit is returned, with every term at its identity.
 WORSE_THAN_PLAIN_DB = 0.0
@@ -88,6 +88,8 @@ def against_plain(problem, path, result, plain) -> FitResult:
         held = {term: 0.0 for term in AFTER_BLUR if term in record}
         if "law" in record:
             held["law_strength"] = 0.0
+        if "fill" in record:
+            held["fill"] = 0.0
         identity = {**record, **held, "psnr_without": {}, "fallback": True}
         identity["stderr"] = {term: None for term in record["stderr"]}
         message = (
@@ -127,13 +129,15 @@ def term_bounds(record) -> list[str]:
                 f"light_terms.law: the albedo ended at {'/'.join(f'{x:.5g}' for x in w)}, at the edge of (0, 1): "
                 "the law does not describe this pair there, and its standard error is not meaningful"
             )
-    if "law_strength" in record:
-        a = float(record["law_strength"])
-        err = record["stderr"].get("law_strength")
+    for strength in ("law_strength", "fill"):
+        if strength not in record:
+            continue
+        a = float(record[strength])
+        err = record["stderr"].get(strength)
         margin = 2.0 * err if err is not None else 0.0
         if a < -margin or a > 1.0 + margin:
             out.append(
-                f"light_terms.law_strength: {a:.3g} is outside [0, 1] (by more than two standard errors): "
+                f"light_terms.{strength}: {a:.3g} is outside [0, 1] (by more than two standard errors): "
                 "the fit extrapolates the blend of Lambert's and the law's reflection, which no medium does"
             )
     for term in ("grazing", "incidence"):
