@@ -35,8 +35,10 @@ CONFIGS = {"pt_face_940": "face_940.toml", "pt_face_940_turned": "face_940_turne
            "pt_fran_point_fill_940": "fran_point_fill_940.toml", "pt_proc_dir_fill_940": "proc_dir_fill_940.toml"}
 #: The pairs bundled before the split (issue 29): every one of them is a tuning pair.
 FIRST_PAIRS = ("pt_face_940", "pt_face_940_turned", "pt_face_skin1")
-#: Each pair folder stays about as small as the first ones (about 400 KB; 600 KB at most).
-MAX_FOLDER_BYTES = 600_000
+#: Each pair folder stays about as small as the first ones (about 500 KB; 800 KB at most,
+#: raised from 600 KB when every folder gained fill_light.exr, a 3-channel float buffer of
+#: about 110 KB, for the fill term).
+MAX_FOLDER_BYTES = 800_000
 #: The lowest noise ceiling a rough-dielectric target may have: at 16384 spp about 28 dB
 #: (docs/scenes.md); the first renders, at 2048 spp (21.4 and 21.7 dB), would fail.
 ROUGH_MIN_CEILING_DB = 26.0
@@ -188,7 +190,7 @@ def test_pair_images_agree_with_scene_json(name):
     assert (folder / "fill_light.exr").is_file() == (len(config.lights) > 1)
     if len(config.lights) > 1:
         fill = invsss.read_image(folder / "fill_light.exr")
-        depth = invsss.read_image(folder / "depth.exr")
+        depth = invsss.read_image(folder / "depth.exr")[..., 0]
         np.testing.assert_allclose(fill[skin], light_directions(config, depth, light=1)[skin], atol=1e-5)
     coverage = invsss.read_image(folder / "coverage.exr")[..., 0]
     np.testing.assert_array_equal(coverage >= 0.5, skin)

@@ -289,6 +289,32 @@ def test_scene_command_writes_a_pair_folder(tmp_path, capsys):
     assert "--overwrite" in capsys.readouterr().err
 
 
+def test_a_scene_with_a_second_light_writes_its_direction_for_the_fill_term(tmp_path):
+    from invsss.scenes.render import light_directions
+
+    text = _TOML.format(camera_extra="fov = 20.0") + """
+[[lights]]
+type = "directional"
+direction = [0.6, 0.0, -0.8]
+irradiance = 1.0
+"""
+    path = tmp_path / "two.toml"
+    path.write_text(text)
+    out = tmp_path / "pair"
+    assert main(["scene", str(path), "--out", str(out), "--width", "16"]) == 0
+    fill = invsss.read_image(out / "fill_light.exr")
+    light = invsss.read_image(out / "light.exr")
+    skin = invsss.read_mask(out / "mask.png") > 0
+    # The directional fill: its reversed direction in camera space (the camera looks
+    # down -z from +z, so world and camera axes agree), on every skin pixel; the key
+    # is a point light, whose direction varies, so the two buffers differ.
+    np.testing.assert_allclose(fill[skin], np.broadcast_to([-0.6, 0.0, 0.8], fill[skin].shape), atol=1e-6)
+    assert np.abs(light[skin] - fill[skin]).max() > 0.5
+    config = parse_config(json.loads((out / "scene.json").read_text())["config"], "scene.json")
+    depth = invsss.read_image(out / "depth.exr")[..., 0]
+    np.testing.assert_allclose(fill, light_directions(config, depth, light=1), atol=1e-6)
+
+
 def test_scene_with_a_fitted_warp_renders_onto_the_photographs_grid(tmp_path, capsys):
     from invsss.estimator.registration import Warp
 

@@ -388,9 +388,12 @@ def _light_buffer(result: SceneRender) -> np.ndarray:
 
 
 def _fill_light_buffer(result: SceneRender) -> np.ndarray | None:
-    """Unit vectors towards the second light (None with one light): the fill term's buffer."""
+    """Unit vectors towards the second light (None with one light, or no scene
+    description to place it): the fill term's buffer."""
     from .config import parse_config
 
+    if "config" not in result.info:
+        return None
     config = parse_config(result.info["config"], "scene.json")
     if len(config.lights) < 2:
         return None
