@@ -101,7 +101,8 @@ NO_SPLIT = "-"
 THESIS_HAND_VALUES = ((0.5, 2000.0), (0.7, 7500.0), (0.4, 4500.0))
 #: The light-aware term sets fitted on top of the plain fit; the last is all of them.
 LIGHT_TERM_ROWS = (("shift",), ("grazing",), ("incidence",), ("shift", "grazing"), ("shift", "grazing", "incidence"),
-                   ("law",), ("shift", "law"), ("shift", "grazing", "incidence", "law"))
+                   ("law",), ("shift", "law"), ("shift", "grazing", "incidence", "law"),
+                   ("shift", "law", "fill"), ("shift", "grazing", "incidence", "law", "fill"))
 #: The term sets also fitted with free variances, per pair and jointly per medium,
 #: and the label those rows carry.
 FREE_PROFILE_ROWS = (("shift", "law"),)

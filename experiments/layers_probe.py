@@ -162,17 +162,11 @@ def shape_at_scales(prediction, normal, depth, mask) -> list[np.ndarray]:
     return layers
 
 
-def other_lights(folder, depth) -> np.ndarray | None:
-    """Unit vectors (H, W, 3) towards the scene's second light (the first of the others),
-    rebuilt from the scene file as ``light.exr`` is for the key; None for one light."""
-    from invsss.scenes import load_config
-    from invsss.scenes.render import light_directions
-
-    with scene_folder():
-        config = load_config(scene_file(folder))
-    if len(config.lights) < 2:
-        return None
-    return light_directions(config.model_copy(update={"lights": config.lights[1:]}), depth)
+def other_lights(folder) -> np.ndarray | None:
+    """Unit vectors (H, W, 3) towards the scene's second light (the first of the others):
+    the folder's ``fill_light.exr`` (the ``fill`` term's buffer); None for one light."""
+    path = pathlib.Path(folder) / "fill_light.exr"
+    return invsss.read_image(path) if path.is_file() else None
 
 
 def fill_law(fit, pair, fill_light) -> list[np.ndarray]:
@@ -423,7 +417,7 @@ def main() -> None:
         keep = eroded(pair["mask"], 2) > 0
         fit = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"],
                               light_terms=args.terms, light_buffers=pair["buffers"])
-        gains = layer_gains(pair, fit, keep, other_lights(folder, np.asarray(pair["depth"], np.float64)))
+        gains = layer_gains(pair, fit, keep, other_lights(folder))
         cells = " | ".join(f"{name} {gain:+.2f}" for name, gain in gains.items() if name != "fit")
         print(f"{folder.name}: fit + {args.terms} {gains['fit']:.2f} dB (noise ceiling "
               f"{pair['info']['noise']['noise_ceiling_db']:.2f}); gain with a layer: {cells}", flush=True)
