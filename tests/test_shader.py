@@ -86,6 +86,8 @@ PT_TERMS = {
     "incidence": LightTerms(incidence=0.16),
     "law": LightTerms(law=0.92, law_strength=0.8),
     "all": LightTerms(shift=1.5, grazing=0.31, incidence=0.16, law=0.92, law_strength=0.8),
+    # The law on the other lights too (the fill term; its strength is not a fitted value).
+    "fill": LightTerms(law=0.92, law_strength=0.8, fill=0.6),
 }
 
 
@@ -93,7 +95,8 @@ def _pt_face():
     image, depth, mask = _pair("pt_face_940")
     d = DATA / "pt_face_940"
     raw = LightBuffers(normal=read_image(d / "normal.exr", linear=True), light=read_image(d / "light.exr", linear=True),
-                       key=read_image(d / "key.exr", linear=True, grey=True))
+                       key=read_image(d / "key.exr", linear=True, grey=True),
+                       fill_light=read_image(d / "fill_light.exr", linear=True))
     # The buffers as render uses them: unit vectors, a key with the source's channels.
     buffers = raw.checked(mask.shape, mask, channels=image.shape[2])
     return image, depth, mask, buffers
@@ -121,8 +124,9 @@ def _shade(device, image, depth, mask, constants, model, terms=None, buffers=Non
     if buffers is not None:
         kwargs = dict(normal=None if buffers.normal is None else np.asarray(buffers.normal),
                       light=None if buffers.light is None else np.asarray(buffers.light),
-                      key=None if buffers.key is None else np.asarray(buffers.key))
-    return run_shader(image, depth, mask, to_hlsl(constants), model, law="law" in used,
+                      key=None if buffers.key is None else np.asarray(buffers.key),
+                      fill_light=None if buffers.fill_light is None else np.asarray(buffers.fill_light))
+    return run_shader(image, depth, mask, to_hlsl(constants), model, law="law" in used or "fill" in used,
                       after_blur=any(t in used for t in ("shift", "grazing", "incidence")),
                       adapter_name=device, messages=messages, **kwargs)
 
@@ -264,6 +268,7 @@ TERM_BREAKS = {
     "incidence gain halved": ("incidence", lambda c: c.update(incidenceGain=c["incidenceGain"] / 2)),
     "law albedo 0.02 off": ("law", lambda c: c.update(lawAlbedo=[w - 0.02 for w in c["lawAlbedo"]])),
     "law strength 1 instead of 0.8": ("law", lambda c: c.update(lawStrength=1.0)),
+    "fill strength 0 instead of 0.6": ("fill", lambda c: c.update(lawFillStrength=0.0)),
 }
 
 

@@ -420,7 +420,8 @@ def to_hlsl(constants: dict, prefix: str = "") -> str:
     if "lawAlbedo" in constants:
         factors = [("invsssKeyLightLaw", "lawStrength", "")]
         if "lawFillStrength" in constants:
-            factors.append(("invsssOtherLightLaw", "lawFillStrength", FILL_LAW_HLSL))
+            factors.append(("invsssOtherLightLaw", "lawFillStrength", "#define INVSSS_OTHER_LIGHT_LAW 1\n"
+                            + FILL_LAW_HLSL))
         text += LAW_HLSL
         for name, strength, comment in factors:
             text += comment + LAW_FACTOR_HLSL.replace("LAW_NAME", name).replace("LAW_STRENGTH", strength)

@@ -172,6 +172,7 @@ class _Runner:
                         "storage_texture": {"access": wgpu.StorageTextureAccess.read_write,
                                             "format": wgpu.TextureFormat.rgba32float,
                                             "view_dimension": wgpu.TextureViewDimension.d2}})
+        entries.append({"binding": 8, "visibility": wgpu.ShaderStage.COMPUTE, "texture": texture})
         self.group_layout = device.create_bind_group_layout(entries=entries)
         self.layout = device.create_pipeline_layout(bind_group_layouts=[self.group_layout])
         self.pending = []
@@ -197,7 +198,7 @@ class _Runner:
         uniform = self.device.create_buffer_with_data(
             data=np.array([pass_index, pass_axis, 0, 0], np.uint32), usage=self.wgpu.BufferUsage.UNIFORM)
         entries = [{"binding": 0, "resource": {"buffer": uniform, "offset": 0, "size": 16}}]
-        entries += [{"binding": b, "resource": resources[b].create_view()} for b in range(1, 8)]
+        entries += [{"binding": b, "resource": resources[b].create_view()} for b in range(1, 9)]
         group = self.device.create_bind_group(layout=self.group_layout, entries=entries)
         encoder = self.device.create_command_encoder()
         compute = encoder.begin_compute_pass()
@@ -227,7 +228,7 @@ def _rgba(image, h, w) -> np.ndarray:
 
 
 def run_shader(
-    image, depth, mask, constants_hlsl: str, model: str, *, normal=None, light=None, key=None,
+    image, depth, mask, constants_hlsl: str, model: str, *, normal=None, light=None, key=None, fill_light=None,
     law: bool = False, after_blur: bool = False, adapter_name: str | None = None, compiler: str | None = None,
     messages: list | None = None,
 ) -> np.ndarray:
@@ -245,9 +246,10 @@ def run_shader(
         The text ``invsss export --format hlsl`` writes (or :func:`invsss.io.export.to_hlsl`);
         it becomes ``invsss_constants.hlsl`` beside the shaders.
     model : {"sog", "thesis", "separable"}
-    normal, light, key : arrays, optional
+    normal, light, key, fill_light : arrays, optional
         The light terms' buffers (view-space unit vectors (H, W, 3); the key
-        light's part of the source, shaped like ``image``).
+        light's part of the source, shaped like ``image``; the direction towards
+        the other lights, for a constants text with the fill term).
     law, after_blur : bool
         Run LawCS before the blur, LightTermsCS after it.
     adapter_name : str, optional
@@ -283,7 +285,8 @@ def run_shader(
     res = {2: runner.texture(depth), 3: runner.texture(mask),
            4: runner.texture(zero if normal is None else _rgba(normal, h, w)),
            5: runner.texture(zero if light is None else _rgba(light, h, w)),
-           6: runner.texture(zero if key is None else _rgba(key, h, w))}
+           6: runner.texture(zero if key is None else _rgba(key, h, w)),
+           8: runner.texture(zero if fill_light is None else _rgba(fill_light, h, w))}
     a, b = runner.texture(_rgba(image, h, w)), runner.texture(zero)
 
     def run(entry, src, dst, index=0, axis=0):

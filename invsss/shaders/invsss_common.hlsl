@@ -47,6 +47,7 @@ Texture2D<float4> Normal : register(t4);       // light terms: view-space unit n
 Texture2D<float4> ToLight : register(t5);      // light terms: view-space unit vector towards the key light in xyz
 Texture2D<float4> KeyLight : register(t6);     // law term: the source lit by the key light alone
 RWTexture2D<float4> Destination : register(u7); // the pass's output (read and written by AccumulateCS)
+Texture2D<float4> FillToLight : register(t8);  // fill term: view-space unit vector towards the other lights in xyz
 
 int2 InvsssSize()
 {
