@@ -239,3 +239,25 @@ def test_cli_fit_render_and_export_with_the_fill_light_buffer(tmp_path, capsys):
     capsys.readouterr()
     assert main(["export", params_path, "--format", "hlsl"]) == 0
     assert "invsssOtherLightLaw" in capsys.readouterr().out
+
+
+def test_a_sweep_reads_fill_light_only_for_trials_with_the_fill(tmp_path):
+    import invsss.experiments as ex
+    from _pair_files import light_sweep_text, write_pair_folder
+
+    source, depth, mask, buffers = dome_with_two_lights(16)
+    folder = tmp_path / "data" / "dome"
+    write_pair_folder(folder, (source, source, depth, mask), buffers, roles=("normal", "light", "key"))
+    path = tmp_path / "fill.toml"
+    path.write_text(light_sweep_text('["law", "law,fill"]'))
+    # Without fill_light.exr the trial with the fill is refused before anything runs.
+    with pytest.raises(InvalidInputError, match=r"light term 'fill' needs fill_light\.exr in pair 'dome'"):
+        ex.load(path)
+    law_only = tmp_path / "law.toml"
+    law_only.write_text(light_sweep_text('["law"]'))
+    id_without = ex.load(law_only).trials[0].id
+    invsss.write_image(folder / "fill_light.exr", np.asarray(buffers.fill_light, np.float32))
+    law, fill = ex.load(path).trials
+    # A folder that gained fill_light.exr keeps the ids of its trials without the fill.
+    assert law.id == id_without and "fill_light" not in law.config["pairs"][0]
+    assert "fill_light" in fill.config["pairs"][0] and "fill_light" in fill.buffer_roles
