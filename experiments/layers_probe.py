@@ -361,21 +361,11 @@ def facet_normal_gains(folder, pair, fit, terms, keep) -> dict:
     real face would not show.
     """
     from invsss.scenes import load_config, render_scene
-    import invsss.scenes.render as scene_render
 
-    interpolated = scene_render.scene_dict
-
-    def flat(*args, **kwargs):
-        scene = interpolated(*args, **kwargs)
-        scene["object"]["face_normals"] = True  # Mitsuba's mesh option: ignore the vertex normals
-        return scene
-
-    scene_render.scene_dict = flat
-    try:
-        with scene_folder():
-            flat_render = render_scene(load_config(scene_file(folder)), target=False)
-    finally:
-        scene_render.scene_dict = interpolated
+    with scene_folder():
+        config = load_config(scene_file(folder))
+        flat = config.model_copy(update={"object": config.object.model_copy(update={"face_normals": True})})
+        flat_render = render_scene(flat, target=False)
     target = np.asarray(pair["target"], np.float64)
     source = np.asarray(flat_render.source, np.float32).reshape(np.shape(pair["source"]))
     buffers = invsss.LightBuffers(np.asarray(flat_render.normal, np.float32), pair["buffers"].light,

@@ -475,6 +475,8 @@ def test_with_warp_keeps_the_camera_where_the_warp_is_the_identity():
     ({"primitive": "face", "wrinkle": False}, "object.wrinkle: unknown key, did you mean 'wrinkles'?"),
     ({"primitive": "sphere", "radius": 40.0, "bumps": 10.0}, "object: bumps: only for a mesh or primitive"),
     ({"primitive": "face", "bumps": 60.0}, "object.bumps: input should be less than 60"),
+    ({"primitive": "sphere", "radius": 40.0, "face_normals": True}, "object: face_normals: only for a mesh or"),
+    ({"primitive": "face", "bumps": 5.0, "face_normals": True}, "object: face_normals: only for a mesh or"),
 ])
 def test_face_and_bump_keys_are_checked_in_one_line(object_, message):
     with pytest.raises(invsss.InvalidInputError) as err:
@@ -540,6 +542,33 @@ def test_bumps_tilt_the_shading_normals_and_leave_the_surface():
     # Tilted by up to 30 degrees (a pixel averages a little of its neighbours' tilt), not everywhere alike.
     assert 12.0 < angle.max() < 31.0 and np.median(angle) > 3.0
     assert not np.allclose(plain.source, bumped.source)
+
+
+def test_face_normals_shade_with_the_triangles_own_normals():
+    import tempfile
+
+    import trimesh
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = os.path.join(folder, "ball.ply")
+        ball = trimesh.creation.icosphere(subdivisions=1, radius=40.0)  # 80 flat triangles
+        ball.export(path)
+        camera = {**CAMERA, "width": 24, "height": 24}
+        mesh = {"mesh": path, "mm_per_unit": 1.0}
+        smooth = render_scene(_config(object=mesh, camera=camera), target=False)
+        flat = render_scene(_config(object={**mesh, "face_normals": True}, camera=camera), target=False)
+    np.testing.assert_array_equal(smooth.mask, flat.mask)
+    inside = smooth.coverage > 0.999
+    def on_a_facet(render):
+        # The share of pixels whose normal is one of the triangles' own (within 0.1
+        # degrees; camera space: the camera looks down -z, world and camera axes
+        # agree). A pixel across an edge averages two of them.
+        unit = render.normal[inside] / np.linalg.norm(render.normal[inside], axis=-1, keepdims=True)
+        nearest = np.max(unit @ np.asarray(ball.face_normals).T, axis=1)
+        return float(np.mean(nearest > np.cos(np.radians(0.1))))
+
+    # Measured: 34 % of the 210 covered pixels with face normals, none with the smooth ones.
+    assert on_a_facet(flat) > 0.25 and on_a_facet(smooth) < 0.02
 
 
 def test_closed_fran_is_the_scan_closed_by_its_script():

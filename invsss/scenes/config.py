@@ -131,6 +131,12 @@ class SceneObject(_Strict):
     normal map does (:func:`~invsss.scenes.mitsuba_scene.bumped_normals`): the
     normal buffer and the Lambertian source show bumps that the medium's boundary
     does not have, and near the silhouette some normals face away from the camera.
+
+    ``face_normals`` (default false) shades a mesh or face with each triangle's own
+    normal (Mitsuba's ``face_normals``) instead of the interpolated vertex normals,
+    in every pass: the normal buffer and the source then agree with the flat
+    triangles that bound the medium (``experiments/layers_probe.py --facet-normals``
+    measures what the difference costs a fit).
     """
 
     mesh: str | None = None
@@ -143,6 +149,7 @@ class SceneObject(_Strict):
     ears: bool | None = None
     wrinkles: bool | None = None
     bumps: Annotated[float, Field(ge=0.0, lt=60.0)] = 0.0
+    face_normals: bool = False
     pose: Pose = Pose()
     pigment: Pigment | None = None
 
@@ -161,6 +168,9 @@ class SceneObject(_Strict):
             raise ValueError(f'{", ".join(face_keys)}: only for primitive "face"')
         if self.bumps > 0 and self.primitive in ("slab", "sphere"):
             raise ValueError('bumps: only for a mesh or primitive "face" (Mitsuba\'s slab and sphere have their own normals)')
+        if self.face_normals and (self.primitive in ("slab", "sphere") or self.bumps > 0):
+            raise ValueError('face_normals: only for a mesh or primitive "face" without bumps '
+                             "(the bumps tilt the vertex normals that face normals ignore)")
         if self.pigment is not None and (self.mesh is None or self.bumps > 0):
             raise ValueError("pigment: only for a mesh (with texture coordinates) without bumps")
         if self.primitive == "face" and (self.size is not None or self.radius is not None):

@@ -372,9 +372,12 @@ def _object_shape(mi, config: SceneConfig, mesh_ply: str | None) -> dict:
         # Mitsuba's cube spans [-1, 1]^3; the slab's front face is z = 0.
         return {"type": "cube",
                 "to_world": pose.translate([0, 0, -thickness / 2]).scale([width / 2, height / 2, thickness / 2])}
-    if obj.primitive == "face":
-        return {"type": "ply", "filename": mesh_ply, "to_world": pose}  # meshed in mm already
-    return {"type": "ply", "filename": mesh_ply, "to_world": pose.scale(obj.mm_per_unit)}
+    # Meshed in mm already when a face; a mesh file is in its own units.
+    shape = {"type": "ply", "filename": mesh_ply, "to_world": pose if obj.primitive == "face"
+             else pose.scale(obj.mm_per_unit)}
+    if obj.face_normals:
+        shape["face_normals"] = True
+    return shape
 
 
 def _frame(mi, center, normal, along, half_u: float, half_v: float):
