@@ -257,22 +257,16 @@ def key_through_thin_parts(folder) -> tuple[np.ndarray, np.ndarray]:
     import tempfile
 
     from invsss.scenes import load_config
-    from invsss.scenes.mitsuba_scene import import_mitsuba, load_mesh_ply, scene_dict
-    from invsss.scenes.render import _render_aovs
+    from invsss.scenes.mitsuba_scene import import_mitsuba, scene_dict
+    from invsss.scenes.render import object_ply, render_aovs
 
     mi = import_mitsuba("scalar_rgb")
     with scene_folder(), tempfile.TemporaryDirectory(prefix="layers-probe-") as scratch:
         config = load_config(scene_file(folder))
-        if config.object.mesh:
-            ply = load_mesh_ply(config.object.mesh, scratch, bumps=config.object.bumps,
-                                mm_per_unit=config.object.mm_per_unit)
-        else:
-            from invsss.scenes.procedural import write_face_ply
-
-            ply, _ = write_face_ply(config.object, scratch)
+        ply, _ = object_ply(config, scratch)
         coefficients = config.medium.coefficients()
         geometry = scene_dict(mi, config, "geometry", mesh_ply=ply, coefficients=coefficients)
-        aovs = _render_aovs(mi, geometry)
+        aovs = render_aovs(mi, geometry)
         skin = mi.load_dict(geometry)
         # The source's scene has the occluders too; it only answers "is the light blocked".
         blockers = mi.load_dict(scene_dict(mi, config, "source", mesh_ply=ply, albedo=0.5))

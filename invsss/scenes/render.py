@@ -51,7 +51,8 @@ from .config import SceneConfig
 from .mitsuba_scene import import_mitsuba, load_mesh_ply, pigmented_mesh, scene_dict, write_attribute_ply
 from .noise import half_render_noise
 
-__all__ = ["SCENE_FILES", "SceneRender", "light_directions", "render_scene", "scene_writers", "write_scene"]
+__all__ = ["SCENE_FILES", "SceneRender", "light_directions", "object_ply", "render_aovs", "render_scene",
+           "scene_writers", "write_scene"]
 
 #: The files of a scene folder, in the order they are written.
 SCENE_FILES = ("source.exr", "target.exr", "depth.exr", "mask.png", "normal.exr", "coverage.exr", "light.exr",
@@ -78,11 +79,29 @@ def _channels(image, count: int) -> np.ndarray:
     return np.asarray(image, np.float64)[..., :count]
 
 
-def _render_aovs(mi, scene: dict) -> dict:
+def render_aovs(mi, scene: dict) -> dict:
+    """Render a Mitsuba scene dict whose integrator is an AOV integrator (the
+    ``"geometry"`` and ``"visible"`` kinds of :func:`~invsss.scenes.mitsuba_scene.scene_dict`)
+    and return its channels by name as float64 arrays."""
     loaded = mi.load_dict(scene)
     mi.render(loaded)
     bitmap = loaded.sensors()[0].film().bitmap()
     return {name: np.asarray(channel, np.float64) for name, channel in bitmap.split()}
+
+
+def object_ply(config: SceneConfig, folder: str) -> tuple[str | None, dict | None]:
+    """The scene's object as a PLY file in ``folder`` for :func:`~invsss.scenes.mitsuba_scene.scene_dict`
+    (a mesh file with its bumps and scale, or the procedural face), and the record
+    ``scene.json`` keeps of it; ``(None, None)`` for Mitsuba's own sphere and slab.
+    An object with a pigment is made by :func:`render_scene` itself."""
+    if config.object.mesh:
+        return (load_mesh_ply(config.object.mesh, folder, bumps=config.object.bumps,
+                              mm_per_unit=config.object.mm_per_unit), _mesh_record(config.object.mesh))
+    if config.object.primitive == "face":
+        from .procedural import write_face_ply
+
+        return write_face_ply(config.object, folder)
+    return None, None
 
 
 def _is_grey(config: SceneConfig, coefficients: dict) -> bool:
@@ -185,27 +204,21 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
     seeds = {"source": 2 * config.seed, "target_halves": [2 * config.seed, 2 * config.seed + 1],
              "specular_halves": [2 * config.seed, 2 * config.seed + 1], "calibration": 0}
     with tempfile.TemporaryDirectory(prefix="invsss-scene-") as folder:
-        mesh_ply, mesh_record = None, _mesh_record(config.object.mesh)
         pigment = config.object.pigment
         if pigment is not None:
             # The pigment rides on the vertices of a finer copy of the same surface.
             vertices, faces, transmittance, pigment_record = pigmented_mesh(config.object.mesh, pigment)
-            mesh_record = {**mesh_record, "pigment": pigment_record}
+            mesh_record = {**_mesh_record(config.object.mesh), "pigment": pigment_record}
             mesh_ply = write_attribute_ply(os.path.join(folder, "object.ply"), vertices, faces,
                                            {"absorb": 1.0 - np.sqrt(transmittance)})
-        elif config.object.mesh:
-            mesh_ply = load_mesh_ply(config.object.mesh, folder, bumps=config.object.bumps,
-                                     mm_per_unit=config.object.mm_per_unit)
-        elif config.object.primitive == "face":
-            from .procedural import write_face_ply
-
-            mesh_ply, mesh_record = write_face_ply(config.object, folder)
+        else:
+            mesh_ply, mesh_record = object_ply(config, folder)
 
         def build(kind: str, scene_config: SceneConfig = config, **extra):
             return scene_dict(mi, scene_config, kind, mesh_ply=mesh_ply, coefficients=coefficients, **extra)
 
-        geometry = timed("geometry", lambda: _render_aovs(mi, build("geometry")))
-        visible = timed("visibility", lambda: _render_aovs(mi, build("visible")))
+        geometry = timed("geometry", lambda: render_aovs(mi, build("geometry")))
+        visible = timed("visibility", lambda: render_aovs(mi, build("visible")))
         coverage = np.clip(visible["cov"][..., 0], 0.0, 1.0)
         mask = (coverage >= 0.5).astype(np.float32)
         if not mask.any():
