@@ -20,7 +20,7 @@ from invsss.forward.light_terms import LightBuffers, LightTerms, apply_law, refl
 from invsss.validation import InvalidInputError
 
 from _lit_scenes import FIX, PROFILE, dome_with_two_lights, lit_target
-from test_reflectance_law import PARAMS, _hlsl_function_as_python, _reference_source, _scene, _unit, _Vector
+from test_reflectance_law import PARAMS, _reference_source, _scene, _unit, hlsl_law_factor
 
 
 @pytest.fixture(autouse=True)
@@ -139,25 +139,11 @@ def test_the_exported_fill_factor_is_the_model():
     # The same through a LightTerms.
     assert invsss.shader_constants(PARAMS, light_terms=LightTerms(law=albedo, fill=0.4))["lawFillStrength"] == 0.4
 
-    hapke = _hlsl_function_as_python(hlsl, "float3 invsssHapkeH")
-    factor = _hlsl_function_as_python(hlsl, "float3 invsssOtherLightLaw")
-    scope0 = {"np": np, "sqrt": np.sqrt, "max": np.maximum, "min": np.minimum,
-              "saturate": lambda x: np.clip(x, 0.0, 1.0), "dot": lambda a, b: float(np.dot(a, b)),
-              "float3": lambda *v: np.array(v, np.float64), "sss_lawAlbedo": albedo,
-              "sss_lawStrength": 0.7, "sss_lawFillStrength": 0.4}
-
-    def invsssHapkeH(x, w):  # noqa: N802 - the shader's name
-        scope = {**scope0, "x": x, "w": w}
-        exec(hapke, scope)
-        return scope["result"]
-
-    scope0["invsssHapkeH"] = invsssHapkeH
+    factor = hlsl_law_factor(hlsl, "invsssOtherLightLaw", constants)
     expected = 1.0 + 0.4 * (np.asarray(reflectance_law(jnp.asarray(normal), jnp.asarray(fill_light),
                                                        jnp.asarray(albedo))) - 1.0)
     for r, c in [(3, 4), (5, 9), (11, 14)]:
-        scope = {**scope0, "normal": normal[r, c].copy().view(_Vector), "toLight": fill_light[r, c].copy().view(_Vector)}
-        exec(factor, scope)
-        np.testing.assert_allclose(scope["result"], expected[r, c], rtol=1e-12)
+        np.testing.assert_allclose(factor(normal[r, c], fill_light[r, c]), expected[r, c], rtol=1e-12)
 
 
 # ------------------------------------------------------------------ estimator

@@ -291,6 +291,40 @@ def _hlsl_function_as_python(text: str, name: str):
     return "\n".join(lines)
 
 
+def hlsl_law_factor(hlsl: str, name: str, constants: dict, prefix: str = "sss_"):
+    """The law factor ``name`` of a constants text (``invsssKeyLightLaw`` or
+    ``invsssOtherLightLaw``) as a Python function of one pixel's normal and light
+    direction, run from the shader's own text with the constants' values."""
+    hapke = _hlsl_function_as_python(hlsl, "float3 invsssHapkeH")
+    factor = _hlsl_function_as_python(hlsl, f"float3 {name}")
+    helpers = {
+        "np": np,
+        "sqrt": np.sqrt,
+        "max": np.maximum,
+        "clamp": np.clip,
+        "saturate": lambda x: np.clip(x, 0.0, 1.0),
+        "dot": lambda a, b: float(np.dot(a, b)),
+        "float3": lambda *v: np.array(v, np.float64),
+        "min": np.minimum,
+        **{prefix + key: value for key, value in constants.items() if key.startswith("law")},
+    }
+
+    def invsssHapkeH(x, w):  # noqa: N802 - the shader's name
+        scope = {**helpers, "x": x, "w": w}
+        exec(hapke, scope)
+        return scope["result"]
+
+    helpers["invsssHapkeH"] = invsssHapkeH
+
+    def run(normal, to_light):
+        scope = {**helpers, "normal": np.array(normal, np.float64).view(_Vector),
+                 "toLight": np.array(to_light, np.float64).view(_Vector)}
+        exec(factor, scope)
+        return scope["result"]
+
+    return run
+
+
 @pytest.mark.slow
 def test_the_exported_law_is_the_model():
     source, key, _, mask, normal, light = _scene(8)
@@ -302,27 +336,7 @@ def test_the_exported_law_is_the_model():
     assert "static const float sss_lawAlbedo[3] = { 0.93, 0.8, 0.55 };" in hlsl
     assert "float3 invsssKeyLightLaw(float3 normal, float3 toLight)" in hlsl
 
-    hapke = _hlsl_function_as_python(hlsl, "float3 invsssHapkeH")
-    law = _hlsl_function_as_python(hlsl, "float3 invsssKeyLightLaw")
-    helpers = {
-        "np": np,
-        "sqrt": np.sqrt,
-        "max": np.maximum,
-        "clamp": np.clip,
-        "saturate": lambda x: np.clip(x, 0.0, 1.0),
-        "dot": lambda a, b: float(np.dot(a, b)),
-        "float3": lambda *v: np.array(v, np.float64),
-        "min": np.minimum,
-        "sss_lawAlbedo": constants["lawAlbedo"],
-        "sss_lawStrength": constants["lawStrength"],
-    }
-
-    def invsssHapkeH(x, w):  # noqa: N802 - the shader's name
-        scope = {**helpers, "x": x, "w": w}
-        exec(hapke, scope)
-        return scope["result"]
-
-    helpers["invsssHapkeH"] = invsssHapkeH
+    law = hlsl_law_factor(hlsl, "invsssKeyLightLaw", constants)
     # The key light's factor at strength a: 1 + a (g - 1).
     expected = 1.0 + 0.7 * (np.asarray(reflectance_law(jnp.asarray(normal), jnp.asarray(light),
                                                        jnp.asarray(albedo))) - 1.0)
@@ -330,11 +344,9 @@ def test_the_exported_law_is_the_model():
         n, l_ = normal[r, c].copy(), light[r, c].copy()
         if r == 7:
             l_ = -n  # the key light behind the surface: mu0 = 0
-        scope = {**helpers, "normal": n.view(_Vector), "toLight": l_.view(_Vector)}
-        exec(law, scope)
         wanted = expected[r, c] if r != 7 else 1.0 + 0.7 * (np.asarray(
             reflectance_law(jnp.asarray(n[None, None]), jnp.asarray(l_[None, None]), jnp.asarray(albedo)))[0, 0] - 1.0)
-        np.testing.assert_allclose(scope["result"], wanted, rtol=1e-12)
+        np.testing.assert_allclose(law(n, l_), wanted, rtol=1e-12)
 
 
 def test_only_the_law_exports_no_after_blur_constants():
