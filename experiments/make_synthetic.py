@@ -866,6 +866,7 @@ PATH_TRACED = {
     "pt_face_rough_area_940": "face_rough_area_940.toml",
     "pt_fran_point_fill_940": "fran_point_fill_940.toml",
     "pt_proc_dir_fill_940": "proc_dir_fill_940.toml",
+    "pt_proc_lowpoly_smooth_dir_940": "proc_lowpoly_smooth_dir_940.toml",
 }
 
 PATH_TRACED_HEAD = """

@@ -32,7 +32,8 @@ CONFIGS = {"pt_face_940": "face_940.toml", "pt_face_940_turned": "face_940_turne
            "pt_fran_dir_940": "fran_dir_940.toml", "pt_fran_dir_rough_940": "fran_dir_rough_940.toml",
            "pt_proc_lowpoly_dir_940": "proc_lowpoly_dir_940.toml",
            "pt_face_rough_area_940": "face_rough_area_940.toml",
-           "pt_fran_point_fill_940": "fran_point_fill_940.toml", "pt_proc_dir_fill_940": "proc_dir_fill_940.toml"}
+           "pt_fran_point_fill_940": "fran_point_fill_940.toml", "pt_proc_dir_fill_940": "proc_dir_fill_940.toml",
+           "pt_proc_lowpoly_smooth_dir_940": "proc_lowpoly_smooth_dir_940.toml"}
 #: The pairs bundled before the split (issue 29): every one of them is a tuning pair.
 FIRST_PAIRS = ("pt_face_940", "pt_face_940_turned", "pt_face_skin1")
 #: Each pair folder stays about as small as the first ones (about 500 KB; 800 KB at most,
@@ -148,9 +149,13 @@ def test_pair_is_reproducible_from_its_scene_description(name, monkeypatch):
 
         from invsss.scenes.procedural import write_face_ply
 
+        obj = parse_config(info["config"], "scene.json").object
         with tempfile.TemporaryDirectory() as folder:
-            _, record = write_face_ply(parse_config(info["config"], "scene.json").object, folder)
-        assert record == info["mesh"]
+            _, record = write_face_ply(obj, folder)
+            # And the renderer's coarser head, where the buffers come from one.
+            coarse = None if obj.buffers_cell is None else write_face_ply(
+                obj.model_copy(update={"cell": obj.buffers_cell}), folder)[1]
+        assert record == info["mesh"] and coarse == info.get("buffers_mesh")
 
 
 @pytest.mark.parametrize("name", PAIRS)

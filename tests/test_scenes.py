@@ -476,6 +476,7 @@ def test_with_warp_keeps_the_camera_where_the_warp_is_the_identity():
     ({"primitive": "sphere", "radius": 40.0, "bumps": 10.0}, "object: bumps: only for a mesh or primitive"),
     ({"primitive": "face", "bumps": 60.0}, "object.bumps: input should be less than 60"),
     ({"primitive": "sphere", "radius": 40.0, "face_normals": True}, "object: face_normals: only for a mesh or"),
+    ({"primitive": "sphere", "radius": 40.0, "buffers_cell": 9.0}, 'object: buffers_cell: only for primitive "face"'),
     ({"primitive": "face", "bumps": 5.0, "face_normals": True}, "object: face_normals: only for a mesh or"),
 ])
 def test_face_and_bump_keys_are_checked_in_one_line(object_, message):
@@ -542,6 +543,21 @@ def test_bumps_tilt_the_shading_normals_and_leave_the_surface():
     # Tilted by up to 30 degrees (a pixel averages a little of its neighbours' tilt), not everywhere alike.
     assert 12.0 < angle.max() < 31.0 and np.median(angle) > 3.0
     assert not np.allclose(plain.source, bumped.source)
+
+
+def test_buffers_cell_renders_the_buffers_from_a_coarser_head():
+    camera = {"position": [0.0, 0.0, 650.0], "look_at": [0.0, 0.0, 0.0], "fov": 24.0, "width": 16, "height": 16}
+    face = {"primitive": "face", "cell": 10.0, "ears": False, "wrinkles": False}
+    same = render_scene(_config(object=face, camera=camera), target=False)
+    coarse = render_scene(_config(object={**face, "buffers_cell": 20.0}, camera=camera), target=False)
+    # scene.json records both heads; the buffers' has fewer triangles.
+    assert coarse.info["mesh"] == same.info["mesh"] and "buffers_mesh" not in same.info
+    assert coarse.info["buffers_mesh"]["cell_mm"] == 20.0
+    assert coarse.info["buffers_mesh"]["triangles"] < coarse.info["mesh"]["triangles"]
+    # The depth and normals are the coarse head's, not the medium's.
+    both = (same.mask > 0) & (coarse.mask > 0)
+    assert np.abs(same.depth[both] - coarse.depth[both]).max() > 0.5
+    assert not np.allclose(same.normal[both], coarse.normal[both], atol=0.01)
 
 
 def test_face_normals_shade_with_the_triangles_own_normals():

@@ -132,6 +132,11 @@ class SceneObject(_Strict):
     normal buffer and the Lambertian source show bumps that the medium's boundary
     does not have, and near the silhouette some normals face away from the camera.
 
+    ``buffers_cell`` (mm, only for ``primitive = "face"``) renders what a renderer
+    would have (the source, the key light's part, depth, normals, mask) from the face
+    meshed at this grid, and the target's medium from the face at ``cell``: a game's
+    low-poly model of a face whose photograph shows no facets.
+
     ``face_normals`` (default false) shades a mesh or face with each triangle's own
     normal (Mitsuba's ``face_normals``) instead of the interpolated vertex normals,
     in every pass: the normal buffer and the source then agree with the flat
@@ -146,6 +151,7 @@ class SceneObject(_Strict):
     radius: Positive | None = None
     # The face's grid is held to 1 mm or coarser: at 1 mm it already has 290 000 triangles.
     cell: Annotated[float, Field(ge=1.0, le=20.0)] | None = None
+    buffers_cell: Annotated[float, Field(ge=1.0, le=20.0)] | None = None
     ears: bool | None = None
     wrinkles: bool | None = None
     bumps: Annotated[float, Field(ge=0.0, lt=60.0)] = 0.0
@@ -163,7 +169,7 @@ class SceneObject(_Strict):
             raise ValueError('primitive "slab" needs size = [width, height, thickness] in mm')
         if self.primitive == "sphere" and self.radius is None:
             raise ValueError('primitive "sphere" needs radius in mm')
-        face_keys = [k for k in ("cell", "ears", "wrinkles") if getattr(self, k) is not None]
+        face_keys = [k for k in ("cell", "buffers_cell", "ears", "wrinkles") if getattr(self, k) is not None]
         if face_keys and self.primitive != "face":
             raise ValueError(f'{", ".join(face_keys)}: only for primitive "face"')
         if self.bumps > 0 and self.primitive in ("slab", "sphere"):

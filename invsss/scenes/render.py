@@ -213,9 +213,17 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
                                            {"absorb": 1.0 - np.sqrt(transmittance)})
         else:
             mesh_ply, mesh_record = object_ply(config, folder)
+        # The renderer's buffers come from the same object unless it has a coarser copy.
+        buffers_ply, buffers_record = mesh_ply, None
+        if config.object.buffers_cell is not None:
+            from .procedural import write_face_ply
+
+            coarse = config.object.model_copy(update={"cell": config.object.buffers_cell})
+            os.mkdir(os.path.join(folder, "buffers"))
+            buffers_ply, buffers_record = write_face_ply(coarse, os.path.join(folder, "buffers"))
 
         def build(kind: str, scene_config: SceneConfig = config, **extra):
-            return scene_dict(mi, scene_config, kind, mesh_ply=mesh_ply, coefficients=coefficients, **extra)
+            return scene_dict(mi, scene_config, kind, mesh_ply=buffers_ply, coefficients=coefficients, **extra)
 
         geometry = timed("geometry", lambda: render_aovs(mi, build("geometry")))
         visible = timed("visibility", lambda: render_aovs(mi, build("visible")))
@@ -238,7 +246,7 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         albedo_error = np.concatenate([error for _, error in calibrated])
         albedo_list = albedo.tolist()
         source_albedo = albedo_list if albedo.size > 1 else albedo_list[0]
-        source_ply = mesh_ply
+        source_ply = buffers_ply
         if pigment is not None:
             # The renderer's albedo map: the calibrated albedo times what the pigment leaves.
             source_ply = write_attribute_ply(os.path.join(folder, "source.ply"), vertices, faces,
@@ -289,6 +297,7 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         "platform": platform.platform(),
         "config": _portable(config.model_dump()),
         "mesh": mesh_record,
+        **({"buffers_mesh": buffers_record} if buffers_record is not None else {}),
         "focal_px": config.camera.focal_length_px,
         "channels": channels,
         "medium": {
