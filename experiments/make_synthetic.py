@@ -947,7 +947,9 @@ def add_fill_light(name: str, out: Path) -> None:
 def _object_label(info: dict) -> str:
     obj = info["config"]["object"]
     if obj.get("primitive") == "face":
-        return f"procedural head, {obj.get('cell') or 1.0:g} mm grid" + (", ears" if obj.get("ears") is not False else "")
+        coarse = f", buffers from the {obj['buffers_cell']:g} mm head" if obj.get("buffers_cell") else ""
+        return (f"procedural head, {obj.get('cell') or 1.0:g} mm grid" + (", ears" if obj.get("ears") is not False else "")
+                + coarse)
     if obj.get("primitive"):
         return obj["primitive"]
     name = Path(obj["mesh"]).name
