@@ -138,7 +138,9 @@ def term_bounds(record) -> list[str]:
         if a < -margin or a > 1.0 + margin:
             out.append(
                 f"light_terms.{strength}: {a:.3g} is outside [0, 1] (by more than two standard errors): "
-                "the fit extrapolates the blend of Lambert's and the law's reflection, which no medium does"
+                "the fit extrapolates the blend of Lambert's and the law's reflection, asking for "
+                f"{'more' if a > 1.0 else 'less'} angular contrast than the law gives at the fitted albedo, "
+                "which then describes a shape rather than the medium (docs/model.md, section 8)"
             )
     for term in ("grazing", "incidence"):
         if term in record and term not in record["fixed"] and float(record[term]) <= -GAIN_EDGE:
