@@ -231,22 +231,21 @@ float3 invsssLightTerms(Texture2D blurred, SamplerState linearClamp, float2 uv, 
 """
 
 
-#: The HLSL functions :func:`to_hlsl` appends when the constants hold the ``law``
-#: term (docs/model.md, section 8): the key light's diffuse BRDF factor, for the
-#: lighting pass, before the blur.
+#: The HLSL :func:`to_hlsl` appends when the constants hold the ``law`` term
+#: (docs/model.md, section 8), before the key light's factor (:data:`LAW_FACTOR_HLSL`),
+#: the diffuse BRDF factor for the lighting pass, before the blur.
 LAW_HLSL = """
 // The key light's reflectance law (invsss docs/model.md, section 8): in the
 // lighting pass, multiply the key light's Lambertian diffuse term
 // (albedo * irradiance * saturate(dot(normal, toLight))) by this factor; the
-// other lights stay Lambertian and the blur passes do not change. normal and
-// toLight are unit vectors in view space, z towards the camera. The factor
-// fades to 1 where the normal faces (nearly) away from the camera or the light,
-// and lawStrength 0 makes it 1 everywhere.
+// other lights stay Lambertian unless the fill term's factor follows, and the blur
+// passes do not change. normal and toLight are unit vectors in view space, z
+// towards the camera. The factor fades to 1 where the normal faces (nearly) away
+// from the camera or the light, and lawStrength 0 makes it 1 everywhere.
 float3 invsssHapkeH(float x, float3 w)
 {
     return (1.0 + 2.0 * x) / (1.0 + 2.0 * x * sqrt(max(1.0 - w, 1e-12)));
 }
-
 """
 
 #: One light's law factor, ``1 + a t (f_w / f_w(1, 1) - 1)``: LAW_NAME and
@@ -271,7 +270,7 @@ FILL_LAW_HLSL = """
 // The same law for every other light (the fill term): in the lighting pass,
 // multiply each other light's Lambertian diffuse term by this factor, with
 // that light's own toLight. lawFillStrength 0 would make it 1 everywhere.
-"""
+#define INVSSS_OTHER_LIGHT_LAW 1"""
 
 
 def _pass_constants(entry, weights, variances, options) -> dict:
@@ -420,8 +419,7 @@ def to_hlsl(constants: dict, prefix: str = "") -> str:
     if "lawAlbedo" in constants:
         factors = [("invsssKeyLightLaw", "lawStrength", "")]
         if "lawFillStrength" in constants:
-            factors.append(("invsssOtherLightLaw", "lawFillStrength", "#define INVSSS_OTHER_LIGHT_LAW 1\n"
-                            + FILL_LAW_HLSL))
+            factors.append(("invsssOtherLightLaw", "lawFillStrength", FILL_LAW_HLSL))
         text += LAW_HLSL
         for name, strength, comment in factors:
             text += comment + LAW_FACTOR_HLSL.replace("LAW_NAME", name).replace("LAW_STRENGTH", strength)
