@@ -247,3 +247,12 @@ def test_a_sweep_reads_fill_light_only_for_trials_with_the_fill(tmp_path):
     # A folder that gained fill_light.exr keeps the ids of its trials without the fill.
     assert law.id == id_without and "fill_light" not in law.config["pairs"][0]
     assert "fill_light" in fill.config["pairs"][0] and "fill_light" in fill.buffer_roles
+    # A pair given file by file names its fill_light too.
+    files = tmp_path / "files.toml"
+    names = {role: f"data/dome/{role}.{'png' if role == 'mask' else 'exr'}"
+             for role in ("source", "target", "depth", "mask", "normal", "light", "key", "fill_light")}
+    files.write_text(light_sweep_text('["law,fill"]').replace(
+        '[data]\npairs = ["data/*/"]\n',
+        "[data]\n[[data.files]]\nname = \"dome\"\n" + "".join(f'{k} = "{v}"\n' for k, v in names.items())))
+    (trial,) = ex.load(files).trials
+    assert trial.config["pairs"][0]["fill_light"] == names["fill_light"]

@@ -80,8 +80,8 @@ _Taps = Optional[Union[str, _Numbers]]
 
 
 class FileSet(BaseModel):
-    """One pair given file by file (``[[data.files]]``); ``normal``, ``light`` and
-    ``key`` are the optional buffers of the light-aware terms."""
+    """One pair given file by file (``[[data.files]]``); ``normal``, ``light``,
+    ``key`` and ``fill_light`` are the optional buffers of the light-aware terms."""
 
     model_config = _STRICT
     name: Optional[str] = None
@@ -92,6 +92,7 @@ class FileSet(BaseModel):
     normal: Optional[str] = None
     light: Optional[str] = None
     key: Optional[str] = None
+    fill_light: Optional[str] = None
 
 
 class DataSpec(BaseModel):
