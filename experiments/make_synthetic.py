@@ -929,14 +929,14 @@ def add_fill_light(name: str, out: Path) -> None:
     from invsss.io import read_image, write_image
     from invsss.io.result_dir import MANIFEST_NAME
     from invsss.scenes import parse_config
-    from invsss.scenes.render import light_directions
+    from invsss.scenes.render import fill_light_directions
 
     folder = out / name
     config = parse_config(json.loads((folder / "scene.json").read_text())["config"], "scene.json")
-    if len(config.lights) < 2:
+    fill = fill_light_directions(config, read_image(folder / "depth.exr")[..., 0])
+    if fill is None:
         return
-    depth = read_image(folder / "depth.exr")[..., 0]
-    write_image(folder / "fill_light.exr", light_directions(config, depth, light=1).astype(np.float32))
+    write_image(folder / "fill_light.exr", fill)
     manifest = json.loads((folder / MANIFEST_NAME).read_text())
     if "fill_light.exr" not in manifest["files"]:
         manifest["files"].insert(manifest["files"].index("scene.json"), "fill_light.exr")

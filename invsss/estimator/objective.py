@@ -29,10 +29,9 @@ from ..forward.light_terms import (
     LightTerms,
     grazing_field,
     incidence_field,
-    law_source,
     light_transport,
+    lit_source,
     propagation_offsets,
-    reflectance_law,
 )
 from ..forward.stretch import stretch_factors
 from .basis import basis_images
@@ -57,11 +56,9 @@ def _lit_source(pair, natural):
     the difference Jacobian sees ``w`` as it sees any blur parameter."""
     if "law" not in natural:
         return pair
-    gain = reflectance_law(pair.normal, pair.light, natural["law"])
-    lit = law_source(pair.source, pair.key, pair.mask, gain, natural["law_strength"])
-    if "fill_strength" in natural:
-        fill_gain = reflectance_law(pair.normal, pair.fill_light, natural["law"])
-        lit = law_source(lit, pair.source - pair.key, pair.mask, fill_gain, natural["fill_strength"])
+    fill = natural.get("fill_strength")
+    lit = lit_source(pair.source, pair.key, pair.mask, pair.normal, pair.light, natural["law"],
+                     natural["law_strength"], None if fill is None else pair.fill_light, fill)
     return eqx.tree_at(lambda p: p.source, pair, lit)
 
 

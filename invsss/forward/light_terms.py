@@ -109,6 +109,7 @@ __all__ = [
     "law_trust",
     "reflectance_law",
     "law_source",
+    "lit_source",
     "shift_image",
     "light_transport",
     "apply_light_terms",
@@ -399,6 +400,16 @@ def law_source(
     return source + strength * mask[..., None] * key * (gain - 1.0)
 
 
+def lit_source(source, key, mask, normal, light, albedo, strength, fill_light=None, fill=None):
+    """``S + m a K (g(n, l) - 1)``, plus ``m b (S - K) (g(n, l_f) - 1)`` when ``fill_light``
+    and ``fill`` (``b``) are given: the source the blur spreads under the ``law`` and
+    ``fill`` terms. The traced core that :func:`apply_law` and the estimator share."""
+    lit = law_source(source, key, mask, reflectance_law(normal, light, albedo), strength)
+    if fill_light is None or fill is None:
+        return lit
+    return law_source(lit, source - key, mask, reflectance_law(normal, fill_light, albedo), fill)
+
+
 def shift_image(image: Float[Array, "H W C"], offset: Float[Array, "H W 2"]) -> Float[Array, "H W C"]:
     """``image`` read at ``(x - dx, y - dy)`` per pixel: bilinear, clamped to the edge.
 
@@ -519,11 +530,9 @@ def apply_law(image, mask, albedo, buffers: LightBuffers, strength=1.0, fill=0.0
     """
     image = jnp.asarray(image)
     dtype = image.dtype
-    normal, albedo = jnp.asarray(buffers.normal, dtype), jnp.asarray(albedo, dtype)
-    key, mask = jnp.asarray(buffers.key, dtype), jnp.asarray(mask, dtype)
-    gain = reflectance_law(normal, jnp.asarray(buffers.light, dtype), albedo)
-    out = law_source(image, key, mask, gain, jnp.asarray(strength, dtype))
-    if buffers.fill_light is None or (is_concrete(fill) and float(fill) == 0.0):
-        return out
-    fill_gain = reflectance_law(normal, jnp.asarray(buffers.fill_light, dtype), albedo)
-    return law_source(out, image - key, mask, fill_gain, jnp.asarray(fill, dtype))
+    skip_fill = buffers.fill_light is None or (is_concrete(fill) and float(fill) == 0.0)
+    return lit_source(image, jnp.asarray(buffers.key, dtype), jnp.asarray(mask, dtype),
+                      jnp.asarray(buffers.normal, dtype), jnp.asarray(buffers.light, dtype),
+                      jnp.asarray(albedo, dtype), jnp.asarray(strength, dtype),
+                      None if skip_fill else jnp.asarray(buffers.fill_light, dtype),
+                      None if skip_fill else jnp.asarray(fill, dtype))

@@ -51,8 +51,8 @@ from .config import SceneConfig
 from .mitsuba_scene import import_mitsuba, load_mesh_ply, pigmented_mesh, scene_dict, write_attribute_ply
 from .noise import half_render_noise
 
-__all__ = ["SCENE_FILES", "SceneRender", "light_directions", "object_ply", "render_aovs", "render_scene",
-           "scene_writers", "write_scene"]
+__all__ = ["SCENE_FILES", "SceneRender", "fill_light_directions", "light_directions", "object_ply", "render_aovs",
+           "render_scene", "scene_writers", "write_scene"]
 
 #: The files of a scene folder, in the order they are written.
 SCENE_FILES = ("source.exr", "target.exr", "depth.exr", "mask.png", "normal.exr", "coverage.exr", "light.exr",
@@ -416,10 +416,15 @@ def _fill_light_buffer(result: SceneRender) -> np.ndarray | None:
 
     if "config" not in result.info:
         return None
-    config = parse_config(result.info["config"], "scene.json")
+    return fill_light_directions(parse_config(result.info["config"], "scene.json"), result.depth)
+
+
+def fill_light_directions(config: SceneConfig, depth) -> np.ndarray | None:
+    """``fill_light.exr``: float32 unit vectors towards the scene's second light
+    (:func:`light_directions` with ``light=1``), or None for a scene with one light."""
     if len(config.lights) < 2:
         return None
-    return light_directions(config, result.depth, light=1).astype(np.float32)
+    return light_directions(config, depth, light=1).astype(np.float32)
 
 
 def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
