@@ -33,6 +33,10 @@ post hoc, on pairs written by ``invsss scene``:
      and ``the law on the other lights``: the fit's law applied to ``S - K`` with that
      direction, ``(S - K)(g - 1)`` blurred, one image (the terms give the key light alone
      the law);
+   * ``the law's change``: what the fit's law (and fill) add to the source, ``S' - S``,
+     unblurred, and with its own profile (unblurred and through each of the fitted
+     Gaussians alone, each with its own weight): whether the blur, which spreads the
+     law's change with the whole profile, eats the angular contrast the law gives;
    * ``shape at 1-8 px``: convexity (smoothed normals' divergence) and a depth
      difference (smoothed depth minus depth) at 1, 2, 4 and 8 px, alone and times the
      prediction (16 images): light gathered in creases or lost at ridges over a few pixels.
@@ -181,6 +185,30 @@ def fill_law(fit, pair, fill_light) -> list[np.ndarray]:
     return [through_blur(rest * (gain - 1.0), pair, fit.params)]
 
 
+def law_change(fit, pair) -> np.ndarray:
+    """What the fit's law (and fill) add to the source, ``S' - S``, before any blur."""
+    from invsss.forward.light_terms import lit_source
+
+    terms, buffers = fit.light_terms, pair["buffers"]
+    source = np.asarray(pair["source"], np.float32)
+    fill = terms.get("fill")
+    lit = lit_source(source, np.asarray(buffers.key, np.float32), np.asarray(pair["mask"], np.float32),
+                     np.asarray(buffers.normal, np.float32), np.asarray(buffers.light, np.float32),
+                     np.asarray(terms["law"], np.float32), float(terms.get("law_strength", 1.0)),
+                     None if fill is None or buffers.fill_light is None else np.asarray(buffers.fill_light, np.float32),
+                     None if fill is None else float(fill))
+    return np.asarray(lit, np.float64) - source
+
+
+def through_one_gaussian(image, pair, params, k: int):
+    """``image`` through the fitted blur's ``k``-th Gaussian alone (weight 1)."""
+    weights = np.zeros(len(params.weights), np.float32)
+    weights[k] = 1.0
+    one = invsss.SSSParams(params.sss_level, params.correction, params.maxdd, weights, params.variances)
+    out = invsss.render(np.asarray(image, np.float32), pair["depth"], pair["mask"], one)
+    return np.asarray(out, np.float64).reshape(np.shape(image))
+
+
 def layer_gains(pair, fit, keep, fill_light=None) -> dict:
     """The PSNR gain of each candidate layer mixed with the fit's prediction (dB)."""
     source, target = (np.asarray(pair[k], np.float64) for k in ("source", "target"))
@@ -215,6 +243,11 @@ def layer_gains(pair, fit, keep, fill_light=None) -> dict:
                                                if np.any((a * b)[keep])]
         if fit.light_terms and fit.light_terms.get("law") is not None:
             layers["the law on the other lights"] = fill_law(fit, pair, fill_light)
+    if fit.light_terms and fit.light_terms.get("law") is not None:
+        change = law_change(fit, pair)
+        layers["the law's change, unblurred"] = [change]
+        layers["the law's change, its own profile"] = [change] + [
+            through_one_gaussian(change, pair, fit.params, k) for k in range(len(fit.params.weights))]
     base = psnr([prediction])
     return {"fit": base, **{name: psnr([prediction, *images]) - base for name, images in layers.items()}}
 

@@ -165,6 +165,19 @@ def test_fit_recovers_the_fill_and_gains_over_the_law_alone():
     assert key_only.psnr < fit.psnr - 1.0
     # The fitted values render as fitted.
     assert float(fit.light_terms_params().fill) == pytest.approx(terms["fill"])
+    assert not any("a gain that neither" in w for w in fit.warnings)
+
+
+@pytest.mark.slow
+def test_other_lights_darker_than_any_medium_are_warned_about():
+    # The target's other lights lose light where every medium reflects more than
+    # Lambert's law (a fill strength of -1.5): the fit finds that and says so.
+    source, depth, mask, buffers = dome_with_two_lights(32)
+    target = lit_target(source, depth, mask, buffers, LightTerms(law=[0.9, 0.8, 0.7], fill=-1.5))
+    fit = invsss.fit_pair(source, target, depth, mask, light_terms="law,fill", profile=PROFILE, fix=FIX,
+                          n_starts=1, light_buffers=buffers)
+    assert fit.light_terms["fill"] < -1.0
+    assert any(w.startswith("light_terms.fill: at ") and "a gain that neither" in w for w in fit.warnings)
 
 
 @pytest.mark.slow

@@ -13,7 +13,7 @@ import pytest
 
 import invsss
 from invsss.estimator.stages import light_terms as light_terms_stage
-from invsss.forward.light_terms import LAW_TRUST, LightBuffers, LightTerms, reflectance_law
+from invsss.forward.light_terms import LAW_TRUST, LightBuffers, LightTerms, law_excess, reflectance_law
 
 from _lit_scenes import FIX, PROFILE, dome_with_two_lights, lit_target
 
@@ -159,14 +159,54 @@ def test_terms_at_the_edge_of_their_range_are_warned_about():
     assert light_terms_stage.term_bounds(quiet) == []
     at_edge = dict(quiet, law=[0.99993])
     assert "light_terms.law: the albedo ended at 0.99993" in light_terms_stage.term_bounds(at_edge)[0]
-    beyond = dict(quiet, law_strength=1.4)
-    assert "light_terms.law_strength: 1.4 is outside [0, 1]" in light_terms_stage.term_bounds(beyond)[0]
-    # Within two standard errors of [0, 1] it is noise, not extrapolation.
-    assert light_terms_stage.term_bounds(dict(quiet, law_strength=1.08, stderr={"law_strength": 0.17})) == []
+    # A strength outside [0, 1] is judged against the buffers (unlike_any_medium), not here.
+    assert light_terms_stage.term_bounds(dict(quiet, law_strength=1.4)) == []
     darkened = dict(quiet, grazing=-0.995)
     assert "light_terms.grazing: -0.995 is at its bound -1" in light_terms_stage.term_bounds(darkened)[0]
     held = dict(at_edge, fixed=["law"])
     assert light_terms_stage.term_bounds(held) == []
+
+
+@pytest.mark.parametrize("albedo, strength, beyond", [(0.9, 1.6, False), (0.3, 3.0, True), (0.95, -1.0, True),
+                                                       (0.6, 0.5, False)])
+def test_law_excess_is_the_distance_to_every_albedos_gain(albedo, strength, beyond):
+    # The definition, brute force: the gains of the law at 201 albedos and Lambert's 1.
+    _, _, _, buffers = dome_with_two_lights()
+    normal, light = np.asarray(buffers.normal), np.asarray(buffers.light)
+    grid = np.stack([np.asarray(reflectance_law(normal, light, w))[..., 0] for w in np.linspace(0.0, 1.0, 201)])
+    low, high = np.minimum(grid.min(0), 1.0), np.maximum(grid.max(0), 1.0)
+    blend = 1.0 + strength * (np.asarray(reflectance_law(normal, light, albedo))[..., 0] - 1.0)
+    expected = np.maximum(np.maximum(low - blend, blend - high), 0.0)
+    got = np.asarray(law_excess(normal, light, albedo, strength))[..., 0]
+    np.testing.assert_allclose(got, expected, atol=1e-5)
+    # A blend of two physical laws is physical; beyond them it may or may not be
+    # (1.6 at w = 0.9 is a gain that lower albedos give on every pixel here).
+    assert np.any(got > 0.01) == beyond
+
+
+def test_a_strength_beyond_every_medium_is_warned_about():
+    source, _, mask, b = dome_with_two_lights()
+    pair = invsss.ImagePair(source, source, np.ones_like(mask), mask, normal=b.normal, light=b.light,
+                            key=b.key, fill_light=b.fill_light)
+    quiet = {"law": [0.9, 0.8, 0.7], "law_strength": 1.0, "fill": 0.5,
+             "stderr": {"law_strength": 0.05, "fill": 0.05}, "fixed": []}
+
+    def found(**changes):
+        return light_terms_stage.unlike_any_medium([pair], {**quiet, **changes})
+
+    assert found() == []
+    # What the procedural heads fit (docs/model.md, section 8): outside [0, 1] and
+    # still a gain that a lower albedo gives, so not a warning.
+    assert found(law=[0.977], law_strength=1.6, stderr={"law_strength": 0.26, "fill": 0.05}) == []
+    darker = found(law_strength=-1.0)
+    assert len(darker) == 1 and darker[0].startswith("light_terms.law_strength: at -1 ± 0.05 the blend gives")
+    assert "of the key light's part a gain that neither" in darker[0]
+    assert len(found(law=[0.3], law_strength=3.0)) == 1
+    (fill,) = found(fill=-1.5)
+    assert fill.startswith("light_terms.fill: at -1.5 ± 0.05") and "the other lights' part" in fill
+    # Two standard errors from [0, 1] the data allow a physical blend; a held strength is the user's.
+    assert found(law_strength=-1.0, stderr={"law_strength": 0.6, "fill": 0.05}) == []
+    assert found(law_strength=-1.0, fixed=["law_strength"]) == []
 
 
 @pytest.mark.slow

@@ -108,6 +108,7 @@ __all__ = [
     "chandrasekhar_h",
     "law_trust",
     "reflectance_law",
+    "law_excess",
     "law_source",
     "lit_source",
     "shift_image",
@@ -164,7 +165,8 @@ class LightTerms(eqx.Module):
     law_strength : float
         ``a``: how much of the key light follows the law (0: Lambert, the
         identity; 1, the default: the law). Values outside [0, 1] extrapolate
-        the blend; a fit warns about them.
+        the blend; a fit warns where that gives gains no medium gives
+        (:func:`law_excess`).
     fill : float
         ``b``: how much of the other lights' part of the source follows the law
         with the same albedo (0, the default: they stay Lambertian, the identity;
@@ -388,6 +390,28 @@ def reflectance_law(
     # and its derivative too.
     ratio = chandrasekhar_h(mu, w) * chandrasekhar_h(mu0, w) / jnp.maximum(mu + mu0, 1e-6) / head_on
     return 1.0 + trust * (ratio - 1.0)
+
+
+def law_excess(
+    normal: Float[Array, "H W 3"], light: Float[Array, "H W 3"], albedo: Float[Array, "*C"], strength
+) -> Float[Array, "H W C"]:
+    """How far the blended gain ``1 + a (g_w - 1)`` lies outside every gain that a
+    medium could give: those between Lambert's (1) and the law's at any albedo in [0, 1].
+
+    At fixed cosines the law's gain :func:`reflectance_law` is monotone in ``w``
+    (each ``H(x) / H(1)`` runs from 1 at ``w = 0`` to ``(1 + 2x) / 3`` at ``w = 1``),
+    so the albedos 0 and 1 bound it, and with Lambert's 1 they bound every blend
+    with ``a`` in [0, 1]. A strength outside [0, 1] is physical where its blend
+    still lies among them (another albedo gives that gain there) and not where it
+    leaves them. 0 inside, the distance outside; same axes as :func:`reflectance_law`.
+    """
+    w = jnp.atleast_1d(albedo)
+    blend = 1.0 + strength * (reflectance_law(normal, light, w) - 1.0)
+    single = reflectance_law(normal, light, jnp.zeros_like(w))
+    conservative = reflectance_law(normal, light, jnp.ones_like(w))
+    low = jnp.minimum(jnp.minimum(single, conservative), 1.0)
+    high = jnp.maximum(jnp.maximum(single, conservative), 1.0)
+    return jnp.maximum(jnp.maximum(low - blend, blend - high), 0.0)
 
 
 def law_source(
