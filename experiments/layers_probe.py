@@ -37,6 +37,9 @@ post hoc, on pairs written by ``invsss scene``:
      unblurred, and with its own profile (unblurred and through each of the fitted
      Gaussians alone, each with its own weight): whether the blur, which spreads the
      law's change with the whole profile, eats the angular contrast the law gives;
+   * for an area key or second light, ``the law over an area light``: the law's gain
+     averaged over 9 x 9 points of the light, weighted by the irradiance each sends, in
+     place of the gain towards its centre (printed on its own line);
    * ``shape at 1-8 px``: convexity (smoothed normals' divergence) and a depth
      difference (smoothed depth minus depth) at 1, 2, 4 and 8 px, alone and times the
      prediction (16 images): light gathered in creases or lost at ridges over a few pixels.
@@ -207,6 +210,70 @@ def through_one_gaussian(image, pair, params, k: int):
     one = invsss.SSSParams(params.sss_level, params.correction, params.maxdd, weights, params.variances)
     out = invsss.render(np.asarray(image, np.float32), pair["depth"], pair["mask"], one)
     return np.asarray(out, np.float64).reshape(np.shape(image))
+
+
+def area_light_gains(pair, fit, keep, samples: int = 9) -> dict:
+    """What giving the law an area light's whole extent, rather than the direction to
+    its centre (``light.exr``, ``fill_light.exr``), gains (dB): the law's gain averaged
+    over ``samples`` x ``samples`` points of the light, each weighted by the
+    irradiance it sends (``n . l`` times the emitter's cosine over the squared
+    distance; no shadowing). For an area key, the difference ``K (g_area - g_centre)``,
+    blurred and mixed into the fit with a free weight; for an area second light (the
+    fill's), ``(S - K)(g - 1)`` blurred, with the averaged gain and with the centre's,
+    each mixed in alone (the fit's own fill strength may be near 0). Empty unless the
+    fit has the law and a light is an area light."""
+    from invsss.forward.light_terms import reflectance_law
+    from invsss.scenes import parse_config
+    from invsss.scenes.render import camera_points, camera_pose
+
+    config = parse_config(pair["info"]["config"])
+    if not fit.light_terms or fit.light_terms.get("law") is None:
+        return {}
+    origin, rotation = camera_pose(config)
+    points = camera_points(config, np.asarray(pair["depth"], np.float64))
+    normal = np.asarray(pair["buffers"].normal, np.float64)
+    albedo = np.asarray(fit.light_terms["law"], np.float32)
+    key = np.asarray(pair["buffers"].key, np.float64) * np.asarray(pair["mask"], np.float64)[..., None]
+    rest = np.asarray(pair["source"], np.float64) * np.asarray(pair["mask"], np.float64)[..., None] - key
+    target = np.asarray(pair["target"], np.float64)
+    prediction = np.asarray(fit.fitted[0], np.float64).reshape(target.shape)
+    base = mixed_psnr(target, keep, [prediction])
+
+    def gain(*images):
+        return mixed_psnr(target, keep, [prediction, *(through_blur(x, pair, fit.params) for x in images)]) - base
+
+    def law_towards(place, facing):
+        towards = rotation @ (place - origin) - points
+        distance = np.linalg.norm(towards, axis=-1, keepdims=True)
+        light = towards / distance
+        sent = np.clip(-(light @ (rotation @ facing)), 0.0, None) * np.clip(np.sum(normal * light, -1), 0.0, None)
+        law = np.asarray(reflectance_law(normal.astype(np.float32), light.astype(np.float32), albedo), np.float64)
+        return law, (sent / distance[..., 0] ** 2)[..., None]
+
+    out = {}
+    for index, part in ((0, key), (1, rest)):
+        if index >= len(config.lights) or config.lights[index].type != "area":
+            continue
+        light = config.lights[index]
+        centre = np.asarray(light.center, np.float64)
+        facing = np.asarray(light.look_at, np.float64) - centre
+        facing /= np.linalg.norm(facing)
+        across = np.cross(facing, [0.0, 1.0, 0.0])
+        across /= np.linalg.norm(across)
+        along = np.cross(facing, across)
+        total = weight = 0.0
+        for u in np.linspace(-0.5, 0.5, samples):
+            for v in np.linspace(-0.5, 0.5, samples):
+                law, sent = law_towards(centre + u * light.width * across + v * light.height * along, facing)
+                total, weight = total + sent * law, weight + sent
+        at_centre, _ = law_towards(centre, facing)
+        spread = np.where(weight > 0, total / np.maximum(weight, 1e-30), at_centre)
+        if index == 0:
+            out["area key: the averaged law's difference"] = gain(part * (spread - at_centre))
+        else:
+            out["area fill: the law towards its centre"] = gain(part * (at_centre - 1.0))
+            out["area fill: the law averaged over it"] = gain(part * (spread - 1.0))
+    return out
 
 
 def layer_gains(pair, fit, keep, fill_light=None) -> dict:
@@ -438,6 +505,10 @@ def main() -> None:
         cells = " | ".join(f"{name} {gain:+.2f}" for name, gain in gains.items() if name != "fit")
         print(f"{folder.name}: fit + {args.terms} {gains['fit']:.2f} dB (noise ceiling "
               f"{pair['info']['noise']['noise_ceiling_db']:.2f}); gain with a layer: {cells}", flush=True)
+        area = area_light_gains(pair, fit, keep)
+        if area:
+            print("  the law over an area light's extent: "
+                  + ", ".join(f"{name} {value:+.3f}" for name, value in area.items()), flush=True)
         scales = residual_scales(fit, np.asarray(pair["target"], np.float64), keep)
         print("  residual rms: " + ", ".join(f"{name} {value:.4f}" for name, value in scales.items()), flush=True)
         if args.thickness:

@@ -13,14 +13,14 @@ from .config import SceneConfig, load_config, parse_config
 from .media import MEDIUM_PRESETS
 
 __all__ = [
-    "MEDIUM_PRESETS", "SceneConfig", "light_directions", "load_config", "parse_config", "render_scene",
+    "MEDIUM_PRESETS", "SceneConfig", "camera_points", "light_directions", "load_config", "parse_config", "render_scene",
     "write_scene",
 ]
 
 
 def __getattr__(name: str):
     # The renderer needs Mitsuba: import it on first use only.
-    if name in ("render_scene", "write_scene", "SceneRender", "light_directions"):
+    if name in ("render_scene", "write_scene", "SceneRender", "light_directions", "camera_points"):
         from . import render
 
         return getattr(render, name)

@@ -51,8 +51,8 @@ from .config import SceneConfig
 from .mitsuba_scene import import_mitsuba, load_mesh_ply, pigmented_mesh, scene_dict, write_attribute_ply
 from .noise import half_render_noise
 
-__all__ = ["SCENE_FILES", "SceneRender", "fill_light_directions", "light_directions", "object_ply", "render_aovs",
-           "render_scene", "scene_writers", "write_scene"]
+__all__ = ["SCENE_FILES", "SceneRender", "camera_points", "camera_pose", "fill_light_directions", "light_directions",
+           "object_ply", "render_aovs", "render_scene", "scene_writers", "write_scene"]
 
 #: The files of a scene folder, in the order they are written.
 SCENE_FILES = ("source.exr", "target.exr", "depth.exr", "mask.png", "normal.exr", "coverage.exr", "light.exr",
@@ -360,6 +360,26 @@ def _depth_and_normal(config: SceneConfig, aovs: dict) -> tuple[np.ndarray, np.n
     return depth, normal
 
 
+def camera_pose(config: SceneConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The camera's position (world) and the rotation (3, 3) from world to camera
+    space (x right, y up, z towards the camera)."""
+    origin, right, up, forward = config.camera.frame()
+    return origin, np.stack([right, up, -forward])
+
+
+def camera_points(config: SceneConfig, depth) -> np.ndarray:
+    """The camera-space points (H, W, 3) seen through the pixel centres at the
+    eye-space ``depth`` (mm; 0 gives the camera's own position)."""
+    depth = np.asarray(depth, np.float64)
+    camera = config.camera
+    h, w = depth.shape
+    f = camera.focal_length_px
+    offset_rows, offset_cols = camera.principal_offset_px
+    x = (np.arange(w)[None, :] + 0.5 - w / 2 - offset_cols) / f * depth
+    y = -(np.arange(h)[:, None] + 0.5 - h / 2 - offset_rows) / f * depth
+    return np.stack(np.broadcast_arrays(x, y, -depth), axis=-1)
+
+
 def light_directions(config: SceneConfig, depth, light: int = 0) -> np.ndarray:
     """Unit vectors (H, W, 3) from each seen surface point towards one of the scene's
     lights (``light``: its index; 0, the first, is the key).
@@ -382,15 +402,8 @@ def light_directions(config: SceneConfig, depth, light: int = 0) -> np.ndarray:
     array([0., 0., 1.])
     """
     depth = np.asarray(depth, np.float64)
-    camera = config.camera
-    origin, right, up, forward = config.camera.frame()
-    rotation = np.stack([right, up, -forward])  # world -> camera
-    h, w = depth.shape
-    f = camera.focal_length_px
-    offset_rows, offset_cols = camera.principal_offset_px
-    x = (np.arange(w)[None, :] + 0.5 - w / 2 - offset_cols) / f * depth
-    y = -(np.arange(h)[:, None] + 0.5 - h / 2 - offset_rows) / f * depth
-    points = np.stack(np.broadcast_arrays(x, y, -depth), axis=-1)
+    origin, rotation = camera_pose(config)
+    points = camera_points(config, depth)
     key = config.lights[light]
     if key.type == "directional":
         towards = np.broadcast_to(-(rotation @ np.asarray(key.direction, np.float64)), points.shape)
