@@ -54,6 +54,7 @@ import invsss
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 from fidelity import eroded, load_scene_pair  # noqa: E402
+from layers_probe import shifted  # noqa: E402
 from reflectance_probe import mixed_psnr  # noqa: E402
 
 #: The near pixels (Chebyshev distance, px) integrated over their footprint.
@@ -139,26 +140,17 @@ def footprint_points(config, points, normal, a: float, b: float):
 
 
 def pixel_area(config, points, normal) -> np.ndarray:
-    """Each pixel's footprint on its tangent plane (mm^2): the head-on area over the
-    cosine between the normal and the ray (at least 0.2)."""
+    """Each pixel's footprint on its tangent plane (mm^2): its solid angle,
+    ``1 / (f^2 |ray|^3)`` for the ray ``(x / f, y / f, -1)``, times the squared distance
+    ``depth^2 |ray|^2``, over the cosine between the normal and the ray (at least 0.2)."""
     depth = -points[..., 2]
     f = config.camera.focal_length_px
     h, w = points.shape[:2]
     rows, cols = np.mgrid[0:h, 0:w].astype(np.float64)
     ray = ray_directions(config, rows, cols)
-    ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
-    cosine = np.maximum(np.abs(np.sum(normal * ray, axis=-1)), 0.2)
-    return (depth / f) ** 2 * np.linalg.norm(ray_directions(config, rows, cols), axis=-1) ** 2 / cosine
-
-
-def shifted(image, dy: int, dx: int, fill=0.0):
-    """``image`` at ``(y + dy, x + dx)``; ``fill`` outside the frame."""
-    h, w = image.shape[:2]
-    out = np.full_like(image, fill)
-    ys, yd = slice(max(dy, 0), h + min(dy, 0)), slice(max(-dy, 0), h + min(-dy, 0))
-    xs, xd = slice(max(dx, 0), w + min(dx, 0)), slice(max(-dx, 0), w + min(-dx, 0))
-    out[yd, xd] = image[ys, xs]
-    return out
+    length = np.linalg.norm(ray, axis=-1)
+    cosine = np.maximum(np.abs(np.sum(normal * ray, axis=-1)) / length, 0.2)
+    return (depth / f) ** 2 / length / cosine
 
 
 def predictions(pair, radius: int) -> dict:

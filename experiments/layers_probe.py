@@ -40,6 +40,10 @@ post hoc, on pairs written by ``invsss scene``:
    * for an area key or second light, ``the law over an area light``: the law's gain
      averaged over 9 x 9 points of the light, weighted by the irradiance each sends, in
      place of the gain towards its centre (printed on its own line);
+   * ``any 15 x 15 kernel``: the source as the fit lit it (its law and fill applied,
+     masked) shifted by every offset up to 7 px, 225 images: every translation-invariant
+     linear filter of it, so an upper bound on what another profile shape, an
+     anisotropic kernel or one global shift could add;
    * ``shape at 1-8 px``: convexity (smoothed normals' divergence) and a depth
      difference (smoothed depth minus depth) at 1, 2, 4 and 8 px, alone and times the
      prediction (16 images): light gathered in creases or lost at ridges over a few pixels.
@@ -203,6 +207,15 @@ def law_change(fit, pair) -> np.ndarray:
     return np.asarray(lit, np.float64) - source
 
 
+def shifted(image, dy: int, dx: int):
+    """``image`` at ``(y + dy, x + dx)``, 0 outside the frame."""
+    h, w = image.shape[:2]
+    out = np.zeros_like(image)
+    out[max(-dy, 0):h + min(-dy, 0), max(-dx, 0):w + min(-dx, 0)] = image[max(dy, 0):h + min(dy, 0),
+                                                                           max(dx, 0):w + min(dx, 0)]
+    return out
+
+
 def through_one_gaussian(image, pair, params, k: int):
     """``image`` through the fitted blur's ``k``-th Gaussian alone (weight 1)."""
     weights = np.zeros(len(params.weights), np.float32)
@@ -310,6 +323,11 @@ def layer_gains(pair, fit, keep, fill_light=None) -> dict:
                                                if np.any((a * b)[keep])]
         if fit.light_terms and fit.light_terms.get("law") is not None:
             layers["the law on the other lights"] = fill_law(fit, pair, fill_light)
+    # Any translation-invariant filter of the source as the fit lit it: 225 free weights.
+    lit = np.asarray(pair["source"], np.float64) * np.asarray(pair["mask"], np.float64)[..., None]
+    if fit.light_terms and fit.light_terms.get("law") is not None:
+        lit = lit + law_change(fit, pair)
+    layers["any 15 x 15 kernel"] = [shifted(lit, dy, dx) for dy in range(-7, 8) for dx in range(-7, 8)]
     if fit.light_terms and fit.light_terms.get("law") is not None:
         change = law_change(fit, pair)
         layers["the law's change, unblurred"] = [change]
