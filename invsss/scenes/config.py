@@ -137,6 +137,14 @@ class SceneObject(_Strict):
     meshed at this grid, and the target's medium from the face at ``cell``: a game's
     low-poly model of a face whose photograph shows no facets.
 
+    ``subdivisions`` (0-3, default 0; only for a ``mesh``) refines the mesh by Loop
+    subdivision this many times before anything is rendered: each level splits every
+    triangle in four and moves the vertices towards a smooth surface, so a scan's facets
+    (the medium's flat boundary, which its interpolated shading normals do not show)
+    shrink below a pixel and the buffers agree with the medium, as for a photographed
+    face. The fran scan's facets lie 4.4 degrees from its shading normals on the median
+    triangle, 0.6 after two levels.
+
     ``face_normals`` (default false) shades a mesh or face with each triangle's own
     normal (Mitsuba's ``face_normals``) instead of the interpolated vertex normals,
     in every pass: the normal buffer and the source then agree with the flat
@@ -156,6 +164,7 @@ class SceneObject(_Strict):
     wrinkles: bool | None = None
     bumps: Annotated[float, Field(ge=0.0, lt=60.0)] = 0.0
     face_normals: bool = False
+    subdivisions: Annotated[int, Field(ge=0, le=3)] = 0
     pose: Pose = Pose()
     pigment: Pigment | None = None
 
@@ -177,6 +186,8 @@ class SceneObject(_Strict):
         if self.face_normals and (self.primitive in ("slab", "sphere") or self.bumps > 0):
             raise ValueError('face_normals: only for a mesh or primitive "face" without bumps '
                              "(the bumps tilt the vertex normals that face normals ignore)")
+        if self.subdivisions and (self.mesh is None or self.pigment is not None):
+            raise ValueError("subdivisions: only for a mesh without a pigment (subdivision drops the texture coordinates)")
         if self.pigment is not None and (self.mesh is None or self.bumps > 0):
             raise ValueError("pigment: only for a mesh (with texture coordinates) without bumps")
         if self.primitive == "face" and (self.size is not None or self.radius is not None):

@@ -150,13 +150,15 @@ def write_mesh_ply(mesh, folder: str, *, bumps: float = 0.0, mm_per_unit: float 
     return path
 
 
-def load_mesh_ply(mesh_path: str, folder: str, *, bumps: float = 0.0, mm_per_unit: float = 1.0) -> str:
+def load_mesh_ply(mesh_path: str, folder: str, *, bumps: float = 0.0, mm_per_unit: float = 1.0,
+                  subdivisions: int = 0) -> str:
     """Load a mesh with trimesh, check that it is closed, and save it as PLY in ``folder``.
 
     Vertices that coincide are merged first (seams of texture coordinates or
     normals split a closed surface into open pieces); the surface must then be
     watertight with outward normals, since it is the boundary of the medium.
-    ``bumps`` and ``mm_per_unit``: see :func:`write_mesh_ply`.
+    ``subdivisions``: that many levels of Loop subdivision (trimesh's), after the
+    check. ``bumps`` and ``mm_per_unit``: see :func:`write_mesh_ply`.
 
     Raises
     ------
@@ -194,6 +196,8 @@ def load_mesh_ply(mesh_path: str, folder: str, *, bumps: float = 0.0, mm_per_uni
         )
     if mesh.volume < 0:
         mesh.invert()  # inward-facing triangles would swap the inside and outside of the medium
+    if subdivisions:
+        mesh = mesh.subdivide_loop(iterations=subdivisions)
     return write_mesh_ply(mesh, folder, bumps=bumps, mm_per_unit=mm_per_unit)
 
 

@@ -96,7 +96,8 @@ def object_ply(config: SceneConfig, folder: str) -> tuple[str | None, dict | Non
     An object with a pigment is made by :func:`render_scene` itself."""
     if config.object.mesh:
         return (load_mesh_ply(config.object.mesh, folder, bumps=config.object.bumps,
-                              mm_per_unit=config.object.mm_per_unit), _mesh_record(config.object.mesh))
+                              mm_per_unit=config.object.mm_per_unit, subdivisions=config.object.subdivisions),
+                _mesh_record(config.object.mesh))
     if config.object.primitive == "face":
         from .procedural import write_face_ply
 
