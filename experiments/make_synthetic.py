@@ -783,7 +783,7 @@ along +z, scaled to millimetres, and closed behind by a cone of triangles from i
 to a point inside; the scan's own triangles are unchanged, its texture is not used).
 
 **leeperrysmith, flat_card and the path-traced pt_face_940, pt_face_940_turned,
-pt_face_skin1, pt_face_ear_backlit_940, pt_face_rough_area_940** use "Infinite, 3D Head
+pt_face_skin1, pt_face_ear_backlit_940, pt_face_rough_area_940 and twowave_face** use "Infinite, 3D Head
 Scan" by Lee Perry-Smith
 (Infinite-Realities, www.ir-ltd.net), based on a work at www.triplegangers.com, licensed
 under Creative Commons Attribution 3.0 Unported
@@ -799,7 +799,9 @@ and lighting and scaled to millimetres (fran: stored in metres; Lee Perry-Smith:
 estimated 45 mm per model unit, 44 mm in the path-traced pairs); for the model-made pairs
 their textures were multiplied by synthetic noise and the targets add synthetic subsurface
 scattering, a colour mix and noise; the path-traced pairs use the untextured mesh as the
-boundary of a scattering medium. The flat card shows a crop of
+boundary of a scattering medium, and `twowave_face` also the colour map's green channel
+as an absorbing layer on that boundary (the mesh split into four triangles per triangle
+twice to carry it). The flat card shows a crop of
 the Lee Perry-Smith colour map as a flat picture.
 
 **pt_proc_area_940, pt_proc_lowpoly_dir_940** use no outside data: their head is made
@@ -813,8 +815,32 @@ LICENCE_FILES = {
 }
 
 
+def written_by_hand(readme: Path, generated: str) -> str:
+    """The ``## `` sections of an existing ``readme`` that ``generated`` does not hold
+    (written by hand, such as the two-wavelength pair's), so that writing the README
+    again keeps them; empty when there is no README."""
+    if not readme.is_file():
+        return ""
+    kept = []
+    for section in readme.read_text().split("\n## ")[1:]:
+        heading = section.splitlines()[0]
+        if f"## {heading}\n" not in generated:
+            kept.append("\n## " + section.rstrip("\n") + "\n")
+    return "".join(kept)
+
+
 def write_readme(out: Path, truths: dict) -> None:
     """README.md with a table of the scenes built from their truth records; licence copies."""
+    (out / "README.md").write_text(readme_text(out, truths))
+    licences = out / "LICENSES"
+    licences.mkdir(exist_ok=True)
+    for copy, original in LICENCE_FILES.items():
+        (licences / copy).write_bytes((MESHES / original).read_bytes())
+
+
+def readme_text(out: Path, truths: dict) -> str:
+    """The README of ``out``: the scenes' table from their truth records, the path-traced
+    pairs' from their scene.json files, and the sections written by hand kept."""
     about = [f"- `{name}`: {t['scene']['about']}" for name, t in truths.items()]
     rows = [
         "",
@@ -843,12 +869,8 @@ def write_readme(out: Path, truths: dict) -> None:
         f"| `{name}` | {t['sss_level']:g} | {t['correction']:g} | {t['maxdd']:g} |"
         for name, t in truths.items()
     ]
-    text = README_HEAD + "\n".join(about + rows + params) + "\n" + path_traced_section(out) + README_ATTRIBUTION
-    (out / "README.md").write_text(text)
-    licences = out / "LICENSES"
-    licences.mkdir(exist_ok=True)
-    for copy, original in LICENCE_FILES.items():
-        (licences / copy).write_bytes((MESHES / original).read_bytes())
+    text = README_HEAD + "\n".join(about + rows + params) + "\n" + path_traced_section(out)
+    return text + written_by_hand(out / "README.md", text + README_ATTRIBUTION) + README_ATTRIBUTION
 
 
 # ----------------------------------------------------------------------------- path-traced pairs
@@ -867,6 +889,7 @@ PATH_TRACED = {
     "pt_fran_point_fill_940": "fran_point_fill_940.toml",
     "pt_proc_dir_fill_940": "proc_dir_fill_940.toml",
     "pt_proc_lowpoly_smooth_dir_940": "proc_lowpoly_smooth_dir_940.toml",
+    "pt_fran_smooth_point_fill_940": "fran_smooth_point_fill_940.toml",
 }
 
 PATH_TRACED_HEAD = """
@@ -953,7 +976,9 @@ def _object_label(info: dict) -> str:
     if obj.get("primitive"):
         return obj["primitive"]
     name = Path(obj["mesh"]).name
-    return {"LeePerrySmith.glb": "Lee Perry-Smith", "fran_closed.ply": "fran (closed)"}.get(name, name)
+    label = {"LeePerrySmith.glb": "Lee Perry-Smith", "fran_closed.ply": "fran (closed)"}.get(name, name)
+    levels = obj.get("subdivisions") or 0
+    return label + (f", {levels} Loop subdivisions" if levels else "")
 
 
 def path_traced_section(out: Path) -> str:

@@ -33,7 +33,8 @@ CONFIGS = {"pt_face_940": "face_940.toml", "pt_face_940_turned": "face_940_turne
            "pt_proc_lowpoly_dir_940": "proc_lowpoly_dir_940.toml",
            "pt_face_rough_area_940": "face_rough_area_940.toml",
            "pt_fran_point_fill_940": "fran_point_fill_940.toml", "pt_proc_dir_fill_940": "proc_dir_fill_940.toml",
-           "pt_proc_lowpoly_smooth_dir_940": "proc_lowpoly_smooth_dir_940.toml"}
+           "pt_proc_lowpoly_smooth_dir_940": "proc_lowpoly_smooth_dir_940.toml",
+           "pt_fran_smooth_point_fill_940": "fran_smooth_point_fill_940.toml"}
 #: The pairs bundled before the split (issue 29): every one of them is a tuning pair.
 FIRST_PAIRS = ("pt_face_940", "pt_face_940_turned", "pt_face_skin1")
 #: Each pair folder stays about as small as the first ones (about 500 KB; 800 KB at most,
@@ -64,18 +65,22 @@ def test_the_documented_path_traced_pairs_are_bundled():
         row = next(line for line in readme.splitlines() if line.startswith(f"| `{name}` |"))
         assert row.split("|")[2].strip() == split[name]
     # One command remakes every pair: make_synthetic.py knows each of them.
-    import importlib.util
+    assert _make_synthetic().PATH_TRACED == CONFIGS
 
+
+def _make_synthetic():
+    """experiments/make_synthetic.py as a module."""
+    import importlib.util
     import sys
 
     spec = importlib.util.spec_from_file_location("make_synthetic", REPO / "experiments" / "make_synthetic.py")
-    make_synthetic = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = make_synthetic  # its dataclasses look their module up while it loads
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses look their module up while it loads
     try:
-        spec.loader.exec_module(make_synthetic)
+        spec.loader.exec_module(module)
     finally:
         del sys.modules[spec.name]
-    assert make_synthetic.PATH_TRACED == CONFIGS
+    return module
 
 
 def test_split_puts_every_pair_in_one_part_and_holds_out_the_most_different():
@@ -117,6 +122,14 @@ def test_the_set_has_low_poly_normals_facing_away_and_a_backlit_thin_part():
     key = np.asarray(info["config"]["lights"][0]["position"])
     camera = np.asarray(info["config"]["camera"]["position"])
     assert np.linalg.norm(key - camera) > np.linalg.norm(camera) + 200.0
+
+
+def test_make_synthetic_writes_the_bundled_readme_again():
+    # Rendering one pair again rewrites data_synthetic/README.md from the files on disk:
+    # it must give back the README as bundled, the sections written by hand included.
+    make_synthetic = _make_synthetic()
+    truths = {name: json.loads((DATA / name / "truth.json").read_text()) for name in make_synthetic.SCENES}
+    assert make_synthetic.readme_text(DATA, truths) == (DATA / "README.md").read_text()
 
 
 @pytest.mark.parametrize("name", PAIRS)

@@ -478,6 +478,8 @@ def test_with_warp_keeps_the_camera_where_the_warp_is_the_identity():
     ({"primitive": "sphere", "radius": 40.0, "face_normals": True}, "object: face_normals: only for a mesh or"),
     ({"primitive": "sphere", "radius": 40.0, "buffers_cell": 9.0}, 'object: buffers_cell: only for primitive "face"'),
     ({"primitive": "face", "bumps": 5.0, "face_normals": True}, "object: face_normals: only for a mesh or"),
+    ({"primitive": "face", "subdivisions": 1}, "object: subdivisions: only for a mesh without a pigment"),
+    ({"primitive": "face", "subdivisions": 4}, "object.subdivisions: input should be less than or equal to 3"),
 ])
 def test_face_and_bump_keys_are_checked_in_one_line(object_, message):
     with pytest.raises(invsss.InvalidInputError) as err:
@@ -585,6 +587,29 @@ def test_face_normals_shade_with_the_triangles_own_normals():
 
     # Measured: 34 % of the 210 covered pixels with face normals, none with the smooth ones.
     assert on_a_facet(flat) > 0.25 and on_a_facet(smooth) < 0.02
+
+
+def test_subdivisions_refine_the_mesh_towards_a_smooth_surface():
+    import tempfile
+
+    import trimesh
+
+    from invsss.scenes.mitsuba_scene import load_mesh_ply
+
+    def facet_angle(mesh):
+        # Median angle (degrees) between each triangle and its corners' mean vertex normal.
+        corners = mesh.vertex_normals[mesh.faces].mean(axis=1)
+        corners /= np.linalg.norm(corners, axis=1, keepdims=True)
+        return float(np.degrees(np.median(np.arccos(np.clip(np.sum(corners * mesh.face_normals, axis=1), -1, 1)))))
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = os.path.join(folder, "ball.ply")
+        trimesh.creation.icosphere(subdivisions=1, radius=40.0).export(path)  # 80 flat triangles
+        as_given = trimesh.load(load_mesh_ply(path, folder), process=False)
+        refined = trimesh.load(load_mesh_ply(path, folder, subdivisions=2), process=False)
+    assert len(as_given.faces) == 80 and len(refined.faces) == 16 * 80
+    assert refined.is_watertight
+    assert facet_angle(refined) < facet_angle(as_given) / 3
 
 
 def test_closed_fran_is_the_scan_closed_by_its_script():
