@@ -777,14 +777,16 @@ files were changed, keep the attribution notices). Both texts are copied unchang
 `LICENSES/vtk-data-Copyright.txt` and `LICENSES/vtk-data-LICENSE-Apache-2.0.txt`.
 No endorsement by the VTK authors is implied.
 
-**pt_fran_dir_940, pt_fran_dir_rough_940** use the same scan, closed into a solid by
+**pt_fran_dir_940, pt_fran_dir_rough_940, pt_fran_point_fill_940 and
+pt_fran_smooth_point_fill_940** use the same scan, closed into a solid by
 `experiments/scenes/meshes/close_fran.py` (`fran_closed.ply`: the scan turned to look
 along +z, scaled to millimetres, and closed behind by a cone of triangles from its rim
-to a point inside; the scan's own triangles are unchanged, its texture is not used).
+to a point inside; the scan's own triangles are unchanged, its texture is not used;
+pt_fran_smooth_point_fill_940 renders it refined by two levels of Loop subdivision).
 
 **leeperrysmith, flat_card and the path-traced pt_face_940, pt_face_940_turned,
-pt_face_skin1, pt_face_ear_backlit_940, pt_face_rough_area_940 and twowave_face** use "Infinite, 3D Head
-Scan" by Lee Perry-Smith
+pt_face_skin1, pt_face_ear_backlit_940, pt_face_rough_area_940, pt_face_rough_940 and
+twowave_face** use "Infinite, 3D Head Scan" by Lee Perry-Smith
 (Infinite-Realities, www.ir-ltd.net), based on a work at www.triplegangers.com, licensed
 under Creative Commons Attribution 3.0 Unported
 (https://creativecommons.org/licenses/by/3.0/); the licence note asks that users always
@@ -890,6 +892,7 @@ PATH_TRACED = {
     "pt_proc_dir_fill_940": "proc_dir_fill_940.toml",
     "pt_proc_lowpoly_smooth_dir_940": "proc_lowpoly_smooth_dir_940.toml",
     "pt_fran_smooth_point_fill_940": "fran_smooth_point_fill_940.toml",
+    "pt_face_rough_940": "face_rough_940.toml",
 }
 
 PATH_TRACED_HEAD = """

@@ -187,7 +187,8 @@ class SceneObject(_Strict):
             raise ValueError('face_normals: only for a mesh or primitive "face" without bumps '
                              "(the bumps tilt the vertex normals that face normals ignore)")
         if self.subdivisions and (self.mesh is None or self.pigment is not None):
-            raise ValueError("subdivisions: only for a mesh without a pigment (subdivision drops the texture coordinates)")
+            raise ValueError("subdivisions: only for a mesh without a pigment "
+                             "(subdivision drops the texture coordinates)")
         if self.pigment is not None and (self.mesh is None or self.bumps > 0):
             raise ValueError("pigment: only for a mesh (with texture coordinates) without bumps")
         if self.primitive == "face" and (self.size is not None or self.radius is not None):
