@@ -44,6 +44,10 @@ post hoc, on pairs written by ``invsss scene``:
      masked) shifted by every offset up to 7 px, 225 images: every translation-invariant
      linear filter of it, so an upper bound on what another profile shape, an
      anisotropic kernel or one global shift could add;
+   * ``a dielectric's angular law``: the key light's part under Fresnel transmission in
+     and out of a boundary of index 1.3, alone and with the law at the refracted
+     cosines (``w`` 0.3, 0.9, 0.99), each blurred (4 images): what a rough dielectric's
+     boundary might add to the index-matched law;
    * ``shape at 1-8 px``: convexity (smoothed normals' divergence) and a depth
      difference (smoothed depth minus depth) at 1, 2, 4 and 8 px, alone and times the
      prediction (16 images): light gathered in creases or lost at ridges over a few pixels.
@@ -192,6 +196,37 @@ def fill_law(fit, pair, fill_light) -> list[np.ndarray]:
     return [through_blur(rest * (gain - 1.0), pair, fit.params)]
 
 
+def fresnel_transmittance(cosine, eta: float = 1.3):
+    """Unpolarised Fresnel transmittance into a dielectric of relative index ``eta`` at
+    the incidence ``cosine``, and the refracted ray's cosine."""
+    cosine = np.clip(cosine, 1e-4, 1.0)
+    refracted = np.sqrt(np.clip(1.0 - (1.0 - cosine**2) / eta**2, 0.0, 1.0))
+    s = (cosine - eta * refracted) / (cosine + eta * refracted)
+    p = (eta * cosine - refracted) / (eta * cosine + refracted)
+    return 1.0 - 0.5 * (s**2 + p**2), refracted
+
+
+def dielectric_laws(pair, fit) -> list[np.ndarray]:
+    """The key light's part under a dielectric boundary's angular laws, ``K (g - 1)``
+    blurred, faded as the law is: Fresnel transmission in and out,
+    ``T(mu0) T(mu) / T(1)^2``, alone and times the law at the refracted cosines for
+    ``w`` = 0.3, 0.9 and 0.99 (eta 1.3, the bundled rough dielectrics')."""
+    from invsss.forward.light_terms import chandrasekhar_h
+
+    normal, light = (np.asarray(b, np.float64) for b in (pair["buffers"].normal, pair["buffers"].light))
+    key = np.asarray(pair["buffers"].key, np.float64) * np.asarray(pair["mask"], np.float64)[..., None]
+    mu, mu0, fade = cosines(normal, light)
+    into, inside0 = fresnel_transmittance(mu0)
+    out, inside = fresnel_transmittance(mu)
+    head_on, _ = fresnel_transmittance(np.ones(1))
+    fresnel = into * out / head_on**2
+    gains = [fresnel]
+    for w in (0.3, 0.9, 0.99):
+        h = lambda x: np.asarray(chandrasekhar_h(x, w), np.float64)  # noqa: E731
+        gains.append(fresnel * h(inside) * h(inside0) / np.maximum(inside + inside0, 1e-6) / (h(1.0) ** 2 / 2.0))
+    return [through_blur(key * fade * (g - 1.0), pair, fit.params) for g in gains]
+
+
 def law_change(fit, pair) -> np.ndarray:
     """What the fit's law (and fill) add to the source, ``S' - S``, before any blur."""
     from invsss.forward.light_terms import lit_source
@@ -314,6 +349,7 @@ def layer_gains(pair, fit, keep, fill_light=None) -> dict:
                             for a in cosine_bins(mu, 8) for b in cosine_bins(mu0, 8) if np.any((a * b)[keep])]
                            + [through_blur((source - key) * a, pair, fit.params) for a in cosine_bins(mu, 8)],
         "along the light": along_the_light(prediction, light, mu0),
+        "a dielectric's angular law": dielectric_laws(pair, fit),
         "shape at 1-8 px": shape_at_scales(prediction, normal, np.asarray(pair["depth"], np.float64), pair["mask"]),
     }
     if fill_light is not None:
