@@ -127,16 +127,15 @@ def ray_directions(config, rows, cols) -> np.ndarray:
 
 
 def footprint_points(config, points, normal, a: float, b: float):
-    """Where the ray through ``(row + b, col + a)`` meets each pixel's tangent plane,
-    and the area (mm^2) one of ``SUBSAMPLES**2`` points of the footprint stands for."""
+    """Where the ray through ``(row + b, col + a)`` meets each pixel's tangent plane (the
+    plane through its point with its normal), camera space, (H, W, 3)."""
     h, w = points.shape[:2]
     rows, cols = np.mgrid[0:h, 0:w].astype(np.float64)
     ray = ray_directions(config, rows + b, cols + a)
-    along = np.sum(normal * ray, axis=-1)
-    safe = np.where(np.abs(along) < 0.2 * np.linalg.norm(ray, axis=-1),
-                    -0.2 * np.linalg.norm(ray, axis=-1), along)  # at most 5 times the head-on footprint
-    t = np.sum(normal * points, axis=-1) / safe
-    return ray * t[..., None]
+    # The cosine to the ray at least 0.2, as in pixel_area: a plane seen edge-on (or a
+    # normal facing away) would send the point off to infinity.
+    along = np.minimum(np.sum(normal * ray, axis=-1), -0.2 * np.linalg.norm(ray, axis=-1))
+    return ray * (np.sum(normal * points, axis=-1) / along)[..., None]
 
 
 def pixel_area(config, points, normal) -> np.ndarray:
