@@ -61,6 +61,10 @@ post hoc, on pairs written by ``invsss scene``:
    It also splits the residual by scale: the part a 1.5 px Gaussian keeps (structure
    over a few pixels) and what is left (the pixel scale, where the target's noise is).
 
+With ``--averaged-buffers`` it renders the source and the key light's part again with
+another seed and fits again with each the mean of the two renders (half the noise's
+variance): what the buffers' own Monte Carlo noise costs the fit.
+
 2. **How much of it is the source's own noise?** The noise ceiling takes the
    prediction to be noise-free, but the source is a Monte Carlo render too. With
    ``--source-noise`` the source is rendered again with another seed (the same scene
@@ -71,7 +75,7 @@ post hoc, on pairs written by ``invsss scene``:
 
 Run it on tuning pairs only (data_synthetic/SPLIT.toml)::
 
-    python experiments/layers_probe.py [--source-noise] [--thickness] [--facet-normals] data_synthetic/pt_face_940 ...
+    python experiments/layers_probe.py [--source-noise] [--thickness] [--facet-normals] [--averaged-buffers] data_synthetic/pt_face_940 ...
 """
 
 from __future__ import annotations
@@ -403,6 +407,34 @@ def source_noise(folder, pair, fit, keep) -> dict:
     return found
 
 
+def averaged_buffers_gain(folder, pair, terms: str, keep) -> dict:
+    """The fit again with the source and the key light's part each the mean of the
+    shipped render and one with another seed (half the render noise's variance), and
+    with the shipped ones, PSNR (dB) on ``keep``: how much the buffers' Monte Carlo noise
+    costs the fit (``S - K`` carries both renders' noise, since the key light is rendered
+    from a scene of its own)."""
+    from invsss.scenes import load_config, render_scene
+
+    with scene_folder():
+        config = load_config(scene_file(folder))
+        again = render_scene(config.model_copy(update={"seed": config.seed + 1000}), target=False)
+    buffers = pair["buffers"]
+    source = np.asarray(pair["source"], np.float64)
+    mean_source = 0.5 * (source + np.asarray(again.source, np.float64).reshape(source.shape))
+    key = np.asarray(buffers.key, np.float64)
+    mean_key = 0.5 * (key + np.asarray(again.key, np.float64).reshape(key.shape))
+    target = np.asarray(pair["target"], np.float64)
+
+    def psnr(src, given):
+        result = invsss.fit_pair(src, pair["target"], pair["depth"], pair["mask"], light_terms=terms,
+                                 light_buffers=given)
+        return mixed_psnr(target, keep, [np.asarray(result.fitted[0], np.float64).reshape(target.shape)])
+
+    return {"shipped buffers": psnr(source, buffers),
+            "buffers averaged over two renders": psnr(mean_source, invsss.LightBuffers(
+                normal=buffers.normal, light=buffers.light, key=mean_key, fill_light=buffers.fill_light))}
+
+
 def key_through_thin_parts(folder) -> tuple[np.ndarray, np.ndarray]:
     """Ray-cast the scene file's object: for each pixel, the distance ``d`` (mm) from its
     surface point through the object towards the key light, and the key light's
@@ -548,6 +580,9 @@ def main() -> None:
     parser.add_argument("--facet-normals", action="store_true",
                         help="render the source, key light and normals again with the triangles' own normals "
                         "and fit again (a few minutes)")
+    parser.add_argument("--averaged-buffers", action="store_true",
+                        help="render the source and key light again with another seed and fit with the means "
+                        "(a few minutes)")
     parser.add_argument("pairs", nargs="+", type=pathlib.Path)
     args = parser.parse_args()
     for folder in args.pairs:
@@ -572,6 +607,9 @@ def main() -> None:
         if args.facet_normals:
             found = facet_normal_gains(folder, pair, fit, args.terms, keep)
             print("  " + ", ".join(f"{name} {value:.2f}" for name, value in found.items()), flush=True)
+        if args.averaged_buffers:
+            found = averaged_buffers_gain(folder, pair, args.terms, keep)
+            print("  the fit with " + ", ".join(f"{name} {value:.2f}" for name, value in found.items()), flush=True)
         if args.source_noise:
             found = source_noise(folder, pair, fit, keep)
             print("  rms: " + ", ".join(f"{name} {value:.4f}" for name, value in found.items()
