@@ -278,9 +278,9 @@ def area_light_gains(pair, fit, keep, samples: int = 9) -> dict:
     from invsss.scenes import parse_config
     from invsss.scenes.render import camera_points, camera_pose
 
-    config = parse_config(pair["info"]["config"])
     if not fit.light_terms or fit.light_terms.get("law") is None:
         return {}
+    config = parse_config(pair["info"]["config"])
     origin, rotation = camera_pose(config)
     points = camera_points(config, np.asarray(pair["depth"], np.float64))
     normal = np.asarray(pair["buffers"].normal, np.float64)
@@ -365,11 +365,10 @@ def layer_gains(pair, fit, keep, fill_light=None) -> dict:
             layers["the law on the other lights"] = fill_law(fit, pair, fill_light)
     # Any translation-invariant filter of the source as the fit lit it: 225 free weights.
     lit = np.asarray(pair["source"], np.float64) * np.asarray(pair["mask"], np.float64)[..., None]
-    if fit.light_terms and fit.light_terms.get("law") is not None:
-        lit = lit + law_change(fit, pair)
-    layers["any 15 x 15 kernel"] = [shifted(lit, dy, dx) for dy in range(-7, 8) for dx in range(-7, 8)]
-    if fit.light_terms and fit.light_terms.get("law") is not None:
-        change = law_change(fit, pair)
+    change = law_change(fit, pair) if fit.light_terms and fit.light_terms.get("law") is not None else None
+    layers["any 15 x 15 kernel"] = [shifted(lit if change is None else lit + change, dy, dx)
+                                    for dy in range(-7, 8) for dx in range(-7, 8)]
+    if change is not None:
         layers["the law's change, unblurred"] = [change]
         layers["the law's change, its own profile"] = [change] + [
             through_one_gaussian(change, pair, fit.params, k) for k in range(len(fit.params.weights))]
@@ -407,12 +406,12 @@ def source_noise(folder, pair, fit, keep) -> dict:
     return found
 
 
-def averaged_buffers_gain(folder, pair, terms: str, keep) -> dict:
-    """The fit again with the source and the key light's part each the mean of the
-    shipped render and one with another seed (half the render noise's variance), and
-    with the shipped ones, PSNR (dB) on ``keep``: how much the buffers' Monte Carlo noise
-    costs the fit (``S - K`` carries both renders' noise, since the key light is rendered
-    from a scene of its own)."""
+def averaged_buffers_gain(folder, pair, fit, terms: str, keep) -> dict:
+    """PSNR (dB) on ``keep`` of ``fit`` (with the shipped buffers) and of the fit again
+    with the source and the key light's part each the mean of the shipped render and
+    one with another seed (half the render noise's variance): how much the buffers'
+    Monte Carlo noise costs the fit (``S - K`` carries both renders' noise, since the
+    key light is rendered from a scene of its own)."""
     from invsss.scenes import load_config, render_scene
 
     with scene_folder():
@@ -425,14 +424,13 @@ def averaged_buffers_gain(folder, pair, terms: str, keep) -> dict:
     mean_key = 0.5 * (key + np.asarray(again.key, np.float64).reshape(key.shape))
     target = np.asarray(pair["target"], np.float64)
 
-    def psnr(src, given):
-        result = invsss.fit_pair(src, pair["target"], pair["depth"], pair["mask"], light_terms=terms,
-                                 light_buffers=given)
+    def psnr(result):
         return mixed_psnr(target, keep, [np.asarray(result.fitted[0], np.float64).reshape(target.shape)])
 
-    return {"shipped buffers": psnr(source, buffers),
-            "buffers averaged over two renders": psnr(mean_source, invsss.LightBuffers(
-                normal=buffers.normal, light=buffers.light, key=mean_key, fill_light=buffers.fill_light))}
+    averaged = invsss.fit_pair(mean_source, pair["target"], pair["depth"], pair["mask"], light_terms=terms,
+                               light_buffers=invsss.LightBuffers(normal=buffers.normal, light=buffers.light,
+                                                                 key=mean_key, fill_light=buffers.fill_light))
+    return {"shipped buffers": psnr(fit), "buffers averaged over two renders": psnr(averaged)}
 
 
 def key_through_thin_parts(folder) -> tuple[np.ndarray, np.ndarray]:
@@ -608,7 +606,7 @@ def main() -> None:
             found = facet_normal_gains(folder, pair, fit, args.terms, keep)
             print("  " + ", ".join(f"{name} {value:.2f}" for name, value in found.items()), flush=True)
         if args.averaged_buffers:
-            found = averaged_buffers_gain(folder, pair, args.terms, keep)
+            found = averaged_buffers_gain(folder, pair, fit, args.terms, keep)
             print("  the fit with " + ", ".join(f"{name} {value:.2f}" for name, value in found.items()), flush=True)
         if args.source_noise:
             found = source_noise(folder, pair, fit, keep)
