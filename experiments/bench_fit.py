@@ -60,21 +60,27 @@ compiles, so these times overlap: the row "of it, wall time" counts the seconds
 during which anything was compiling once.
 It runs three fits measured in one run: a fresh process with an empty persistent
 compilation cache (cold), a second fit in that process (what a sweep worker does
-after its first trial), and a fresh process on the cache the first one wrote
-(warm); each child process prints JSON, the parent the table. ``synthetic:N``
-in place of a folder fits this script's model-made N x N pair (rendered in the
-child, not timed as reading). The table names JAX's device, and per solver step
-splits the wall time into the host dispatching the jitted step, the wait for
-the device's result (the step's one device-to-host read: its loss and
-stopping flags) and the host's own work between steps, so a device left idle
-by the host shows; "same history" says whether the three fits took the same
-steps to the same losses, bit for bit.
+after its first trial), a fresh process on the cache the first one wrote
+(warm cache: the first process to use an entry tries it in a child process
+first, :mod:`invsss.runtime.executable_entries`), and one more fresh process
+on that cache (verified: what every later run of the command line meets);
+each child process prints JSON, the parent the table. ``synthetic:N`` in place
+of a folder fits this script's model-made N x N pair (rendered in the child,
+not timed as reading). The table names JAX's device and whether the solver
+loop steps ahead (:func:`invsss.estimator.solve.step_ahead`). Per solver step
+it gives the loop's wall time and splits it into the host dispatching the
+jitted step, the wait for the device's result (the step's one device-to-host
+read: its loss and stopping flags) and the host's own work between steps, so a
+device left idle by the host shows; a loop that steps ahead is not made to
+wait for each step, so its wait counts under "between", and its "solver
+steps" count the steps it dispatched and then dropped. "same history" says
+whether the fits took the same steps to the same losses, bit for bit.
 
 Usage::
 
     python experiments/bench_fit.py [--size 128] [--repeats 3] [--max-steps 200]
     python experiments/bench_fit.py --breakdown data_synthetic/fran_front
-    python experiments/bench_fit.py --breakdown synthetic:1024
+    python experiments/bench_fit.py --breakdown synthetic:1024 [--cold-only]
     python experiments/bench_fit.py --stopping data_synthetic/pt_face_940 data_synthetic/fran_front
     python experiments/bench_fit.py --jacobian data_synthetic/fran_front data_synthetic/pt_face_940
     python experiments/bench_fit.py --canvas data_synthetic/fran_front
@@ -235,6 +241,8 @@ def main() -> None:
     parser.add_argument("--breakdown", metavar="PAIR_DIR", default=None,
                         help="profile fit_pair stage by stage on this pair folder, cold and warm")
     parser.add_argument("--breakdown-child", metavar="CACHE_DIR", default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--cold-only", action="store_true",
+                        help="--breakdown: only the cold process (its fit and a second fit in it)")
     parser.add_argument("--canvas", metavar="PAIR_DIR", default=None,
                         help="three crops of a pair fitted at their own sizes and on one canvas")
     parser.add_argument("--canvas-child", metavar="ON", default=None, help=argparse.SUPPRESS)
@@ -259,7 +267,7 @@ def main() -> None:
         breakdown_child(args.breakdown, args.breakdown_child)
         return
     if args.breakdown is not None:
-        breakdown(args.breakdown)
+        breakdown(args.breakdown, cold_only=args.cold_only)
         return
 
     scene = make_scene(args.size)
@@ -414,12 +422,15 @@ def breakdown_child(pair_dir: str, cache_dir: str) -> None:
 
     import invsss.estimator.solve as solve_module
 
-    steps = {"dispatch": 0.0, "wait": 0.0, "between": 0.0, "n": 0, "last": None}
+    steps = {"dispatch": 0.0, "wait": 0.0, "between": 0.0, "loop": 0.0, "n": 0, "last": None}
     iterate = solve_module._iterate
+    ahead = solve_module.step_ahead()
 
     def timed_iterate(*args, **kwargs):
         # Replace the step function (argument 10) by one that times dispatch
-        # and the wait for its result separately.
+        # and the wait for its result separately. A loop that steps ahead must
+        # not be made to wait for each step here: then only the dispatch is
+        # timed, and the wait falls into "between".
         args = list(args)
         inner = args[10]
 
@@ -429,7 +440,8 @@ def breakdown_child(pair_dir: str, cache_dir: str) -> None:
                 steps["between"] += t0 - steps["last"]
             out = inner(*a, **k)
             t1 = time.perf_counter()
-            jax.block_until_ready(out[2:])  # loss, dof, done, ok: what the loop reads
+            if not ahead:
+                jax.block_until_ready(out[2:])  # loss, dof, done, ok: what the loop reads
             steps["last"] = time.perf_counter()
             steps["dispatch"] += t1 - t0
             steps["wait"] += steps["last"] - t1
@@ -437,9 +449,11 @@ def breakdown_child(pair_dir: str, cache_dir: str) -> None:
             return out
 
         args[10] = step
+        t0 = time.perf_counter()
         try:
             return iterate(*args, **kwargs)
         finally:
+            steps["loop"] += time.perf_counter() - t0
             steps["last"] = None
 
     solve_module._iterate = timed_iterate
@@ -453,7 +467,7 @@ def breakdown_child(pair_dir: str, cache_dir: str) -> None:
         stages.counts.clear()
         compiles.clear()
         spans.clear()
-        steps.update(dispatch=0.0, wait=0.0, between=0.0, n=0, last=None)
+        steps.update(dispatch=0.0, wait=0.0, between=0.0, loop=0.0, n=0, last=None)
         t0 = time.perf_counter()
         result = fit_module.fit_pair(pair.source, pair.target, pair.depth, pair.mask)
         total = time.perf_counter() - t0
@@ -467,7 +481,7 @@ def breakdown_child(pair_dir: str, cache_dir: str) -> None:
             "history": [float(x).hex() for x in np.ravel(result.history)],
         })
     device = jax.devices()[0]
-    print(json.dumps({"import": imported, "reading": reading, "runs": runs,
+    print(json.dumps({"import": imported, "reading": reading, "runs": runs, "ahead": ahead,
                       "device": f"{device.platform}: {device.device_kind}"}))
 
 
@@ -492,13 +506,15 @@ def _child_run(pair_dir: str, cache_dir: str) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def breakdown(pair_dir: str) -> None:
-    """Cold process, second fit in it, warm-cache process: one table."""
+def breakdown(pair_dir: str, cold_only: bool = False) -> None:
+    """Cold process, second fit in it, warm-cache process, verified-cache process: one table."""
     with tempfile.TemporaryDirectory(prefix="invsss-bench-cache-") as cache:
         cold = _child_run(pair_dir, cache)
-        warm = _child_run(pair_dir, cache)
-    columns = {"cold": (cold, cold["runs"][0]), "2nd fit": (cold, cold["runs"][1]),
-               "warm cache": (warm, warm["runs"][0])}
+        columns = {"cold": (cold, cold["runs"][0]), "2nd fit": (cold, cold["runs"][1])}
+        if not cold_only:
+            warm = _child_run(pair_dir, cache)
+            verified = _child_run(pair_dir, cache)
+            columns.update({"warm cache": (warm, warm["runs"][0]), "verified": (verified, verified["runs"][0])})
     stage_names = []
     for _, run in columns.values():
         stage_names += [k for k in run["stages"] if k not in stage_names]
@@ -508,7 +524,8 @@ def breakdown(pair_dir: str) -> None:
 
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"bench_fit --breakdown {pair_dir}: fit_pair with the CLI defaults; {os.cpu_count()} CPUs, "
-          f"load average {load:.1f}; JAX device {cold.get('device')}; seconds (calls)")
+          f"load average {load:.1f}; JAX device {cold.get('device')}; "
+          f"steps ahead: {'yes' if cold.get('ahead') else 'no'}; seconds (calls)")
     header = f"{'stage':<34}" + "".join(f"{name:>16}" for name in columns)
     print(header)
     print("-" * len(header))
@@ -526,8 +543,8 @@ def breakdown(pair_dir: str) -> None:
                     for _, run in columns.values()])
     row("iterations", [str(run["iterations"]) for _, run in columns.values()])
     row("solver steps", [str(run["steps"]["n"]) for _, run in columns.values()])
-    for part, label in (("dispatch", "  host dispatch, ms/step"), ("wait", "  wait for device, ms/step"),
-                        ("between", "  host between steps, ms/step")):
+    for part, label in (("loop", "  solver loop, ms/step"), ("dispatch", "  host dispatch, ms/step"),
+                        ("wait", "  wait for device, ms/step"), ("between", "  host between steps, ms/step")):
         row(label, [f"{1e3 * run['steps'][part] / max(run['steps']['n'], 1):.2f}" for _, run in columns.values()])
     histories = [run.get("history") for _, run in columns.values()]
     row("same history (bitwise)", ["-" if h is None else ("yes" if h == histories[0] else "no") for h in histories])
@@ -550,9 +567,12 @@ def breakdown(pair_dir: str) -> None:
     row("compile total (trace+lower+XLA)", [f"{t:.2f}" for t in totals])
     walls = [run.get("compiling", 0.0) for _, run in columns.values()]
     row("  of it, wall time", [f"{t:.2f}" for t in walls])
-    c, w, s2 = (columns[k][1]["fit"] for k in ("cold", "warm cache", "2nd fit"))
-    print(f"ratios: warm cache / cold = {w / c:.2f}; 2nd fit in process / cold = {s2 / c:.2f}; "
-          f"compiling's share of the cold fit's wall time = {walls[0] / c:.2f}")
+    c, s2 = columns["cold"][1]["fit"], columns["2nd fit"][1]["fit"]
+    ratios = [f"2nd fit in process / cold = {s2 / c:.2f}"]
+    if not cold_only:
+        w, v = columns["warm cache"][1]["fit"], columns["verified"][1]["fit"]
+        ratios = [f"warm cache / cold = {w / c:.2f}", f"verified / cold = {v / c:.2f}"] + ratios
+    print("ratios: " + "; ".join(ratios + [f"compiling's share of the cold fit's wall time = {walls[0] / c:.2f}"]))
 
 
 # ------------------------------------------------------------------ --canvas

@@ -1,38 +1,50 @@
 #!/usr/bin/env bash
-# Everything issue 35 measures on a lent GPU, in one call, each part with its own
-# time limit so that one hang does not lose the rest. Run from the repository
+# Everything issue 35 measures on a lent GPU, in one call. Each part has its own
+# time limit, cut further so that the whole script ends by $DEADLINE seconds
+# (default 530) and one hang does not lose the rest. Run from the repository
 # root (or a copy of it) with OUT set to a folder for the logs; wheels of the
-# packages the machine lacks may lie in ./wheels (installed into /tmp/site).
+# packages the machine lacks may lie in ./.whl (installed into /tmp/site).
 #
 #   OUT=/tmp/out bash experiments/gpu_session.sh
 #
-# Parts, most important first: environment; the GPU tests (pytest -m gpu); one
-# pass at 1024 px, XLA against the kernel at several tiles; the models' forward
-# and value+grad at 256, 1024 and 2048 px (both pass implementations, the scan
-# unrolled or not); the bundled pair's command-line fit cold and warm (kernels,
-# then XLA passes); a model-made 1024 x 1024 pair's fit cold and warm with the
-# per-step host/device split; then, for ratios, the machine's CPU: the forward
-# benchmark, and the command-line fit limited to 2 cores as on the project's
-# machines; last the one-pass benchmark at 256 and 2048 px and the 1024 x 1024
-# fit with XLA passes. All output goes to $OUT/session.log, the fits' own logs
-# to $OUT/fit_logs.txt. docs/gpu.md holds what it printed on an H100.
+# Parts, most important first:
+#   env          the machine, the libraries, which pass and loop the fit uses;
+#   gpu_tests    the GPU tests (pytest -m gpu) and the stepping-ahead loop;
+#   fit_1024     a model-made 1024 x 1024 pair's fit: cold, 2nd fit, warm cache,
+#                verified cache (bench_fit --breakdown), stepping ahead;
+#   fit_1024_plain  the same, cold process only, with the plain loop;
+#   cli_gpu      the bundled pair's command-line fit: cold, warm, verified;
+#   cli_cpu2     the same on this machine's CPU pinned to 2 cores;
+#   forward      the models' forward and value+grad at 256, 1024 and 2048 px,
+#                reference passes against the kernels with the scan unrolled,
+#                single calls and queued ones (bench_forward);
+#   quick_tier   the README's test command on the GPU backend;
+#   pass_1024    one pass, reference against the kernel (bench_pass_kernel);
+#   fit_1024_unroll  fit_1024's cold process with the passes' scan unrolled.
+# All output goes to $OUT/session.log, the command-line fits' logs to
+# $OUT/fit_logs.txt, the test run's to $OUT/quick_tier.log.
 set -o pipefail
 OUT=${OUT:-/tmp/invsss-gpu-session}
+DEADLINE=${DEADLINE:-530}
 mkdir -p "$OUT"
 export PYTHONUNBUFFERED=1
-if [ -d wheels ]; then
-    python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site wheels/*.whl \
+if [ -d .whl ]; then
+    python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl \
         > "$OUT/pip.log" 2>&1 || echo "wheel install failed (see pip.log)"
     export PYTHONPATH=$PWD:/tmp/site:${PYTHONPATH:-}
 else
     export PYTHONPATH=$PWD:${PYTHONPATH:-}
 fi
 PAIR=data_synthetic/fran_front
-CACHE=$(mktemp -d /tmp/invsss-cache-XXXX)
 
 part() {  # part NAME SECONDS COMMAND...: run with a limit, append to $OUT/session.log
-    local name=$1 limit=$2
+    local name=$1 limit=$2 left=$((DEADLINE - SECONDS))
     shift 2
+    if [ "$left" -lt 15 ]; then
+        echo "===== $name: skipped, ${left} s left" | tee -a "$OUT/session.log"
+        return
+    fi
+    [ "$limit" -gt "$left" ] && limit=$left
     echo "===== $name (limit ${limit}s) $(date -u +%H:%M:%S)" | tee -a "$OUT/session.log"
     local t0=$SECONDS
     timeout -k 5 "$limit" "$@" 2>&1 | tee -a "$OUT/session.log"
@@ -56,32 +68,33 @@ export PAIR OUT
 PIN=""
 command -v taskset > /dev/null && PIN="taskset -c 0,1"
 
-part env 60 bash -c 'date -u; nvidia-smi -L; nvidia-smi --query-gpu=name,clocks.sm,clocks.mem,temperature.gpu,utilization.gpu --format=csv;
+part env 40 bash -c 'date -u; nvidia-smi -L; nvidia-smi --query-gpu=name,clocks.sm,clocks.mem,temperature.gpu --format=csv;
     nproc; python3 -c "import jax, jaxlib, equinox, optimistix; print(\"jax\", jax.__version__, \"jaxlib\", jaxlib.__version__, \"equinox\", equinox.__version__, \"optimistix\", optimistix.__version__); print(jax.devices(), jax.default_backend())";
-    python3 -c "import invsss, invsss.io, invsss.pass_kernels as k; print(invsss.__file__); import jax.numpy as jnp; print(\"kernel on:\", k.kernel_enabled(jnp.zeros((8,8,3))))"'
+    python3 -c "import invsss, invsss.io, jax.numpy as jnp; from invsss.forward import pass_kernels as k; from invsss.estimator.solve import step_ahead; print(invsss.__file__); print(\"kernel on:\", k.kernel_enabled(jnp.zeros((8,8,3))), \"step ahead:\", step_ahead())"'
 
-part gpu_tests 60 python3 -m pytest -q -p no:cacheprovider -m gpu tests/test_pass_kernels.py -rA
+part gpu_tests 70 python3 -m pytest -q -p no:cacheprovider -m "gpu or not slow" tests/test_pass_kernels.py \
+    tests/test_step_ahead.py -rfEs
 
-part pass_1024 80 python3 experiments/bench_pass_kernel.py --sizes 1024 --repeats 20 --blocks 8x128 4x128 16x64 2x256
+part fit_1024 110 python3 experiments/bench_fit.py --breakdown synthetic:1024
 
-part forward_gpu 150 python3 experiments/bench_forward.py --sizes 256 1024 2048 --repeats 20 --device gpu \
-    --passes xla pallas pallas+unroll
+part fit_1024_plain 40 env INVSSS_STEP_AHEAD=0 python3 experiments/bench_fit.py --breakdown synthetic:1024 --cold-only
 
-part cli_fit_gpu 100 bash -c 'export INVSSS_CACHE_DIR='"$CACHE"'; cli_fit "gpu cold"; cli_fit "gpu warm";
-    export INVSSS_PASS_KERNEL=xla; cli_fit "gpu XLA passes cold"; cli_fit "gpu XLA passes warm"'
-
-part fit_1024_gpu 130 python3 experiments/bench_fit.py --breakdown synthetic:1024
-
-part forward_cpu 45 env JAX_PLATFORMS=cpu python3 experiments/bench_forward.py --sizes 256 1024 --repeats 3 \
-    --device cpu --passes xla --no-torch
+CACHE=$(mktemp -d /tmp/invsss-cache-XXXX)
+part cli_gpu 50 bash -c 'export INVSSS_CACHE_DIR='"$CACHE"'; cli_fit "gpu cold"; cli_fit "gpu warm"; cli_fit "gpu verified"'
 
 CACHE2=$(mktemp -d /tmp/invsss-cache-XXXX)
-part cli_fit_cpu2 45 bash -c 'export INVSSS_CACHE_DIR='"$CACHE2"' JAX_PLATFORMS=cpu;
+part cli_cpu2 50 bash -c 'export INVSSS_CACHE_DIR='"$CACHE2"' JAX_PLATFORMS=cpu;
     echo "pinned with: '"${PIN:-nothing, no taskset}"'";
-    '"$PIN"' bash -c "cli_fit \"cpu 2 cores cold\"; cli_fit \"cpu 2 cores warm\""'
+    '"$PIN"' bash -c "cli_fit \"cpu 2 cores cold\"; cli_fit \"cpu 2 cores warm\"; cli_fit \"cpu 2 cores verified\""'
 
-part pass_sizes 80 python3 experiments/bench_pass_kernel.py --sizes 256 2048 --repeats 20 --blocks 8x128
+part forward 100 python3 experiments/bench_forward.py --sizes 1024 256 2048 --repeats 20 --device gpu \
+    --passes xla pallas+unroll --no-torch
 
-part fit_1024_gpu_xla 130 env INVSSS_PASS_KERNEL=xla python3 experiments/bench_fit.py --breakdown synthetic:1024
+part quick_tier 130 bash -c 'XLA_PYTHON_CLIENT_PREALLOCATE=false python3 -m pytest -q -p no:cacheprovider \
+    -n 6 -m "not slow" --continue-on-collection-errors -rfE > "$OUT/quick_tier.log" 2>&1; rc=$?; tail -40 "$OUT/quick_tier.log"; exit $rc'
 
-echo "===== done $(date -u +%H:%M:%S)"
+part pass_1024 60 python3 experiments/bench_pass_kernel.py --sizes 1024 --repeats 20 --blocks 8x128 4x128
+
+part fit_1024_unroll 40 env INVSSS_SCAN_UNROLL=1 python3 experiments/bench_fit.py --breakdown synthetic:1024 --cold-only
+
+echo "===== done $(date -u +%H:%M:%S), ${SECONDS} s"

@@ -14,10 +14,17 @@ This is the package's one way to run a solver: the estimator and
 :func:`invsss.fit_sum_of_gaussians` both call :func:`run_solver`. Between two steps
 (outside compiled code) it polls a ``stop`` callable, so a fit can be interrupted
 cleanly and still report the best point reached.
+
+On a GPU the loop steps ahead (:func:`step_ahead`): it dispatches step ``i + 1``
+before it reads step ``i``'s loss, so the device works on the next step while
+the host reads the last one back, runs the callbacks and tests for the end.
+A solve that ends at step ``i`` throws step ``i + 1`` away; its record is the
+one the plain loop returns, bit for bit.
 """
 
 from __future__ import annotations
 
+import os
 from typing import Callable, NamedTuple
 
 import equinox as eqx
@@ -32,7 +39,8 @@ from ..validation import InvalidInputError
 __all__ = [
     "SOLVERS", "JACOBIANS", "DIFFERENCE_STEP", "SCREEN_TOL", "NOISE_TOL", "STALL_TOL",
     "SCREEN_STALL_TOL", "STALL_WINDOW", "gauss_newton_distance", "stalled", "make_solver",
-    "SolveRecord", "run_solver", "compile_solver", "FitInterrupted",
+    "SolveRecord", "run_solver", "compile_solver", "FitInterrupted", "STEP_AHEAD_VARIABLE",
+    "step_ahead",
 ]
 
 SOLVERS = ("lm", "gauss-newton", "bfgs")
@@ -75,6 +83,42 @@ STALL_WINDOW = 3
 # The starts only choose a basin, so they stall at 1: two basins whose chi^2
 # differ by less than that are ones the data cannot tell apart.
 SCREEN_STALL_TOL = 1.0
+
+
+#: The environment variable that sets :func:`step_ahead`: ``auto`` (default),
+#: ``1`` or ``0``.
+STEP_AHEAD_VARIABLE = "INVSSS_STEP_AHEAD"
+
+
+def step_ahead() -> bool:
+    """Whether :func:`run_solver` dispatches each step before reading the last one's loss.
+
+    ``INVSSS_STEP_AHEAD`` = ``1`` or ``0`` decides; otherwise (``auto``) it steps
+    ahead when JAX's default backend is not the CPU. On a GPU the host's work
+    per step (dispatching the jitted step, reading its loss back, the callbacks)
+    then overlaps the device's, instead of leaving the device idle for it
+    (docs/gpu.md). On the CPU the device is the host's own cores, so there is
+    nothing to overlap, and the one step each solve throws away would cost its
+    full time.
+
+    Raises
+    ------
+    InvalidInputError
+        If ``INVSSS_STEP_AHEAD`` holds anything else.
+
+    Examples
+    --------
+    >>> import jax
+    >>> step_ahead() == (jax.default_backend() != "cpu"
+    ...     and os.environ.get(STEP_AHEAD_VARIABLE, "auto") != "0")
+    True
+    """
+    choice = os.environ.get(STEP_AHEAD_VARIABLE, "auto").strip().lower()
+    if choice not in ("auto", "1", "0"):
+        raise InvalidInputError(f"{STEP_AHEAD_VARIABLE}: expected one of auto, 1, 0, got {choice!r}")
+    if choice == "auto":
+        return jax.default_backend() != "cpu"
+    return choice == "1"
 
 
 class FitInterrupted(Exception):
@@ -417,10 +461,17 @@ def _iterate(solver, fn, z, max_steps, on_step, stop, arrived, noise_tolerance, 
              init, step, state=None) -> SolveRecord:
     if state is None:
         state = init(solver, fn, z)
+    ahead = step_ahead()
     history, accepted = [], []
     converged, failure, interrupted = False, "", False
-    for _ in range(max_steps):
-        z, state, loss, dof, done, ok = step(solver, fn, z, state, noise_tolerance)
+    pending = step(solver, fn, z, state, noise_tolerance) if max_steps > 0 else None
+    for i in range(max_steps):
+        z, state, loss, dof, done, ok = pending
+        more = i + 1 < max_steps
+        if ahead and more:
+            # Dispatched before float(loss) waits for this step: the device
+            # computes it meanwhile, and it is dropped if this step ends the solve.
+            pending = step(solver, fn, z, state, noise_tolerance)
         loss = float(loss)
         history.append(loss)
         # The loss reported is the last accepted point's: a step that lowers it
@@ -443,4 +494,6 @@ def _iterate(solver, fn, z, max_steps, on_step, stop, arrived, noise_tolerance, 
         if not np.isfinite(loss):
             failure = "the loss is not finite"
             break
+        if more and not ahead:
+            pending = step(solver, fn, z, state, noise_tolerance)
     return SolveRecord(z, np.asarray(history), len(history), converged, failure, interrupted, state)
