@@ -70,6 +70,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with warnings.catch_warnings(), StopSignals() as stop:
             warnings.showwarning = _show_warning
+            # A library's notice of its own future changes is for developers:
+            # on a GPU, JAX's "Pallas Triton backend is deprecated" (docs/gpu.md)
+            # otherwise reached every command as a warning the user can do nothing about.
+            warnings.filterwarnings("ignore", category=DeprecationWarning, module=_LIBRARY_MODULES)
             _use_compile_cache(args)
             return args.func(args, stop)
     except InvalidInputError as err:
@@ -92,6 +96,11 @@ def _use_compile_cache(args: argparse.Namespace) -> None:
     from ..runtime.compile_cache import enable_compile_cache
 
     enable_compile_cache()
+
+
+#: The modules whose DeprecationWarnings the command line drops (a regular
+#: expression on the warning's module, as ``warnings.filterwarnings`` takes it).
+_LIBRARY_MODULES = r"(jax|jaxlib|equinox|optimistix|lineax|jaxtyping)(\.|$)"
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None):
