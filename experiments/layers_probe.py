@@ -48,6 +48,10 @@ post hoc, on pairs written by ``invsss scene``:
      and out of a boundary of index 1.3, alone and with the law at the refracted
      cosines (``w`` 0.3, 0.9, 0.99), each blurred (4 images): what a rough dielectric's
      boundary might add to the index-matched law;
+   * ``shadow-edge profiles``: a free 1-D profile across the key light's shadow edges,
+     per whole-pixel signed distance up to 7 px and in 3 bins of ``mu0`` (up to 42
+     images, each an indicator times the lit level beside the edge): whatever the
+     blurred edge should look like and the fitted profile does not give;
    * ``shape at 1-8 px``: convexity (smoothed normals' divergence) and a depth
      difference (smoothed depth minus depth) at 1, 2, 4 and 8 px, alone and times the
      prediction (16 images): light gathered in creases or lost at ridges over a few pixels.
@@ -155,6 +159,38 @@ def along_the_light(prediction, light, mu0) -> list[np.ndarray]:
     along = ux * ux * gxx + 2 * ux * uy * gxy + uy * uy * gyy
     across = uy * uy * gxx - 2 * ux * uy * gxy + ux * ux * gyy
     return [(d * b[..., 0])[..., None] for b in cosine_bins(mu0, 5) for d in (first, along, across)]
+
+
+def shadow_edge_profiles(key, mu0, mask, reach: int = 7, bins: int = 3) -> tuple[list[np.ndarray], np.ndarray]:
+    """A free profile across the key light's shadow edges: indicator images of the
+    signed distance (whole pixels, ``-reach..reach - 1``; 0 and up on the lit side) to the
+    nearest shadow edge, in ``bins`` bins of ``mu0``, each times the lit level beside
+    the edge. Also returns the share of the mask within ``reach`` of an edge.
+
+    A pixel is lit where the key light's part over Lambert's ``mu0`` is over a quarter
+    of its 90th percentile on the mask (the texture and the light's fall-off vary far
+    less than a shadow's depth); the terminator (``mu0`` < 0.15), where the light fades
+    without a shadow, is left out. Each image is one free weight: any 1-D kernel
+    across the edges, per incidence bin, that the blur's profile does not give."""
+    from scipy import ndimage
+
+    k = key[..., 0] * mask
+    facing = (mu0[..., 0] >= 0.15) & (mask > 0)
+    ratio = k / np.maximum(mu0[..., 0], 0.05)
+    lit = ratio > 0.25 * (np.quantile(ratio[facing], 0.9) if np.any(facing) else np.inf)
+    level = ndimage.maximum_filter(np.where(lit, k, 0.0), size=2 * reach + 1)
+    distance = ndimage.distance_transform_edt(lit) - ndimage.distance_transform_edt(~lit)
+    # The edt's distance is 1 at the first pixel on either side of the edge: those
+    # two pixels get steps 0 (lit) and -1 (shadowed).
+    step = np.floor(np.where(distance > 0, distance - 0.5, distance + 0.5)).astype(int)
+    near = (step >= -reach) & (step < reach) & facing
+    layers = []
+    for b in cosine_bins(mu0, bins):
+        for d in range(-reach, reach):
+            image = (near & (step == d) & (b[..., 0] > 0)) * level
+            if np.any(image):
+                layers.append(image[..., None])
+    return layers, near
 
 
 def shape_at_scales(prediction, normal, depth, mask) -> list[np.ndarray]:
@@ -356,6 +392,8 @@ def layer_gains(pair, fit, keep, fill_light=None) -> dict:
         "a dielectric's angular law": dielectric_laws(pair, fit),
         "shape at 1-8 px": shape_at_scales(prediction, normal, np.asarray(pair["depth"], np.float64), pair["mask"]),
     }
+    edge_layers, near_edges = shadow_edge_profiles(key, mu0, np.asarray(pair["mask"], np.float64))
+    layers["shadow-edge profiles"] = edge_layers
     if fill_light is not None:
         _, fill_mu0, _ = cosines(normal, fill_light)
         layers["other lights' angular law"] = [through_blur((source - key) * a * b, pair, fit.params)
@@ -373,7 +411,8 @@ def layer_gains(pair, fit, keep, fill_light=None) -> dict:
         layers["the law's change, its own profile"] = [change] + [
             through_one_gaussian(change, pair, fit.params, k) for k in range(len(fit.params.weights))]
     base = psnr([prediction])
-    return {"fit": base, **{name: psnr([prediction, *images]) - base for name, images in layers.items()}}
+    gains = {name: psnr([prediction, *images]) - base for name, images in layers.items()}
+    return {"fit": base, "share of the mask near shadow edges": float(np.mean(near_edges[keep])), **gains}
 
 
 def source_noise(folder, pair, fit, keep) -> dict:
@@ -589,9 +628,11 @@ def main() -> None:
         fit = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"],
                               light_terms=args.terms, light_buffers=pair["buffers"])
         gains = layer_gains(pair, fit, keep, other_lights(folder))
+        share = gains.pop("share of the mask near shadow edges")
         cells = " | ".join(f"{name} {gain:+.2f}" for name, gain in gains.items() if name != "fit")
         print(f"{folder.name}: fit + {args.terms} {gains['fit']:.2f} dB (noise ceiling "
-              f"{pair['info']['noise']['noise_ceiling_db']:.2f}); gain with a layer: {cells}", flush=True)
+              f"{pair['info']['noise']['noise_ceiling_db']:.2f}); gain with a layer: {cells}; "
+              f"{100 * share:.1f} % of the mask lies within 7 px of a shadow edge", flush=True)
         area = area_light_gains(pair, fit, keep)
         if area:
             print("  the law over an area light's extent: "
