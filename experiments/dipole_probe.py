@@ -114,24 +114,18 @@ class Medium:
         return np.maximum(value / (4.0 * self.c_phi), 0.0)
 
 
-def ray_directions(config, rows, cols) -> np.ndarray:
-    """Camera-space directions (not unit) of the rays through image points (pixel
-    centres at integers + 0.5, as :func:`invsss.scenes.render.camera_points`)."""
-    camera = config.camera
-    h, w = camera.height, camera.width
-    f = camera.focal_length_px
-    offset_rows, offset_cols = camera.principal_offset_px
-    x = (cols + 0.5 - w / 2 - offset_cols) / f
-    y = -(rows + 0.5 - h / 2 - offset_rows) / f
-    return np.stack(np.broadcast_arrays(x, y, -np.ones_like(x)), axis=-1)
+def ray_directions(config, shape, within=(0.0, 0.0)) -> np.ndarray:
+    """Camera-space directions (H, W, 3; not unit, depth 1) of the rays through every
+    pixel's centre moved by ``within`` = (rows, cols) pixels."""
+    from invsss.scenes.render import camera_points
+
+    return camera_points(config, np.ones(shape), within)
 
 
 def footprint_points(config, points, normal, a: float, b: float):
     """Where the ray through ``(row + b, col + a)`` meets each pixel's tangent plane (the
     plane through its point with its normal), camera space, (H, W, 3)."""
-    h, w = points.shape[:2]
-    rows, cols = np.mgrid[0:h, 0:w].astype(np.float64)
-    ray = ray_directions(config, rows + b, cols + a)
+    ray = ray_directions(config, points.shape[:2], (b, a))
     # The cosine to the ray at least 0.2, as in pixel_area: a plane seen edge-on (or a
     # normal facing away) would send the point off to infinity.
     along = np.minimum(np.sum(normal * ray, axis=-1), -0.2 * np.linalg.norm(ray, axis=-1))
@@ -144,9 +138,7 @@ def pixel_area(config, points, normal) -> np.ndarray:
     ``depth^2 |ray|^2``, over the cosine between the normal and the ray (at least 0.2)."""
     depth = -points[..., 2]
     f = config.camera.focal_length_px
-    h, w = points.shape[:2]
-    rows, cols = np.mgrid[0:h, 0:w].astype(np.float64)
-    ray = ray_directions(config, rows, cols)
+    ray = ray_directions(config, points.shape[:2])
     length = np.linalg.norm(ray, axis=-1)
     cosine = np.maximum(np.abs(np.sum(normal * ray, axis=-1)) / length, 0.2)
     return (depth / f) ** 2 / length / cosine

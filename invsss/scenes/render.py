@@ -368,16 +368,20 @@ def camera_pose(config: SceneConfig) -> tuple[np.ndarray, np.ndarray]:
     return origin, np.stack([right, up, -forward])
 
 
-def camera_points(config: SceneConfig, depth) -> np.ndarray:
+def camera_points(config: SceneConfig, depth, within=(0.0, 0.0)) -> np.ndarray:
     """The camera-space points (H, W, 3) seen through the pixel centres at the
-    eye-space ``depth`` (mm; 0 gives the camera's own position)."""
+    eye-space ``depth`` (mm; 0 gives the camera's own position; 1, the ray's
+    direction with unit depth).
+
+    ``within`` = ``(rows, cols)`` moves every pixel's point from its centre by that
+    many pixels (-0.5 to 0.5 spans the pixel), for sums over a pixel's footprint."""
     depth = np.asarray(depth, np.float64)
     camera = config.camera
     h, w = depth.shape
     f = camera.focal_length_px
     offset_rows, offset_cols = camera.principal_offset_px
-    x = (np.arange(w)[None, :] + 0.5 - w / 2 - offset_cols) / f * depth
-    y = -(np.arange(h)[:, None] + 0.5 - h / 2 - offset_rows) / f * depth
+    x = (np.arange(w)[None, :] + 0.5 + within[1] - w / 2 - offset_cols) / f * depth
+    y = -(np.arange(h)[:, None] + 0.5 + within[0] - h / 2 - offset_rows) / f * depth
     return np.stack(np.broadcast_arrays(x, y, -depth), axis=-1)
 
 
