@@ -194,6 +194,14 @@ def test_fit_progress_says_how_long_compiling_took_once():
     warm = io.StringIO()
     ProgressLine(warm, lambda: 0.01)(1, 1e-3)
     assert warm.getvalue().splitlines() == ["fit: compiled code loaded from the cache", "fit: iter 1  loss 1.000e-03"]
+    # The first warm run tries the entries in a child process: its pause is explained.
+    first_warm = io.StringIO()
+    ProgressLine(first_warm, lambda: 0.01, lambda: 6.25)(1, 1e-3)
+    assert first_warm.getvalue().splitlines()[0] == (
+        "fit: compiled code loaded from the cache (its first use here: tried in a separate process first, 6.2 s)")
+    verified = io.StringIO()
+    ProgressLine(verified, lambda: 0.01, lambda: 0.0)(1, 1e-3)
+    assert verified.getvalue().splitlines()[0] == "fit: compiled code loaded from the cache"
 
 
 def test_compile_seconds_counts_a_new_compilation():

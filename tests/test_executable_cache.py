@@ -256,9 +256,15 @@ def test_an_entry_that_crashes_its_loader_is_tried_in_a_separate_process_first(c
     assert f"executable cache: {entry.name} failed when a separate process tried it" in warned[0]
     assert "SIGABRT" in warned[0]
     # Replaced by the compilation; tried once more in a child, then recorded as tried.
+    from invsss.cli.progress import trial_seconds
+
+    before = trial_seconds()
     assert _call()[1:] == (0, [])
     assert entry.with_suffix(".verified").is_file()
+    tried = trial_seconds() - before
+    assert tried > 0.1  # the child's time, as the command line reports it
     assert _call()[1:] == (0, [])
+    assert trial_seconds() - before == tried  # a verified entry is not tried again
 
 
 def test_entries_not_yours_alone_are_refused_before_anything_is_unpickled(cache_dir, tmp_path):

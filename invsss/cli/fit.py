@@ -31,7 +31,7 @@ import dataclasses
 from ..estimator.fit import run_fit
 from ..estimator.option_text import saturation_from_text
 from ..estimator.options import FitOptions
-from .progress import ProgressLine, compile_seconds
+from .progress import ProgressLine, compile_seconds, trial_seconds
 from .arguments import add_no_cache_argument, read_key_buffer, read_light_buffer
 
 
@@ -224,8 +224,9 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
         threading.Thread(
             target=importlib.import_module, args=("invsss.cli.report",), name="invsss-import-report"
         ).start()
-        compiled_before = compile_seconds()
-        progress = ProgressLine(sys.stderr, lambda: compile_seconds() - compiled_before)
+        compiled_before, tried_before = compile_seconds(), trial_seconds()
+        progress = ProgressLine(sys.stderr, lambda: compile_seconds() - compiled_before,
+                                lambda: trial_seconds() - tried_before)
         height, width, _ = pairs[0].source.shape
         progress.show(f"fit: {count} pair(s), {width}x{height}, model {args.model}: searching starting points")
 

@@ -7,7 +7,9 @@ import time
 import numpy as np
 
 
-_COMPILING = {"spans": [], "listening": False}
+#: Wall-time intervals, by what filled them: "compile" (JAX's compile events) and
+#: "trial" (the executable cache trying an entry in a child process).
+_SPANS = {"compile": [], "trial": [], "listening": False}
 
 
 class ProgressLine:
@@ -18,12 +20,15 @@ class ProgressLine:
     so logs stay short. With ``compile_seconds`` (a callable: seconds spent
     compiling so far in this fit), the first solver step is preceded by one
     permanent line saying how long compilation took (or that the compiled code
-    came from the cache).
+    came from the cache); with ``trial_seconds`` as well (seconds spent trying
+    cache entries in a child process, :func:`trial_seconds`), that line says
+    how long the trials took when there were any.
     """
 
-    def __init__(self, stream, compile_seconds=None):
+    def __init__(self, stream, compile_seconds=None, trial_seconds=None):
         self._stream = stream
         self._compile_seconds = compile_seconds
+        self._trial_seconds = trial_seconds
         self._tty = bool(getattr(stream, "isatty", lambda: False)())
         self._interval = 0.1 if self._tty else 5.0
         self._last = -np.inf
@@ -44,10 +49,16 @@ class ProgressLine:
             # Everything the first step needs is compiled once it has run.
             self.close()
             seconds = self._compile_seconds()
-            # A warm cache (invsss.runtime.executable_cache) leaves nothing to compile.
-            self._stream.write(f"fit: compiling ... {seconds:.1f} s\n" if seconds >= 0.05
-                               else "fit: compiled code loaded from the cache\n")
-            self._compile_seconds = None
+            tried = self._trial_seconds() if self._trial_seconds is not None else 0.0
+            # A warm cache (invsss.runtime.executable_cache) leaves nothing to compile;
+            # its first use here tries each entry in a child process, which the user
+            # would otherwise see as an unexplained pause.
+            line = (f"fit: compiling ... {seconds:.1f} s" if seconds >= 0.05
+                    else "fit: compiled code loaded from the cache")
+            if tried >= 0.05:
+                line += f" (its first use here: tried in a separate process first, {tried:.1f} s)"
+            self._stream.write(line + "\n")
+            self._compile_seconds = self._trial_seconds = None
         now = time.monotonic()
         if now - self._last < self._interval:
             return
@@ -72,17 +83,33 @@ def compile_seconds() -> float:
     compiles, so the durations are not summed: each is an interval ending when
     its event arrives, and overlapping intervals count once.
     """
-    if not _COMPILING["listening"]:
-        from jax import monitoring
+    _listen()
+    return covered_seconds(_SPANS["compile"])
 
-        def listen(event, duration, **_):
-            if event.startswith("/jax/core/compile/"):
-                end = time.monotonic()
-                _COMPILING["spans"].append((end - duration, end))  # list.append is atomic
 
-        monitoring.register_event_duration_secs_listener(listen)
-        _COMPILING["listening"] = True
-    return covered_seconds(_COMPILING["spans"])
+def trial_seconds() -> float:
+    """Seconds of wall time during which the executable cache was trying entries in a
+    child process (:data:`invsss.runtime.executable_entries.TRIAL_EVENT`), counted as
+    :func:`compile_seconds` counts compiling; the listener is registered on the first call."""
+    _listen()
+    return covered_seconds(_SPANS["trial"])
+
+
+def _listen() -> None:
+    if _SPANS["listening"]:
+        return
+    from jax import monitoring
+
+    from ..runtime.executable_entries import TRIAL_EVENT
+
+    def listen(event, duration, **_):
+        kind = "compile" if event.startswith("/jax/core/compile/") else "trial" if event == TRIAL_EVENT else None
+        if kind is not None:
+            end = time.monotonic()
+            _SPANS[kind].append((end - duration, end))  # list.append is atomic
+
+    monitoring.register_event_duration_secs_listener(listen)
+    _SPANS["listening"] = True
 
 
 def covered_seconds(spans) -> float:

@@ -25,6 +25,7 @@ import stat
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import jax
@@ -32,6 +33,7 @@ import jax
 from .compile_cache import ownership_problem, warn_once
 
 __all__ = [
+    "TRIAL_EVENT",
     "VERIFY_SECONDS",
     "Refused",
     "discard",
@@ -55,6 +57,11 @@ _DIGEST_BYTES = 32
 #: How long the child process that tries an entry may take (it loads the entry
 #: and runs one call) before the entry counts as failed.
 VERIFY_SECONDS = 600
+
+
+#: The ``jax.monitoring`` event that :func:`try_in_child` records with its seconds, so
+#: that the command line can say where a first warm run's time went.
+TRIAL_EVENT = "/invsss/executable_cache/trial"
 
 
 @functools.lru_cache(maxsize=1)
@@ -170,7 +177,18 @@ print("ok", flush=True)
 
 
 def try_in_child(data: bytes, digest: str, leaves) -> str | None:
-    """None if a child process loaded the entry ``data`` and ran it on ``leaves``; else what went wrong."""
+    """None if a child process loaded the entry ``data`` and ran it on ``leaves``; else what went wrong.
+
+    Its wall time is recorded as the ``jax.monitoring`` event :data:`TRIAL_EVENT`.
+    """
+    start = time.monotonic()
+    try:
+        return _try_in_child(data, digest, leaves)
+    finally:
+        jax.monitoring.record_event_duration_secs(TRIAL_EVENT, time.monotonic() - start)
+
+
+def _try_in_child(data: bytes, digest: str, leaves) -> str | None:
     import numpy as np
 
     env = dict(os.environ, INVSSS_NO_CACHE="1")
