@@ -103,8 +103,10 @@ def median_time(run, repeats: int) -> float:
     return statistics.median(times)
 
 
-def queued_time(compiled, params, repeats: int) -> float:
-    """Seconds per call of ``repeats`` calls dispatched at once and waited for once.
+def queued_time(fn, *args, repeats: int) -> float:
+    """Seconds per call of ``fn(*args)`` when ``repeats`` calls are dispatched at once
+    and waited for once: on a GPU the host's dispatch then overlaps the device's
+    work, so this is near the device's own time per call.
 
     The best of three such batches: the first may still meet a cold cache or a
     clock that has not ramped up.
@@ -112,8 +114,7 @@ def queued_time(compiled, params, repeats: int) -> float:
     best = np.inf
     for _ in range(3):
         start = time.perf_counter()
-        outs = [compiled(params) for _ in range(repeats)]
-        jax.block_until_ready(outs)
+        jax.block_until_ready([fn(*args) for _ in range(repeats)])
         best = min(best, (time.perf_counter() - start) / repeats)
     return best
 
@@ -169,7 +170,7 @@ def _bench_jax(model: str, size: int, repeats: int, device) -> dict:
         compiled = jax.jit(fn).lower(params).compile()
         row[f"{name} compile"] = time.perf_counter() - start
         row[name] = median_time(lambda: jax.block_until_ready(compiled(params)), repeats)
-        row[f"{name} queued"] = queued_time(compiled, params, repeats)
+        row[f"{name} queued"] = queued_time(compiled, params, repeats=repeats)
         row[f"{name} result"] = jax.device_get(compiled(params))
     return row
 

@@ -23,7 +23,9 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import pathlib
 import statistics
+import sys
 import time
 
 import jax
@@ -32,6 +34,9 @@ import numpy as np
 
 from invsss.forward.pass_kernels import directional_pass_kernel
 from invsss.forward.passes import _directional_pass_xla, tap_weights
+
+sys.path.insert(0, str(pathlib.Path(__file__).parent))
+from bench_forward import queued_time  # noqa: E402
 
 
 def scene(size: int, seed: int = 0):
@@ -51,18 +56,6 @@ def median_ms(fn, *args, repeats: int) -> float:
         jax.block_until_ready(fn(*args))
         times.append(time.perf_counter() - t0)
     return 1e3 * statistics.median(times)
-
-
-def queued_ms(fn, *args, repeats: int) -> float:
-    """ms per call of ``repeats`` calls dispatched at once and waited for once (best of 3):
-    on a GPU the host's dispatch then overlaps the device's work, so this is near
-    the kernel's own time, where :func:`median_ms` adds a round trip per call."""
-    best = float("inf")
-    for _ in range(3):
-        t0 = time.perf_counter()
-        jax.block_until_ready([fn(*args) for _ in range(repeats)])
-        best = min(best, (time.perf_counter() - t0) / repeats)
-    return 1e3 * best
 
 
 def functions(pass_fn, mask, axis, tangents_i, tangents_f, cotangent):
@@ -118,7 +111,7 @@ def main(argv=None) -> int:
                 fns = functions(fn, mask, axis, t_i, t_f, cot)
                 try:
                     times = [median_ms(fns[k], image, footprint, repeats=args.repeats) for k in kinds]
-                    times.append(queued_ms(fns["forward"], image, footprint, repeats=args.repeats))
+                    queued = 1e3 * queued_time(fns["forward"], image, footprint, repeats=args.repeats)
                     outs = [fns[k](image, footprint) for k in kinds]
                 except Exception as err:  # a tile Triton rejects: say so, go on
                     print(f"{size:>5} {axis:>4} {name:<14} failed: {type(err).__name__}: {str(err)[:200]}")
@@ -127,7 +120,8 @@ def main(argv=None) -> int:
                     reference, diff = outs, ""
                 else:
                     diff = f"{_max_diff(outs, reference):10.1e}"
-                print(f"{size:>5} {axis:>4} {name:<14}" + "".join(f"{t:10.3f}" for t in times[:-1]) + f"{times[-1]:11.3f}{diff:>10}",
+                print(f"{size:>5} {axis:>4} {name:<14}" + "".join(f"{t:10.3f}" for t in times)
+                      + f"{queued:11.3f}{diff:>10}",
                       flush=True)
     return 0
 

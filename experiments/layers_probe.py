@@ -165,7 +165,8 @@ def shadow_edge_profiles(key, mu0, mask, reach: int = 7, bins: int = 3) -> tuple
     """A free profile across the key light's shadow edges: indicator images of the
     signed distance (whole pixels, ``-reach..reach - 1``; 0 and up on the lit side) to the
     nearest shadow edge, in ``bins`` bins of ``mu0``, each times the lit level beside
-    the edge. Also returns the share of the mask within ``reach`` of an edge.
+    the edge. Also returns where those pixels are (a boolean map: near an edge,
+    facing the light, on the mask).
 
     A pixel is lit where the key light's part over Lambert's ``mu0`` is over a quarter
     of its 90th percentile on the mask (the texture and the light's fall-off vary far
