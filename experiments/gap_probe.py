@@ -20,6 +20,15 @@ offset per channel, PSNR on the mask eroded by 2 px):
     (``|P(y) - P(x)| F / L`` in the profile's units: equal to the screen distance
     on a surface that faces the camera, longer where it turns away). It needs no
     ``correction`` or ``maxdd``: the depth buffer's geometry replaces them.
+``surface integral``
+    the same distance, and each pixel's light weighted by the area of surface it
+    covers (from the depth buffer, zero off the mask); not normalised by its own sum
+    over the window but by the same sum on a plane facing the camera at the output
+    pixel's depth, over the window's pixels on the mask (past the mask's edge the
+    surface goes on out of sight). It is the integral of the profile over the
+    surface, which the normalised variants replace by an average: where the surface
+    crowds into a pixel's neighbourhood (a crease, a rim seen edge-on) more light
+    arrives, and a pixel that turns away from the camera sends more of its own.
 
 Each variant gets its own best ``sss_level`` (a golden-section search over its
 logarithm) with the profile's weights and an offset solved by least squares on
@@ -27,7 +36,7 @@ the mask, as the fit solves them; the other parameters are the fit's. This is
 done for the plain fit and for the fit with ``shift,law`` (the law applied to the
 source, the shift to each blurred layer, both held at the fit's values).
 
-    python experiments/gap_probe.py [PAIR_DIR ...] [--terms shift,law]
+    python experiments/gap_probe.py [PAIR_DIR ...] [--terms shift,law] [--variants 'NAME;...']
 
 Without PAIR_DIR, the tuning pairs of data_synthetic/SPLIT.toml.
 """
@@ -52,7 +61,9 @@ from fidelity import eroded, load_scene_pair, score  # noqa: E402
 
 #: The window's half-width: three standard deviations of the widest Gaussian, at most.
 MAX_RADIUS_PX = 12
-VARIANTS = ("7-tap passes", "dense, screen distance", "dense, surface distance")
+VARIANTS = ("7-tap passes", "dense, screen distance", "dense, surface distance", "surface integral")
+#: The smallest cosine an area weight divides by (as the law's fade, docs/model.md section 8).
+MIN_COSINE = 0.1
 
 
 def _shifted(image: np.ndarray, dy: int, dx: int) -> np.ndarray:
@@ -74,15 +85,44 @@ def _points(depth: np.ndarray, focal_px: float, dy: int = 0, dx: int = 0) -> np.
                     axis=-1)
 
 
+def surface_areas(depth: np.ndarray, mask: np.ndarray, focal_px: float) -> np.ndarray:
+    """Area in mm^2 of surface each pixel covers, (H, W): zero off the mask.
+
+    The depth buffer's own geometry, as the distances: each quarter of a pixel's
+    footprint is the parallelogram spanned by the half-steps to its neighbours on
+    that side (forward or backward in each axis), so a pixel on a crease gets half
+    of each face. A quarter counts at most ``1 / MIN_COSINE`` times a quarter of the
+    facing area ``(d / F)^2``, so that a step in depth (an occluding edge) does not
+    stand for a wall of skin.
+    """
+    points = _points(depth, focal_px)
+    facing = (depth / focal_px) ** 2
+    total = np.zeros(depth.shape, np.float64)
+    for dy in (-1, 1):
+        for dx in (-1, 1):
+            along_x = (_points(depth, focal_px, 0, dx) - points) * dx
+            along_y = (_points(depth, focal_px, dy, 0) - points) * dy
+            quarter = np.linalg.norm(np.cross(along_x, along_y), axis=-1)
+            total += np.minimum(quarter, facing / MIN_COSINE) / 4.0
+    return np.where(mask > 0.5, total, 0.0)
+
+
 def dense_layers(image, depth, mask, params, distance: str, focal_px: float) -> np.ndarray:
-    """One dense blurred image per Gaussian of ``params``, (K, H, W, C)."""
+    """One dense blurred image per Gaussian of ``params``, (K, H, W, C).
+
+    ``distance`` is ``"screen"``, ``"surface"`` or ``"integral"`` (surface distance,
+    area-weighted and normalised on a facing plane).
+    """
     s_x, s_y = (np.asarray(s, np.float64) for s in stretch_factors(
         depth, float(params.sss_level), float(params.correction), float(params.maxdd)))
     variances = np.asarray(params.variances, np.float64)
     widest = float(np.sqrt(variances.max()) * max(s_x.max(), s_y.max()))
     radius = int(min(MAX_RADIUS_PX, np.ceil(3.0 * widest)))
-    points = _points(depth, focal_px) if distance == "surface" else None
+    points = _points(depth, focal_px) if distance != "screen" else None
     to_model = focal_px / float(params.sss_level)  # scene mm -> the profile's units at this L
+    if distance == "integral":
+        areas = surface_areas(depth, mask, focal_px)
+        facing = (depth / focal_px) ** 2  # a facing plane's pixel area, and its squared spacing in mm
     layers = []
     for v in variances:
         total = np.zeros(image.shape, np.float64)
@@ -94,9 +134,17 @@ def dense_layers(image, depth, mask, params, distance: str, focal_px: float) -> 
                 else:
                     d2 = np.sum((_points(depth, focal_px, dy, dx) - points) ** 2, axis=-1) * to_model**2
                 weight = np.exp(-d2 / (2.0 * v))
+                if distance == "integral":
+                    total += (weight * _shifted(areas, dy, dx))[..., None] * _shifted(image, dy, dx)
+                    # Only where the window has skin: past the mask's edge the surface goes
+                    # on out of sight, and a pixel there must not be darkened for it.
+                    norm += (facing * np.exp(-(dy * dy + dx * dx) * facing * to_model**2 / (2.0 * v))
+                             * (_shifted(mask, dy, dx) > 0.5))
+                    continue
                 total += weight[..., None] * _shifted(image, dy, dx)
                 norm += weight
-        blurred = total / norm[..., None]
+        # A window with no skin (the integral's, far off the mask) leaves the pixel as it is.
+        blurred = np.divide(total, norm[..., None], out=image.astype(np.float64), where=norm[..., None] > 0)
         layers.append(image + mask[..., None] * (blurred - image))
     return np.stack(layers)
 
@@ -139,8 +187,8 @@ def variant_psnr(pair, fit, variant: str, level: float, scored: np.ndarray) -> f
     if variant == VARIANTS[0]:
         layers = pass_layers(source, depth, mask, params)
     else:
-        layers = dense_layers(source, depth, mask, params, "screen" if variant == VARIANTS[1] else "surface",
-                              pair["info"]["focal_px"])
+        distance = {VARIANTS[1]: "screen", VARIANTS[2]: "surface", VARIANTS[3]: "integral"}[variant]
+        layers = dense_layers(source, depth, mask, params, distance, pair["info"]["focal_px"])
     if terms is not None and float(terms.shift) != 0.0:
         stretch = stretch_factors(depth, level, params.correction, params.maxdd)
         offsets = propagation_offsets(np.asarray(buffers.light, np.float64))
@@ -175,15 +223,21 @@ def main() -> None:
     parser.add_argument("pairs", nargs="*", type=pathlib.Path)
     parser.add_argument("--terms", default="shift,law", help="the term set probed beside the plain fit")
     parser.add_argument("--erode", type=int, default=2)
+    parser.add_argument("--variants", default=";".join(VARIANTS),
+                        help="which of the variants to score, separated by ';' (default: all)")
     args = parser.parse_args()
+    variants = [name.strip() for name in args.variants.split(";")]
+    unknown = sorted(set(variants) - set(VARIANTS))
+    if unknown:
+        parser.error(f"--variants: unknown {unknown}; expected some of {list(VARIANTS)}")
     folders = args.pairs
     if not folders:
         from invsss.scenes.split import read_split  # the tuning pairs only: this probe chooses what to build
 
         split = read_split(pathlib.Path("data_synthetic/SPLIT.toml"))
         folders = sorted(pathlib.Path("data_synthetic") / name for name, part in split.items() if part == "tuning")
-    print("| pair | fit | ceiling | " + " | ".join(VARIANTS) + " | sss_level (each) |")
-    print("|---|---|---|" + "---|" * len(VARIANTS) + "---|")
+    print("| pair | fit | ceiling | " + " | ".join(variants) + " | sss_level (each) |")
+    print("|---|---|---|" + "---|" * len(variants) + "---|")
     for folder in folders:
         pair = load_scene_pair(folder)
         scored = eroded(pair["mask"], args.erode)
@@ -192,7 +246,7 @@ def main() -> None:
             started = time.perf_counter()
             fit = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"],
                                   light_terms=terms, light_buffers=pair["buffers"] if terms else None)
-            found = [best_level(pair, fit, variant, scored) for variant in VARIANTS]
+            found = [best_level(pair, fit, variant, scored) for variant in variants]
             label = "plain" if not terms else "+ " + " + ".join(terms)
             print(f"| {folder.name} | {label} | {ceiling:.2f} | " + " | ".join(f"{p:.2f}" for _, p in found)
                   + " | " + ", ".join(f"{lv:.0f}" for lv, _ in found)

@@ -365,8 +365,12 @@ def area_light_gains(pair, fit, keep, samples: int = 9) -> dict:
     return out
 
 
-def layer_gains(pair, fit, keep, fill_light=None) -> dict:
-    """The PSNR gain of each candidate layer mixed with the fit's prediction (dB)."""
+def layer_gains(pair, fit, keep, fill_light=None) -> tuple[float, dict, float]:
+    """The PSNR gain of each candidate layer mixed with the fit's prediction (dB).
+
+    Returns ``(psnr, gains, near_edges)``: the prediction's own PSNR on ``keep``, the
+    gain of each layer by name, and the share of ``keep`` within 7 px of a shadow edge.
+    """
     source, target = (np.asarray(pair[k], np.float64) for k in ("source", "target"))
     key = np.asarray(pair["buffers"].key, np.float64)
     normal, light = (np.asarray(b, np.float64) for b in (pair["buffers"].normal, pair["buffers"].light))
@@ -413,7 +417,7 @@ def layer_gains(pair, fit, keep, fill_light=None) -> dict:
             through_one_gaussian(change, pair, fit.params, k) for k in range(len(fit.params.weights))]
     base = psnr([prediction])
     gains = {name: psnr([prediction, *images]) - base for name, images in layers.items()}
-    return {"fit": base, "share of the mask near shadow edges": float(np.mean(near_edges[keep])), **gains}
+    return base, gains, float(np.mean(near_edges[keep]))
 
 
 def source_noise(folder, pair, fit, keep) -> dict:
@@ -628,10 +632,9 @@ def main() -> None:
         keep = eroded(pair["mask"], 2) > 0
         fit = invsss.fit_pair(pair["source"], pair["target"], pair["depth"], pair["mask"],
                               light_terms=args.terms, light_buffers=pair["buffers"])
-        gains = layer_gains(pair, fit, keep, other_lights(folder))
-        share = gains.pop("share of the mask near shadow edges")
-        cells = " | ".join(f"{name} {gain:+.2f}" for name, gain in gains.items() if name != "fit")
-        print(f"{folder.name}: fit + {args.terms} {gains['fit']:.2f} dB (noise ceiling "
+        base, gains, share = layer_gains(pair, fit, keep, other_lights(folder))
+        cells = " | ".join(f"{name} {gain:+.2f}" for name, gain in gains.items())
+        print(f"{folder.name}: fit + {args.terms} {base:.2f} dB (noise ceiling "
               f"{pair['info']['noise']['noise_ceiling_db']:.2f}); gain with a layer: {cells}; "
               f"{100 * share:.1f} % of the mask lies within 7 px of a shadow edge", flush=True)
         area = area_light_gains(pair, fit, keep)
