@@ -23,12 +23,15 @@ offset per channel, PSNR on the mask eroded by 2 px):
 ``surface integral``
     the same distance, and each pixel's light weighted by the area of surface it
     covers (from the depth buffer, zero off the mask); not normalised by its own sum
-    over the window but by the same sum on a plane facing the camera at the output
-    pixel's depth, over the window's pixels on the mask (past the mask's edge the
-    surface goes on out of sight). It is the integral of the profile over the
+    over the window but by the same sum on the output pixel's tangent plane (the depth
+    continued with its slopes), over the window's pixels on the mask (past the mask's
+    edge the surface goes on out of sight). It is the integral of the profile over the
     surface, which the normalised variants replace by an average: where the surface
-    crowds into a pixel's neighbourhood (a crease, a rim seen edge-on) more light
-    arrives, and a pixel that turns away from the camera sends more of its own.
+    bends towards a pixel's neighbourhood (a crease, a fold) more light arrives than on
+    its tangent plane, where it bends away less, and a neighbour that turns further
+    from the camera than the pixel sends more of its light. Comparing with the tangent
+    plane's sum, not with the integral of the profile, keeps a narrow Gaussian (under a
+    pixel) from turning a tilted pixel's own area into a gain.
 
 Each variant gets its own best ``sss_level`` (a golden-section search over its
 logarithm) with the profile's weights and an offset solved by least squares on
@@ -85,6 +88,24 @@ def _points(depth: np.ndarray, focal_px: float, dy: int = 0, dx: int = 0) -> np.
                     axis=-1)
 
 
+def _plane_points(depth: np.ndarray, slopes, focal_px: float, dy: int, dx: int) -> np.ndarray:
+    """Points (H, W, 3) in mm of the pixels ``(y + dy, x + dx)`` on each pixel's tangent
+    plane, the depth continued from the pixel's own with ``slopes`` (per pixel, down and across)."""
+    h, w = depth.shape
+    rows, cols = np.mgrid[0:h, 0:w].astype(np.float64)
+    d = depth + slopes[0] * dy + slopes[1] * dx
+    return np.stack([(cols + dx - (w - 1) / 2.0) * d / focal_px, (rows + dy - (h - 1) / 2.0) * d / focal_px, d],
+                    axis=-1)
+
+
+def _plane_area(depth: np.ndarray, slopes, focal_px: float) -> np.ndarray:
+    """The area (H, W) in mm^2 a pixel covers on its tangent plane, bounded as in :func:`surface_areas`."""
+    at = _plane_points(depth, slopes, focal_px, 0, 0)
+    across = _plane_points(depth, slopes, focal_px, 0, 1) - at
+    down = _plane_points(depth, slopes, focal_px, 1, 0) - at
+    return np.minimum(np.linalg.norm(np.cross(across, down), axis=-1), (depth / focal_px) ** 2 / MIN_COSINE)
+
+
 def surface_areas(depth: np.ndarray, mask: np.ndarray, focal_px: float) -> np.ndarray:
     """Area in mm^2 of surface each pixel covers, (H, W): zero off the mask.
 
@@ -111,7 +132,7 @@ def dense_layers(image, depth, mask, params, distance: str, focal_px: float) -> 
     """One dense blurred image per Gaussian of ``params``, (K, H, W, C).
 
     ``distance`` is ``"screen"``, ``"surface"`` or ``"integral"`` (surface distance,
-    area-weighted and normalised on a facing plane).
+    area-weighted and normalised on the tangent plane).
     """
     s_x, s_y = (np.asarray(s, np.float64) for s in stretch_factors(
         depth, float(params.sss_level), float(params.correction), float(params.maxdd)))
@@ -122,7 +143,8 @@ def dense_layers(image, depth, mask, params, distance: str, focal_px: float) -> 
     to_model = focal_px / float(params.sss_level)  # scene mm -> the profile's units at this L
     if distance == "integral":
         areas = surface_areas(depth, mask, focal_px)
-        facing = (depth / focal_px) ** 2  # a facing plane's pixel area, and its squared spacing in mm
+        slopes = np.gradient(depth)  # the tangent plane's depth per pixel down and across
+        plane_area = _plane_area(depth, slopes, focal_px)
     layers = []
     for v in variances:
         total = np.zeros(image.shape, np.float64)
@@ -136,9 +158,10 @@ def dense_layers(image, depth, mask, params, distance: str, focal_px: float) -> 
                 weight = np.exp(-d2 / (2.0 * v))
                 if distance == "integral":
                     total += (weight * _shifted(areas, dy, dx))[..., None] * _shifted(image, dy, dx)
-                    # Only where the window has skin: past the mask's edge the surface goes
-                    # on out of sight, and a pixel there must not be darkened for it.
-                    norm += (facing * np.exp(-(dy * dy + dx * dx) * facing * to_model**2 / (2.0 * v))
+                    # The same sum on the tangent plane, and only where the window has skin:
+                    # past the mask's edge the surface goes on out of sight.
+                    on_plane = _plane_points(depth, slopes, focal_px, dy, dx) - points
+                    norm += (plane_area * np.exp(-np.sum(on_plane**2, axis=-1) * to_model**2 / (2.0 * v))
                              * (_shifted(mask, dy, dx) > 0.5))
                     continue
                 total += weight[..., None] * _shifted(image, dy, dx)

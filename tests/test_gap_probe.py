@@ -96,6 +96,10 @@ def test_surface_integral_keeps_uniform_light_on_a_tilted_plane_and_gathers_it_a
     tilted = 50000.0 + 1.5 * columns
     integral = gap_probe.dense_layers(image, tilted, mask, params, "integral", focal_px=40000.0)[0, ..., 0]
     np.testing.assert_allclose(integral[10:22, 10:22], 1.0, rtol=2e-3)  # the profile integrates to 1
+    # A Gaussian narrower than a pixel lands on the pixel itself: no gain from its tilt.
+    narrow = invsss.SSSParams(40000.0, 0.0, 1.0, [1.0], [0.1])
+    integral = gap_probe.dense_layers(image, tilted, mask, narrow, "integral", focal_px=40000.0)[0, ..., 0]
+    np.testing.assert_allclose(integral[10:22, 10:22], 1.0, rtol=2e-3)
     crease = 50000.0 + 1.5 * np.abs(columns - 16.0)
     normalised = gap_probe.dense_layers(image, crease, mask, params, "surface", focal_px=40000.0)[0, ..., 0]
     integral = gap_probe.dense_layers(image, crease, mask, params, "integral", focal_px=40000.0)[0, ..., 0]
