@@ -1,7 +1,7 @@
 """What is left of the gap to the noise ceiling, and where does it come from? (issue 29, item 5)
 
 On the path-traced *tuning* pairs (data_synthetic/SPLIT.toml) this replaces the
-screen-space model's 7-tap separable passes by two dense references and scores
+screen-space model's 7-tap separable passes by three dense references and scores
 each against the target the way ``experiments/fidelity.py`` does (best gain and
 offset per channel, PSNR on the mask eroded by 2 px):
 
@@ -166,8 +166,9 @@ def dense_layers(image, depth, mask, params, distance: str, focal_px: float) -> 
                     continue
                 total += weight[..., None] * _shifted(image, dy, dx)
                 norm += weight
-        # A window with no skin (the integral's, far off the mask) leaves the pixel as it is.
-        blurred = np.divide(total, norm[..., None], out=image.astype(np.float64), where=norm[..., None] > 0)
+        # Off the mask the pixel stays as it is (the integral's sum there may have no skin).
+        blurred = np.divide(total, norm[..., None], out=image.astype(np.float64),
+                            where=(norm > 0)[..., None] & (mask > 0)[..., None])
         layers.append(image + mask[..., None] * (blurred - image))
     return np.stack(layers)
 

@@ -85,6 +85,17 @@ def _cli_fit(paths, profile, out, *extra) -> tuple[int, dict, str]:
 
 
 @pytest.mark.filterwarnings("ignore::invsss.InputNotice")
+def test_the_cli_names_the_file_whose_pixels_are_all_clipped(tmp_path):
+    # A mask given as the target, say: the library says "target", the user typed a path.
+    paths, profile = _card_on_disk(tmp_path, ".png")
+    code, _, err = _cli_fit(paths, profile, tmp_path / "o", "--saturation", "1e-9")
+    assert code == 2
+    assert err.strip().splitlines()[-1] == (f"invsss: error: {paths['target']} (target): every masked pixel is "
+                                            "at or above the saturation level 1e-09")
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.filterwarnings("ignore::invsss.InputNotice")
 def test_clipping_level_is_the_top_code_of_integer_files_only(tmp_path):
     image = np.full((4, 5), 0.25, np.float32)
     for name, bits in (("a.png", 8), ("b.png", 16), ("c.tif", 8)):

@@ -243,6 +243,8 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
         with stop.deferred(stopping):
             try:
                 result = run_fit(pairs, count == 1, options, progress, stop)
+            except InvalidInputError as err:
+                raise InvalidInputError(_with_file_names(str(err), args, count)) from None
             except FitInterrupted:
                 progress.close()
                 print("invsss: interrupted before the first solver step; nothing written", file=sys.stderr)
@@ -267,6 +269,17 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
         f"wrote {', '.join(written)}"
     )
     return 0
+
+
+def _with_file_names(text: str, args: argparse.Namespace, count: int) -> str:
+    """An estimator's error names a pair's role (``target``, ``pairs[1].mask``); the
+    user typed a file, so put its path first: ``nir.png (target): ...``."""
+    for role in ("source", "target", "depth", "mask"):
+        for i, path in enumerate(getattr(args, role, None) or ()):
+            name = role if count == 1 else f"pairs[{i}].{role}"
+            if text.startswith((f"{name}:", f"{name} ")):
+                return f"{path} ({name}){text[len(name):]}"
+    return text
 
 
 def _write_fit(out: ResultDir, names: list[str], result, pairs, inputs=None) -> list[str] | None:
