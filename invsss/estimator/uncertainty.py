@@ -282,26 +282,41 @@ def gauss_newton_uncertainty(
 
 def _coinciding(natural, scales, flags, msgs, roles):
     """Gaussians whose layers differ by a blur far below a pixel (docs/model.md, section 6: two
-    Gaussians with equal variance): only the sum of their weights is determined."""
+    Gaussians with equal variance): only the sum of their weights is determined.
+
+    Neighbours in variance that coincide form one group, with one message: a chain of three
+    is one sum, not two overlapping ones."""
     v = np.asarray(natural["variances"], np.float64)
     s_max = scales.max_stretch(float(natural["sss_level"]), float(natural["correction"]), float(natural["maxdd"]))
     order = np.argsort(v)
     w = np.asarray(natural["weights"])
+    groups, gaps = [], []
     for a, b in zip(order[:-1], order[1:]):
         gap_px = s_max * np.sqrt(v[b] - v[a])
-        if gap_px < COINCIDENT_PX:
-            shape = w.shape
-            flag = flags.setdefault("weights", np.zeros(shape, bool))
-            flag[a] = flag[b] = True
-            if roles["variances"] == "free":
-                vflag = flags.setdefault("variances", np.zeros(v.shape, bool))
-                vflag[a] = vflag[b] = True
-            total = np.round(np.atleast_1d(w[a] + w[b]), 4).tolist()
-            msgs.append(
-                f"weights[{a}], weights[{b}]: variances {v[a]:.4g} and {v[b]:.4g} differ by a blur of "
-                f"{gap_px:.2f} px at most (below {COINCIDENT_PX} px), so only their sum "
-                f"{total if len(total) > 1 else total[0]} is determined"
-            )
+        if gap_px >= COINCIDENT_PX:
+            continue
+        if groups and groups[-1][-1] == a:
+            groups[-1].append(b)
+            gaps[-1] = max(gaps[-1], gap_px)
+        else:
+            groups.append([a, b])
+            gaps.append(gap_px)
+    for group, gap_px in zip(groups, gaps):
+        flag = flags.setdefault("weights", np.zeros(w.shape, bool))
+        flag[group] = True
+        if roles["variances"] == "free":
+            vflag = flags.setdefault("variances", np.zeros(v.shape, bool))
+            vflag[group] = True
+        total = np.round(np.atleast_1d(sum(w[i] for i in group)), 4).tolist()
+        names = ", ".join(f"weights[{i}]" for i in group)
+        listed = [f"{v[i]:.4g}" for i in group]
+        if len(group) == 2:
+            spread = f"variances {listed[0]} and {listed[1]} differ by a blur of {gap_px:.2f} px at most"
+        else:
+            spread = (f"variances {', '.join(listed[:-1])} and {listed[-1]} differ from one to the next "
+                      f"by a blur of {gap_px:.2f} px at most")
+        msgs.append(f"{names}: {spread} (below {COINCIDENT_PX} px), so only their sum "
+                    f"{total if len(total) > 1 else total[0]} is determined")
 
 
 def structural_reasons(
