@@ -88,6 +88,7 @@ Examples
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -463,6 +464,12 @@ def shift_image(image: Float[Array, "H W C"], offset: Float[Array, "H W 2"]) -> 
     return top + fr * (bottom - top)
 
 
+#: :func:`shift_image` as a jitted function: a fit traces the terms once per blurred
+#: layer and per Jacobian, and a jitted call with the same shapes is traced once
+#: (as the passes' tap sum, :mod:`invsss.forward.passes`).
+_shift_image_traced_once = jax.jit(shift_image)
+
+
 def light_transport(
     blurred: Float[Array, "H W C"],
     mask: Float[Array, "H W"],
@@ -483,7 +490,7 @@ def light_transport(
     if offsets is not None:
         s_x, s_y = stretch
         delta = terms.shift * jnp.stack([s_x * offsets[..., 0], s_y * offsets[..., 1]], axis=-1)
-        out = shift_image(out, delta)
+        out = _shift_image_traced_once(out, delta)
     if grazing is not None:
         out = out * (1.0 + terms.grazing * grazing)[..., None]
     if incidence is not None:
