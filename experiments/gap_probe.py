@@ -77,25 +77,26 @@ def _shifted(image: np.ndarray, dy: int, dx: int) -> np.ndarray:
     return image[rows][:, cols]
 
 
-def _points(depth: np.ndarray, focal_px: float, dy: int = 0, dx: int = 0) -> np.ndarray:
-    """Camera-space points (H, W, 3) in mm of the pixels ``(y + dy, x + dx)``, pinhole at
-    the image centre. Past the edge the depth is the edge's (as the image is) but the
-    pixel keeps its own position, so a clamped sample is as far as its offset says."""
-    h, w = depth.shape
+def _back_projected(d: np.ndarray, focal_px: float, dy: int, dx: int) -> np.ndarray:
+    """Camera-space points (H, W, 3) in mm of the pixels ``(y + dy, x + dx)`` at the
+    depths ``d`` (H, W), pinhole at the image centre."""
+    h, w = d.shape
     rows, cols = np.mgrid[0:h, 0:w].astype(np.float64)
-    d = _shifted(depth, dy, dx)
     return np.stack([(cols + dx - (w - 1) / 2.0) * d / focal_px, (rows + dy - (h - 1) / 2.0) * d / focal_px, d],
                     axis=-1)
+
+
+def _points(depth: np.ndarray, focal_px: float, dy: int = 0, dx: int = 0) -> np.ndarray:
+    """The depth buffer's points of the pixels ``(y + dy, x + dx)``. Past the edge the
+    depth is the edge's (as the image is) but the pixel keeps its own position, so a
+    clamped sample is as far as its offset says."""
+    return _back_projected(_shifted(depth, dy, dx), focal_px, dy, dx)
 
 
 def _plane_points(depth: np.ndarray, slopes, focal_px: float, dy: int, dx: int) -> np.ndarray:
-    """Points (H, W, 3) in mm of the pixels ``(y + dy, x + dx)`` on each pixel's tangent
-    plane, the depth continued from the pixel's own with ``slopes`` (per pixel, down and across)."""
-    h, w = depth.shape
-    rows, cols = np.mgrid[0:h, 0:w].astype(np.float64)
-    d = depth + slopes[0] * dy + slopes[1] * dx
-    return np.stack([(cols + dx - (w - 1) / 2.0) * d / focal_px, (rows + dy - (h - 1) / 2.0) * d / focal_px, d],
-                    axis=-1)
+    """The points of the pixels ``(y + dy, x + dx)`` on each pixel's tangent plane, the
+    depth continued from the pixel's own with ``slopes`` (per pixel, down and across)."""
+    return _back_projected(depth + slopes[0] * dy + slopes[1] * dx, focal_px, dy, dx)
 
 
 def _plane_area(depth: np.ndarray, slopes, focal_px: float) -> np.ndarray:
@@ -145,27 +146,34 @@ def dense_layers(image, depth, mask, params, distance: str, focal_px: float) -> 
         areas = surface_areas(depth, mask, focal_px)
         slopes = np.gradient(depth)  # the tangent plane's depth per pixel down and across
         plane_area = _plane_area(depth, slopes, focal_px)
-    layers = []
-    for v in variances:
-        total = np.zeros(image.shape, np.float64)
-        norm = np.zeros(depth.shape, np.float64)
-        for dy in range(-radius, radius + 1):
-            for dx in range(-radius, radius + 1):
-                if distance == "screen":
-                    d2 = (dx / s_x) ** 2 + (dy / s_y) ** 2
-                else:
-                    d2 = np.sum((_points(depth, focal_px, dy, dx) - points) ** 2, axis=-1) * to_model**2
+    totals = np.zeros((len(variances),) + image.shape, np.float64)
+    norms = np.zeros((len(variances),) + depth.shape, np.float64)
+    # Offsets outside, Gaussians inside: each offset's distances and shifted images are
+    # made once for all the Gaussians (each sum still runs over the offsets in order).
+    for dy in range(-radius, radius + 1):
+        for dx in range(-radius, radius + 1):
+            if distance == "screen":
+                d2 = (dx / s_x) ** 2 + (dy / s_y) ** 2
+            else:
+                d2 = np.sum((_points(depth, focal_px, dy, dx) - points) ** 2, axis=-1) * to_model**2
+            neighbour = _shifted(image, dy, dx)
+            if distance == "integral":
+                sent = _shifted(areas, dy, dx)
+                # The same sum on the tangent plane, and only where the window has skin:
+                # past the mask's edge the surface goes on out of sight.
+                on_plane = _plane_points(depth, slopes, focal_px, dy, dx) - points
+                plane_d2 = np.sum(on_plane**2, axis=-1) * to_model**2
+                plane_weight = plane_area * (_shifted(mask, dy, dx) > 0.5)
+            for k, v in enumerate(variances):
                 weight = np.exp(-d2 / (2.0 * v))
                 if distance == "integral":
-                    total += (weight * _shifted(areas, dy, dx))[..., None] * _shifted(image, dy, dx)
-                    # The same sum on the tangent plane, and only where the window has skin:
-                    # past the mask's edge the surface goes on out of sight.
-                    on_plane = _plane_points(depth, slopes, focal_px, dy, dx) - points
-                    norm += (plane_area * np.exp(-np.sum(on_plane**2, axis=-1) * to_model**2 / (2.0 * v))
-                             * (_shifted(mask, dy, dx) > 0.5))
-                    continue
-                total += weight[..., None] * _shifted(image, dy, dx)
-                norm += weight
+                    totals[k] += (weight * sent)[..., None] * neighbour
+                    norms[k] += plane_weight * np.exp(-plane_d2 / (2.0 * v))
+                else:
+                    totals[k] += weight[..., None] * neighbour
+                    norms[k] += weight
+    layers = []
+    for total, norm in zip(totals, norms):
         # Off the mask the pixel stays as it is (the integral's sum there may have no skin).
         blurred = np.divide(total, norm[..., None], out=image.astype(np.float64),
                             where=(norm > 0)[..., None] & (mask > 0)[..., None])
