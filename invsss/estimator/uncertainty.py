@@ -290,18 +290,16 @@ def _coinciding(natural, scales, flags, msgs, roles):
     s_max = scales.max_stretch(float(natural["sss_level"]), float(natural["correction"]), float(natural["maxdd"]))
     order = np.argsort(v)
     w = np.asarray(natural["weights"])
-    groups, gaps = [], []
+    groups = []
     for a, b in zip(order[:-1], order[1:]):
-        gap_px = s_max * np.sqrt(v[b] - v[a])
-        if gap_px >= COINCIDENT_PX:
+        if s_max * np.sqrt(v[b] - v[a]) >= COINCIDENT_PX:
             continue
         if groups and groups[-1][-1] == a:
             groups[-1].append(b)
-            gaps[-1] = max(gaps[-1], gap_px)
         else:
             groups.append([a, b])
-            gaps.append(gap_px)
-    for group, gap_px in zip(groups, gaps):
+    for group in groups:
+        gap_px = s_max * np.sqrt(np.max(np.diff(v[group])))  # the group is in ascending order
         flag = flags.setdefault("weights", np.zeros(w.shape, bool))
         flag[group] = True
         if roles["variances"] == "free":
