@@ -23,6 +23,7 @@ from scipy import ndimage
 
 import invsss
 from invsss.estimator.search import SolvePath, choose_basin
+from invsss.estimator.summary import rival_basin_warning
 from invsss.estimator.options import FitOptions
 from invsss.estimator.problem import evaluate, build_problem
 from invsss.estimator.robust import robust_loss, robust_scale
@@ -98,6 +99,12 @@ def test_a_second_basin_that_fits_as_well_within_the_noise_is_reported():
         clear = [_candidate(problem, 375.0), _candidate(problem, 900.0)]
         clear_choice = choose_basin(problem, clear, "pseudo-huber")
     assert chosen is tied[0]
-    assert any("another basin fits as well" in m and "420" in m for m in chosen.messages)
+    level, rivals = chosen.rival_basins
+    assert level == pytest.approx(375.0) and len(rivals) == 1 and rivals[0].startswith("420 ")
+    warning = rival_basin_warning(chosen.rival_basins, level_determined=True)
+    assert "another basin fits as well" in warning and "420" in warning
+    assert "its standard error covers one basin only" in warning
+    # Where sss_level has no standard error, the warning promises none.
+    assert "standard error" not in rival_basin_warning(chosen.rival_basins, level_determined=False)
     assert clear_choice is clear[0]
-    assert not any("another basin" in m for m in clear_choice.messages)
+    assert clear_choice.rival_basins is None

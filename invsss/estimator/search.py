@@ -64,6 +64,9 @@ class SolvePath:
         self.objective, self.z = objective, z
         self.converged, self.failure, self.interrupted = True, "", False
         self.messages: list[str] = []
+        # (sss_level kept, [text per rival basin]): set by choose_basin, worded by
+        # summary.rival_basin_warning once the standard errors are known.
+        self.rival_basins: tuple[float, list[str]] | None = None
         self.delta = 0.0
 
     def extend(self, record):
@@ -258,12 +261,9 @@ def choose_basin(problem, finished, robust):
         if z < AMBIGUOUS_Z:
             rivals.append(f"{other:.4g} (loss higher by {z:.1f} standard deviations)")
     if rivals:
-        chosen.messages.append(
-            f"sss_level: another basin fits as well within the noise, at sss_level {', '.join(rivals)} against "
-            f"{level:.4g}; with the weights free the blur scale trades against them, and its standard error "
-            "covers one basin only. Hold the weights at a measured profile (fix weights=...) to decide"
-        )
+        chosen.rival_basins = (level, rivals)
     return chosen
+
 
 
 def active_set(problem, path, run, prefix: str = "") -> None:

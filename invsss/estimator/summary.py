@@ -57,6 +57,10 @@ def summarise(problem, path, single, steps, nuisance=None) -> FitResult:
         messages.append("gain: not positive; the target does not look like a blur of the source")
     natural["weights"] = weights
     unc, stderr, undetermined = _uncertainty(problem, path, final, natural, nuisance, messages)
+    if path.rival_basins is not None:
+        # Where the path's own messages end, as before the uncertainty's reasons.
+        messages.insert(len(problem.notes) + len(path.messages),
+                        rival_basin_warning(path.rival_basins, "sss_level" not in undetermined))
     fitted, psnr, ssim = _goodness(problem, final, single, messages)
     if path.interrupted:
         messages.append(
@@ -97,6 +101,18 @@ def summarise(problem, path, single, steps, nuisance=None) -> FitResult:
         light_terms=_light_terms_record(natural, unc),
     )
 
+
+def rival_basin_warning(rival_basins, level_determined: bool) -> str:
+    """The warning for :func:`~.search.choose_basin`'s rivals. Its caveat about the
+    standard error is given only where there is one: where the data do not
+    determine ``sss_level`` at all, another warning says so."""
+    level, rivals = rival_basins
+    caveat = ", and its standard error covers one basin only" if level_determined else ""
+    return (
+        f"sss_level: another basin fits as well within the noise, at sss_level {', '.join(rivals)} against "
+        f"{level:.4g}; with the weights free the blur scale trades against them{caveat}. Hold the weights "
+        "at a measured profile (fix weights=...) to decide"
+    )
 
 def _uncertainty(problem, path, final, natural, nuisance, messages):
     """Standard errors and undetermined parameters: ``(unc, stderr, undetermined)``;
