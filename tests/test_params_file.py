@@ -240,6 +240,17 @@ def test_absurd_blur_warns_naming_the_value(params, fragment):
         check_plausible(params, depth, "p.json")
 
 
+def test_render_warns_when_depth_in_metres_meets_parameters_fitted_in_mm():
+    # The stretch divides by depth: metres for mm make the blur 1000 times wider.
+    params = invsss.SSSParams(600.0, 250.0, 0.01, [0.4, 0.6], [0.5, 4.0])
+    image, mask = np.ones((16, 20, 3)), np.ones((16, 20))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        invsss.render(image, np.full((16, 20), 500.0), mask, params)
+    with pytest.warns(InputNotice, match=r"params: sss_level 600 blurs by up to .* wider than the 16x20 image"):
+        invsss.render(image, np.full((16, 20), 0.5), mask, params)
+
+
 def test_ordinary_values_do_not_warn():
     with warnings.catch_warnings():
         warnings.simplefilter("error")

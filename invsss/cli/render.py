@@ -9,7 +9,6 @@ import numpy as np
 from ..runtime.interrupts import StopSignals
 from ..io import read_depth, read_image, read_mask, read_params, write_image
 from ..forward.screen_space import render
-from ..forward.params import check_plausible
 from ..forward.light_terms import LIGHT_TERM_FIELDS, NEEDED_BUFFERS, LightBuffers, LightTerms
 from ..forward.pair import fill_background_depth
 from ..validation import InvalidInputError, check_depth, check_same_frame
@@ -102,7 +101,6 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
     # A renderer's 0/inf background is fine off the mask; filled before any use.
     check_depth(depth, mask.shape, args.depth, mask)
     depth = fill_background_depth(depth)
-    check_plausible(params, depth, args.params)
     weights_shape = np.shape(params.weights)
     if len(weights_shape) == 2 and weights_shape[1] not in (1, image.shape[2]):
         raise InvalidInputError(

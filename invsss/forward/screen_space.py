@@ -27,7 +27,7 @@ from jaxtyping import Array, Float
 from .burley_screen_space import check_burley_distances, render_burley
 from .light_terms import AFTER_BLUR, LightBuffers, LightTerms, apply_law, apply_light_terms
 from .models import MODEL_NAMES, get_model, resolve_tap_weights
-from .params import SSSParams
+from .params import SSSParams, check_plausible
 from .pass_plan import pass_plan
 from .passes import directional_pass, pixel_coordinates, sample_along, tap_spread
 from .passes import tap_weights as tap_weight_set
@@ -321,6 +321,21 @@ def render(
         Their per-pixel buffers; required with ``light_terms``, and a term that is
         on (a parameter not 0; ``law`` not None) needs its buffers.
 
+    Raises
+    ------
+    InvalidInputError
+        For an input of the wrong shape, and, for concrete arrays, for values out
+        of range (NaN or non-positive depth on the mask, a mask outside [0, 1],
+        parameters outside their domain). Inside ``jax.jit``, ``grad`` or ``vmap``
+        only shapes are checked: call ``render`` once on the concrete inputs first.
+
+    Warns
+    -----
+    InputNotice
+        For concrete valid but absurd parameters at this depth: the widest Gaussian
+        wider than the image (depth in metres with parameters fitted in mm), or no
+        visible blur at all (:func:`invsss.forward.params.check_plausible`).
+
     Returns
     -------
     array, same shape as ``image``
@@ -344,6 +359,9 @@ def render(
     if not isinstance(params, SSSParams):
         raise InvalidInputError(f"params: expected invsss.SSSParams, got {type(params).__name__}")
     params.check()
+    # Valid but absurd values (depth in metres for parameters fitted in mm blurs
+    # 1000 times too wide) warn here, not only on the command line.
+    check_plausible(params, depth)
     channels = np.shape(image)[2] if np.ndim(image) == 3 else 1
     if np.ndim(params.weights) == 2 and np.shape(params.weights)[1] not in (1, channels):
         raise InvalidInputError(
