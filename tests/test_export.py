@@ -340,6 +340,16 @@ def test_light_terms_export_constants_and_the_snippet(tmp_path):
     assert "invsssLightTerms" not in invsss.to_hlsl(plain)
     with pytest.raises(invsss.InvalidInputError, match="light_terms.grazing: expected a value > -1"):
         invsss.shader_constants(params, light_terms={"grazing": -1.5})
+    # Misuse a library user meets: one-line errors naming the argument.
+    with pytest.raises(invsss.InvalidInputError, match=r"constants: expected the dict of invsss.shader_constants, got SSSParams"):
+        invsss.to_hlsl(params)
+    with pytest.raises(invsss.InvalidInputError, match=r"prefix: expected letters, digits and '_'"):
+        invsss.to_hlsl(plain, prefix="my sss ")
+    with pytest.raises(invsss.InvalidInputError, match=r"params_json_path: expected the path of a params file, got SSSParams"):
+        invsss.export_params(params, format="hlsl")
+    # A misspelt term is refused, not exported switched off.
+    with pytest.raises(invsss.InvalidInputError, match="light_terms: unknown key 'shfit' \\(did you mean 'shift'\\?\\)"):
+        invsss.shader_constants(params, light_terms={"shfit": 0.5})
     # A params file with a fit's light_terms record exports them.
     path = tmp_path / "params.json"
     invsss.write_params(path, {"sss_level": 900.0, "correction": 0.0, "maxdd": 1.0, "weights": [1.0],

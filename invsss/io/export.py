@@ -28,15 +28,17 @@ How a shader uses the constants (docs/model.md, sections 2, 3 and 5):
 
 from __future__ import annotations
 
+import difflib
 import json
 import math
 import os
+from collections.abc import Mapping
 
 import jax
 import numpy as np
 
 from . import read_params, write_text_atomic
-from ..forward.light_terms import AFTER_BLUR, LAW_TRUST, LightTerms
+from ..forward.light_terms import AFTER_BLUR, LAW_TRUST, LIGHT_TERM_FIELDS, LightTerms
 from ..forward.models import get_model, resolve_tap_weights
 from ..forward.params import SSSParams
 from ..forward.passes import TAP_OFFSETS, tap_spread
@@ -183,6 +185,7 @@ def _light_constants(light_terms) -> dict:
             given["law"], given["law_strength"] = light_terms.law, light_terms.law_strength
         after = [getattr(light_terms, term) for term in AFTER_BLUR]
     elif hasattr(light_terms, "get"):
+        _check_light_term_keys(light_terms)
         given = {term: light_terms[term] for term in (*AFTER_BLUR, "law", "law_strength", "fill")
                  if term in light_terms}
         after = [light_terms.get(term, 0.0) for term in AFTER_BLUR]
@@ -209,6 +212,24 @@ def _light_constants(light_terms) -> dict:
         if fill != 0.0:
             out["lawFillStrength"] = fill
     return out
+
+
+#: What else a fit's ``light_terms`` record holds (params.json; docs/params-json.md):
+#: a mapping with these is accepted as the terms it reports.
+LIGHT_TERMS_RECORD_KEYS = ("stderr", "fixed", "psnr_plain", "psnr_without", "fallback")
+
+
+def _check_light_term_keys(light_terms) -> None:
+    """Refuse a key that is neither a term nor part of a fit's record: a misspelt
+    term would otherwise be left out, and its constant exported switched off."""
+    known = (*LIGHT_TERM_FIELDS, *LIGHT_TERMS_RECORD_KEYS)
+    for key in light_terms:
+        if key not in known:
+            close = difflib.get_close_matches(str(key), known, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise InvalidInputError(
+                f"light_terms: unknown key {key!r}{hint}; expected terms among {', '.join(LIGHT_TERM_FIELDS)}"
+            )
 
 
 #: The HLSL function :func:`to_hlsl` appends when the constants hold the light-aware
@@ -395,7 +416,9 @@ def to_hlsl(constants: dict, prefix: str = "") -> str:
     Numbers become ``float``, integer counts ``int``, lists ``float[N]`` and
     lists of 3 (4) numbers ``float3[N]`` (``float4[N]``). String entries
     (model, units, tap weight set) go into the comment header. ``prefix`` is
-    prepended to every name, to keep clear of a shader's own identifiers.
+    prepended to every name, to keep clear of a shader's own identifiers; it must
+    make them identifiers (letters, digits, ``_``). The reference shader of
+    :func:`write_shader` reads the names without a prefix.
 
     Examples
     --------
@@ -406,6 +429,15 @@ def to_hlsl(constants: dict, prefix: str = "") -> str:
     static const float passWidths[2] = { 1.5, 2.0 };
     <BLANKLINE>
     """
+    if not isinstance(constants, Mapping):
+        raise InvalidInputError(
+            f"constants: expected the dict of invsss.shader_constants, got {type(constants).__name__} "
+            "(for parameters, to_hlsl(shader_constants(params)))"
+        )
+    if not isinstance(prefix, str) or not (prefix + "x").isascii() or not (prefix + "x").isidentifier():
+        raise InvalidInputError(
+            f"prefix: expected letters, digits and '_' (not starting with a digit), got {prefix!r}"
+        )
     lines = ["// invsss shader constants"]
     for key, value in constants.items():
         if isinstance(value, str):
@@ -517,10 +549,15 @@ def export_params(
     >>> path = os.path.join(tempfile.mkdtemp(), "params.json")
     >>> invsss.write_params(path, {"sss_level": 900.0, "correction": 0.0, "maxdd": 1.0,
     ...                            "weights": [1.0], "variances": [2.0], "model": "thesis"})
-    >>> hlsl = export_params(path, format="hlsl")
+    >>> hlsl = invsss.export_params(path, format="hlsl")
     >>> [line for line in hlsl.splitlines() if "passWidths" in line and "static" in line]
     ['static const float passWidths[1] = { 2.318071425053519 };']
     """
+    if not isinstance(params_json_path, (str, os.PathLike)):
+        raise InvalidInputError(
+            f"params_json_path: expected the path of a params file, got {type(params_json_path).__name__} "
+            "(for parameters in memory, to_hlsl(shader_constants(params)) or to_json(...))"
+        )
     if format not in EXPORT_FORMATS:
         raise InvalidInputError(f"format: expected one of {', '.join(EXPORT_FORMATS)}, got {format!r}")
     if with_shader and (format != "hlsl" or out_path is None):
