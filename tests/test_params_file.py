@@ -113,6 +113,18 @@ def test_write_params_refuses_what_read_params_would(tmp_path):
         write_params(path, {**PARAMS, "sss_level": True})
     with pytest.raises(InvalidInputError, match="did you mean 'converged'"):
         write_params(path, {**PARAMS, "convergd": True})
+    # Values, not only the schema: each of these was written and then refused on reading.
+    for bad, message in [({"sss_level": float("nan")}, "sss_level contains NaN"),
+                         ({"sss_level": -5.0}, "sss_level must be > 0, got -5"),
+                         ({"variances": [-2.0] * len(PARAMS["variances"])}, "variances must be >= 0"),
+                         ({"weights": [1.0, 2.0], "variances": [1.0]}, "weights must have shape"),
+                         ({"sss_level": None}, "sss_level is null")]:
+        with pytest.raises(InvalidInputError, match=message):
+            write_params(path, {**PARAMS, **bad})
+        with pytest.raises(InvalidInputError, match=message):
+            path.write_text(json.dumps({**PARAMS, **bad}))
+            read_params(path)
+        path.unlink()
     assert not path.exists()
 
 

@@ -372,10 +372,8 @@ def read_params(path) -> tuple[SSSParams, dict]:
     if not isinstance(content, dict):
         raise InvalidInputError(f"{name}: expected a JSON object with the parameter keys")
     _check_result_complete(name)
-    parsed = _validated(content, name)
+    params, filled = _params_of(content, _validated(content, name), name)
     extras = {k: content[k] for k in content if k not in PARAMS_KEYS and k != "schema_version"}
-    values = {k: content[k] for k in PARAMS_KEYS}
-    filled = _fill_from_estimate(values, parsed.estimate, name)
     if filled:
         # A renderer needs numbers: use the estimate that produced the fit's
         # image for exactly the entries the data did not determine, and say so.
@@ -384,8 +382,15 @@ def read_params(path) -> tuple[SSSParams, dict]:
             f"{name}: {', '.join(filled)} not determined by the fit; using its point estimate",
             stacklevel=2,
         )
-    params = SSSParams.from_dict(values, source=name)
     return params, extras
+
+
+def _params_of(content: Mapping, parsed: ParamsFile, name: str) -> tuple[SSSParams, list[str]]:
+    """The parameters of a validated file's content, null entries filled from its
+    estimate, checked as :meth:`SSSParams.check` checks them; and the filled entries."""
+    values = {k: content[k] for k in PARAMS_KEYS}
+    filled = _fill_from_estimate(values, parsed.estimate, name)
+    return SSSParams.from_dict(values, source=name), filled
 
 
 # ---------------------------------------------------------------- writing
@@ -409,15 +414,15 @@ def write_params(path, mapping) -> None:
     path : str or os.PathLike
     mapping : Mapping or SSSParams
         The keys :func:`read_params` accepts; arrays become lists. Content that
-        :func:`read_params` would reject by the schema (unknown keys, a string
-        for a number) is rejected here, so every file this writes can be read
-        back.
+        :func:`read_params` would reject (unknown keys, a string for a number,
+        values outside the parameters' domain, a null without an ``estimate``)
+        is rejected here, so every file this writes can be read back.
 
     Raises
     ------
     InvalidInputError
-        Unknown keys, values the schema refuses or that are not
-        JSON-serialisable, a missing directory.
+        Unknown keys, values the schema or :meth:`SSSParams.check` refuses or
+        that are not JSON-serialisable, a missing directory.
 
     Examples
     --------
@@ -440,5 +445,7 @@ def write_params(path, mapping) -> None:
     except (TypeError, ValueError) as err:
         raise InvalidInputError(f"{name}: cannot write params ({one_line(err)})") from None
     content = {"schema_version": SCHEMA_VERSION, **content}
-    _validated(content, name)
+    # The values too (NaN, sss_level <= 0, shapes that disagree): read_params
+    # would refuse them.
+    _params_of(content, _validated(content, name), name)
     write_text_atomic(name, json.dumps(content, indent=2) + "\n")
