@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import invsss
+from invsss.estimator.summary import entry_name
 from invsss.io import PARAMS_KEYS, PARAMS_OPTIONAL_KEYS, read_params, write_params
 from invsss.io.params_file import MANIFEST_NAME, SCHEMA_VERSION, params_json_schema
 from invsss.forward.params import PARAM_NAMES, check_plausible
@@ -173,6 +174,17 @@ def test_only_the_null_entries_are_filled_and_named(tmp_path):
     assert extras["filled_from_estimate"] == ["weights[2]", "weights[3]"]
 
 
+def test_per_channel_null_entries_are_named_as_the_fit_names_them(tmp_path):
+    # A fit lists an RGB weight as "weights[2,0]" (entry_name); the filled list must match it.
+    weights = [[0.5, 0.5, 0.5], [0.2, 0.2, 0.2], [None, 0.3, 0.3]]
+    undetermined = [entry_name("weights", (2, 0))]
+    path = _file(tmp_path, {**PARAMS, "weights": weights, "variances": [0.5, 1.0, 2.0], "undetermined": undetermined,
+                            "estimate": {**PARAMS, "weights": [[0.5] * 3, [0.2] * 3, [0.3] * 3], "variances": [0.5, 1.0, 2.0]}})
+    with pytest.warns(UserWarning, match=r"weights\[2,0\] not determined by the fit"):
+        _, extras = read_params(path)
+    assert extras["filled_from_estimate"] == undetermined == extras["undetermined"]
+
+
 def test_two_edits_of_determined_entries_give_different_params(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -184,7 +196,7 @@ def test_two_edits_of_determined_entries_give_different_params(tmp_path):
 def test_per_channel_nulls_are_filled_entry_by_entry(tmp_path):
     estimate = {**PARAMS, "weights": [[0.1, 0.2, 0.3], [0.4, 0.5, 0.6]]}
     path = _file(tmp_path, {**PARAMS, "weights": [[0.9, None, 0.3], [0.4, 0.5, None]], "estimate": estimate})
-    with pytest.warns(UserWarning, match=r"weights\[0\]\[1\], weights\[1\]\[2\] not determined"):
+    with pytest.warns(UserWarning, match=r"weights\[0,1\], weights\[1,2\] not determined"):
         params, _ = read_params(path)
     np.testing.assert_allclose(np.asarray(params.weights), [[0.9, 0.2, 0.3], [0.4, 0.5, 0.6]], rtol=1e-6)
 

@@ -279,10 +279,15 @@ def _check_result_complete(path: str) -> None:
 
 
 def _null_entries(value, where: str) -> list[str]:
-    """Names of the null entries of a number or nested list: ``["weights[2]", ...]``."""
-    if isinstance(value, list):
-        return [n for i, v in enumerate(value) for n in _null_entries(v, f"{where}[{i}]")]
-    return [where] if value is None else []
+    """Names of the null entries of a number or nested list, spelt as a fit's
+    ``undetermined`` spells them: ``["sss_level"]``, ``["weights[2]", ...]`` or
+    ``["weights[2,0]", ...]``."""
+    def indices(v, index):
+        if isinstance(v, list):
+            return [found for i, item in enumerate(v) for found in indices(item, (*index, i))]
+        return [index] if v is None else []
+
+    return [f"{where}[{','.join(map(str, i))}]" if i else where for i in indices(value, ())]
 
 
 def _filled(value, estimate):
