@@ -219,7 +219,7 @@ def test_cli_fit_render_and_export_with_the_fill_light_buffer(tmp_path, capsys):
     # The fill without its buffer: one line naming it, nothing written.
     assert main(["fit", *common, "--light-terms", "law,fill", "--out", str(tmp_path / "bad")]) != 0
     err = capsys.readouterr().err
-    assert "fill_light: the 'fill' term needs this buffer" in err and "Traceback" not in err
+    assert "invsss: error: --fill-light: the 'fill' term needs this buffer" in err and "Traceback" not in err
 
     params_path = str(tmp_path / "fit" / "params.json")
     scene = ["--image", str(paths["source"]), "--depth", str(paths["depth"]), "--mask", str(paths["mask"]),

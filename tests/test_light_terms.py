@@ -336,12 +336,15 @@ def test_params_file_keeps_the_terms(tmp_path):
     invsss.read_params(path)  # the strict params file accepts the new key
 
 
-@pytest.mark.slow
-def test_fit_without_the_buffer_names_it():
+def test_fit_without_the_buffer_names_it_before_fitting():
+    # Before the plain fit that comes first (it used to run to the end): no slow mark.
     source, depth, mask, buffers = _lit_pair(16)
-    with pytest.raises(invsss.InvalidInputError, match=r"^normal: the 'grazing' term needs this buffer"):
+    with pytest.raises(invsss.InvalidInputError, match=r"^light_buffers\.normal: the 'grazing' term needs this buffer"):
         invsss.fit_pair(source, source, depth, mask, light_terms=["grazing"],
                         light_buffers=LightBuffers(light=buffers.light))
+    with pytest.raises(invsss.InvalidInputError, match=r"^pairs\[1\]\.light: the 'shift' term needs this buffer"):
+        invsss.fit_pairs([invsss.ImagePair(source, source, depth, mask, light=buffers.light), (source, source, depth, mask)],
+                         light_terms=["shift"])
     with pytest.raises(invsss.InvalidInputError, match=r"light_terms: unknown term\(s\) 'tilt'"):
         invsss.fit_pair(source, source, depth, mask, light_terms=["tilt"], light_buffers=buffers)
 
@@ -370,7 +373,7 @@ def test_cli_fit_with_light_terms(tmp_path, capsys):
     capsys.readouterr()
     assert main(["fit", *common, "--light-terms", "shift", "--out", str(tmp_path / "bad")]) != 0
     err = capsys.readouterr().err
-    assert "light: the 'shift' term needs this buffer" in err and "Traceback" not in err
+    assert "invsss: error: --light: the 'shift' term needs this buffer" in err and "Traceback" not in err
 
     # invsss render applies the fitted terms: the library's render with the same
     # values, and not the blur alone.

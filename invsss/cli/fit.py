@@ -273,12 +273,19 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
 
 def _with_file_names(text: str, args: argparse.Namespace, count: int) -> str:
     """An estimator's error names a pair's role (``target``, ``pairs[1].mask``); the
-    user typed a file, so put its path first: ``nir.png (target): ...``."""
+    user typed a file, so put its path first: ``nir.png (target): ...``. A missing
+    light-term buffer is named by the flag that gives it (``--light: ...``)."""
     for role in ("source", "target", "depth", "mask"):
         for i, path in enumerate(getattr(args, role, None) or ()):
             name = role if count == 1 else f"pairs[{i}].{role}"
             if text.startswith((f"{name}:", f"{name} ")):
                 return f"{path} ({name}){text[len(name):]}"
+    # A light term's missing buffer: the user gives it with a flag.
+    for buffer in ("normal", "light", "key", "fill_light"):
+        flag = "--" + buffer.replace("_", "-")
+        for name in ["light_buffers." + buffer] + [f"pairs[{i}].{buffer}" for i in range(count)]:
+            if text.startswith(f"{name}:"):
+                return flag + ("" if count == 1 else f" ({name})") + text[len(name):]
     return text
 
 

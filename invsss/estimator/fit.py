@@ -204,4 +204,16 @@ def run_fit(pairs, single: bool, options: FitOptions, progress=None, stop=None) 
     _check_callback("stop", stop)
     if not isinstance(options, FitOptions):
         raise InvalidInputError(f"options: expected a FitOptions, got {type(options).__name__}")
+    _require_light_buffers(pairs, single, options.light_terms)
     return fit_stages()(FitCall(pairs, single, options, progress, stop))
+
+
+def _require_light_buffers(pairs, single: bool, terms) -> None:
+    """Refuse a missing buffer of a requested light term before anything is fitted:
+    the plain fit that comes first would otherwise run to the end before the error."""
+    if not terms or not isinstance(pairs, (list, tuple)):
+        return  # prepare_pairs names a malformed sequence
+    for i, pair in enumerate(pairs):
+        buffers = (LightBuffers(pair.normal, pair.light, pair.key, pair.fill_light)
+                   if isinstance(pair, ImagePair) else LightBuffers())
+        buffers.require(terms, "light_buffers." if single else f"pairs[{i}].")
