@@ -243,8 +243,11 @@ def check_mask(mask, shape_hw: tuple[int, int], name: str = "mask") -> None:
         )
     if is_concrete(mask):
         m = np.asarray(mask)
-        if not np.all(np.isfinite(m)) or m.min() < 0 or m.max() > 1:
-            raise InvalidInputError(f"{name}: expected values in [0, 1]")
+        if not np.all(np.isfinite(m)):
+            raise InvalidInputError(f"{name}: expected values in [0, 1], got NaN or infinite values")
+        if m.min() < 0 or m.max() > 1:
+            hint = " (a 0/255 mask? read mask files with invsss.read_mask)" if m.max() > 1 else ""
+            raise InvalidInputError(f"{name}: expected values in [0, 1], got {m.min():g} to {m.max():g}{hint}")
         if not np.any(m > 0):
             raise InvalidInputError(f"{name}: is empty (no pixel > 0)")
 

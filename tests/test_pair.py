@@ -61,5 +61,7 @@ def test_check_pair_names_the_input_that_is_wrong():
         check_pair(source, target, depth[:, :-1], mask, names)
     with pytest.raises(InvalidInputError, match=r"^t.exr: expected 1 channel\(s\) like the source .*, got 3$"):
         check_pair(source[..., :1], target, depth, mask, names)
-    with pytest.raises(InvalidInputError, match=r"^pairs\[1\]\.mask: expected values in \[0, 1\]"):
+    with pytest.raises(InvalidInputError, match=r"^pairs\[1\]\.mask: expected values in \[0, 1\], got 0 to 2 \(a 0/255 mask\?"):
         prepare_pair(source, target, depth, mask * 2, name="pairs[1].")
+    with pytest.raises(InvalidInputError, match=r"^mask: expected values in \[0, 1\], got -1 to 1$"):
+        prepare_pair(source, target, depth, mask * 2 - 1)
