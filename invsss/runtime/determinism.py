@@ -40,7 +40,8 @@ def use_deterministic_scheduler() -> bool:
     """Add :data:`SCHEDULER_FLAG` to ``XLA_FLAGS`` if JAX's backend has not started.
 
     Returns whether the flag is in effect for this process: ``False`` when JAX
-    has already computed something (then XLA has read its flags and the
+    has already computed something, even only made an array (an
+    :class:`invsss.SSSParams` holds JAX arrays), for then XLA has read its flags and the
     environment is left as it is) or when ``XLA_FLAGS`` sets the option
     otherwise. A value the user gave for the option is kept. Child processes
     started afterwards (a sweep's workers) inherit the environment.
