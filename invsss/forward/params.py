@@ -50,6 +50,8 @@ class SSSParams(eqx.Module):
     >>> p = invsss.SSSParams(0.5, 2000.0, 0.001, [0.4, 0.6], [0.5, 2.0])
     >>> p.num_gaussians
     2
+    >>> p
+    SSSParams(sss_level=0.5, correction=2000.0, maxdd=0.001, weights=[0.4, 0.6], variances=[0.5, 2.0])
     """
 
     sss_level: Float[Array, ""] = eqx.field(converter=float_array)
@@ -57,6 +59,18 @@ class SSSParams(eqx.Module):
     maxdd: Float[Array, ""] = eqx.field(converter=float_array)
     weights: Float[Array, "K *C"] = eqx.field(converter=float_array)
     variances: Float[Array, " K"] = eqx.field(converter=float_array)
+
+    def __repr__(self) -> str:
+        # The values, as a user reads them (equinox's default shows only f32[5,3]);
+        # under jit/vmap the fields are tracers and the default is all there is.
+        from ..validation import is_concrete
+
+        if not all(is_concrete(getattr(self, k)) for k in PARAM_NAMES):
+            return super().__repr__()
+        # Six significant digits: float32's own, without its binary tails (0.1478, not 0.14779999852).
+        short = np.vectorize(lambda x: float(f"{x:.6g}"), otypes=[np.float64])
+        values = ", ".join(f"{k}={short(np.asarray(getattr(self, k), np.float64)).tolist()}" for k in PARAM_NAMES)
+        return f"SSSParams({values})"
 
     @property
     def num_gaussians(self) -> int:
