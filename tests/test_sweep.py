@@ -103,6 +103,9 @@ def _check_artefacts_match(out, rows):
          "unknown key 'grid.fix.maxd' (did you mean 'fix.maxdd'?)"),
         ('task = "render"\n[data]\npairs = ["data/*/"]\n[base]\nmaxdd = 0.5\ncorrection = 0.0\n'
          '[grid]\nsss_levle = [1.0]\n', "unknown key 'grid.sss_levle' (did you mean 'sss_level'?)"),
+        # A fit holds a parameter through fix: suggested as such, not the nearest option's name.
+        ('task = "fit"\n[data]\npairs = ["data/*/"]\n[grid]\nsss_level = [300.0, 600.0]\n',
+         "unknown key 'grid.sss_level' (did you mean 'grid.fix.sss_level'?)"),
         ('task = "render"\n[data]\npairs = ["data/*/"]\n[[data.files]]\nsorce = "x"\n',
          "unknown key 'data.files[0].sorce' (did you mean 'source'?)"),
         ('task = "fitt"\n[data]\npairs = ["data/*/"]\n', "task: input should be 'fit', 'fit-joint' or 'render'"),

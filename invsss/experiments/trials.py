@@ -142,7 +142,10 @@ def check_option_key(path: str, task: str, where: str, name: str) -> None:
     head, _, rest = path.partition(".")
     known = [*fields] + ([] if task == "fit-joint" else ["pair"])
     if head not in known:
-        raise InvalidInputError(f"{name}: unknown key '{where}.{path}'{nearest(head, known)}")
+        # A parameter's name is an axis of fix, not an option of its own (grid.sss_level).
+        hint = (f" (did you mean '{where}.fix.{path}'?)" if "fix" in known and path in FIX_NAMES
+                else nearest(head, known))
+        raise InvalidInputError(f"{name}: unknown key '{where}.{path}'{hint}")
     if head == "fix":
         if not rest or rest not in FIX_NAMES:
             raise InvalidInputError(
