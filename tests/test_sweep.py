@@ -21,6 +21,7 @@ import pytest
 import invsss
 import invsss.experiments as ex
 from invsss import InvalidInputError
+from invsss.experiments.report import write_report
 from invsss.experiments.runner import trial_folder
 from invsss.io.result_dir import result_state
 
@@ -409,6 +410,50 @@ def test_sweep_report_parquet_holds_the_results(root, capsys):
         assert record["psnr"] == pytest.approx(row["psnr"], rel=1e-12)
         assert list(record["param.weights"]) == pytest.approx(row["param.weights"], rel=1e-12)
         assert record["status"] == "done" and record["pair"] == "b"
+
+
+def test_parquet_keeps_lists_and_writes_mixed_nestings_as_json_text(tmp_path):
+    pandas = pytest.importorskip("pandas")
+    pytest.importorskip("pyarrow")
+    from invsss.experiments.report import _write_parquet
+
+    # A grey target's weights are a list, an RGB target's a list per Gaussian:
+    # pyarrow cannot hold both in one column ("cannot mix list and non-list").
+    rows = [{"id": "a", "param.weights": [0.4, 0.6], "param.variances": [1.0, 2.0]},
+            {"id": "b", "param.weights": [[0.4, 0.4, 0.4], [0.6, 0.6, 0.6]], "param.variances": [1.0, 2.0]},
+            {"id": "c", "param.weights": None, "param.variances": None}]
+    _write_parquet(rows, tmp_path / "r.parquet")
+    table = pandas.read_parquet(tmp_path / "r.parquet").to_dict("records")
+    assert [None if pandas.isna(r["param.weights"]) else json.loads(r["param.weights"]) for r in table] == \
+        [row["param.weights"] for row in rows]
+    assert list(table[0]["param.variances"]) == [1.0, 2.0]  # one nesting: still a list
+
+
+def test_report_lines_follow_the_grid_and_sampled_and_text_axes_plot_as_such(root):
+    from invsss.experiments.report import _SampleKeys, _plotted_axes, _series
+
+    rows = [{"pair": p, "x": x, "y": y, "model": m, "s": 0.1 * k}
+            for k, (p, x, y, m) in enumerate((p, x, y, m) for p in "ab" for x in (1, 2) for y in (5, 6)
+                                              for m in ("sog", "thesis"))]
+    # Against x: a line per pair and per value of y and model; s (sampled) splits nothing.
+    series = _series(rows, "x", ["x", "y", "model", "s", "pair"], sampled={"s"})
+    assert len(series) == 8 and ("a", "y=5, model=sog") in series
+    assert all(sorted(r["x"] for r in group) == [1, 2] for group in series.values())
+    assert _plotted_axes(rows, ["x", "model", "pair"]) == ["x", "model"]
+    keys = _SampleKeys.of({"text": '[sample]\nmethod = "sobol"\nn = 4\nlog = ["sss_level"]\n'
+                                   'ranges.sss_level = [300.0, 1200.0]\nranges.fix.maxdd = [0.1, 1.0]\n'})
+    assert keys.sampled == {"sss_level", "fix.maxdd"} and keys.log == {"sss_level"}
+    assert _SampleKeys.of({"text": "not [toml"}) == _SampleKeys()
+    # A sampled render sweep: a plot per axis, and no contact sheet of mostly empty panels.
+    sample = RENDER.replace('"data/*/"', '"data/a/"').replace(
+        "[grid]\nsss_level = [300, 600]\ncorrection = [0, 800]\n",
+        '[sample]\nmethod = "sobol"\nn = 4\nlog = ["sss_level"]\nranges.sss_level = [300.0, 1200.0]\n'
+        "ranges.correction = [0.0, 800.0]\n")
+    out = root / "sampled_out"
+    ex.run(_experiment(root, "sampled.toml", sample), out, log=None)
+    _, written = write_report(out)
+    names = sorted(os.path.basename(w) for w in written)
+    assert names == ["metrics_vs_correction.png", "metrics_vs_sss_level.png", "results.csv"]
 
 
 def test_a_nan_loss_fails_the_trial_and_writes_nothing(root, monkeypatch):

@@ -6,14 +6,18 @@ Written into ``OUT/report/``:
   (lists as JSON text);
 * ``results.parquet`` with ``parquet=True`` -- the same table through
   pandas (needs ``pip install 'invsss[report]'``: pandas and pyarrow), lists
-  kept as lists;
-* ``<metric>_vs_<axis>.png`` -- loss, PSNR and SSIM against each numeric axis,
-  one line per pair;
+  kept as lists where one column can hold them (a grey and an RGB fit's
+  weights cannot: that column is JSON text);
+* ``<metric>_vs_<axis>.png`` -- loss, PSNR and SSIM against each axis with more
+  than one value, a line per pair and per value of the other grid and zip axes
+  (the legend beside the panels); text values (a model's name) as categories,
+  sampled axes as points, on a log axis where the ``[sample]`` table says ``log``;
 * for fits, ``params_vs_<axis>.png`` -- the fitted ``sss_level``,
-  ``correction``, ``maxdd`` against each numeric axis with their standard
+  ``correction``, ``maxdd`` against each such axis with their standard
   errors as error bars, and ``params_by_pair.png`` -- their spread across the
   pairs;
-* for a render sweep with two numeric axes, ``contact_<pair>.png`` -- the
+* for a render sweep with two numeric grid axes (not sampled; at most
+  :data:`CONTACT_SHEET_MAX` values each), ``contact_<pair>.png`` -- the
   rendered images laid out on those axes with the PSNR under each (the
   thesis's sssLevel x correction matrix, made from the results).
 
@@ -27,9 +31,11 @@ under a ``task <name>: N trial(s)`` line, and each task's plots in
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 import os
+import tomllib
 
 from ..validation import InvalidInputError
 from .results import flat_rows
@@ -88,51 +94,141 @@ def _numeric_axes(rows: list[dict], axes: list[str]) -> list[str]:
             and len({r.get(a) for r in rows}) > 1]
 
 
-def _groups(rows: list[dict]) -> dict:
-    groups: dict = {}
+def _plotted_axes(rows: list[dict], axes: list[str]) -> list[str]:
+    """Axes with more than one value, all numbers or all text: a plot each
+    (text values, such as a model's name, as categories)."""
+    return [a for a in axes if a != "pair" and len({_cell(r.get(a)) for r in rows}) > 1
+            and (all(_is_number(r.get(a)) for r in rows) or all(isinstance(r.get(a), str) for r in rows))]
+
+
+@dataclasses.dataclass(frozen=True)
+class _SampleKeys:
+    """Which axes of the sweep's experiment file are sampled, and which of them in log space."""
+
+    sampled: frozenset = frozenset()
+    log: frozenset = frozenset()
+
+    @classmethod
+    def of(cls, meta: dict) -> "_SampleKeys":
+        # The experiment's own text is in the store; an older store, or one whose
+        # text no longer parses, has no sampled axes as far as the plots know.
+        try:
+            sample = tomllib.loads(meta.get("text") or "").get("sample") or {}
+        except tomllib.TOMLDecodeError:
+            return cls()
+
+        def keys(table, prefix=""):
+            for key, value in table.items():
+                if isinstance(value, dict):
+                    yield from keys(value, f"{prefix}{key}.")
+                else:
+                    yield prefix + key
+
+        return cls(frozenset(keys(sample.get("ranges") or {})), frozenset(sample.get("log") or ()))
+
+
+def _series(rows: list[dict], axis: str, axes: list[str], sampled) -> dict:
+    """The rows of each line of a plot against ``axis``, keyed ``(pair, others)``:
+    one line per pair and per value of every other grid or zip axis (sampled axes
+    change from trial to trial, so they split nothing); ``others`` says which
+    values (``"y=5, model=sog"``, or ``""``)."""
+    others = [a for a in axes if a not in (axis, "pair") and a not in sampled
+              and len({_cell(r.get(a)) for r in rows}) > 1]
+    series: dict = {}
     for row in rows:
-        groups.setdefault(row.get("pair", ""), []).append(row)
-    return groups
+        key = (str(row.get("pair", "")), ", ".join(f"{a}={_cell(row.get(a))}" for a in others))
+        series.setdefault(key, []).append(row)
+    return series
 
 
-def _plot_metrics(plt, rows, axis, folder) -> str:
-    figure, panels = plt.subplots(1, len(_METRICS), figsize=(4 * len(_METRICS), 3.2))
-    for panel, metric in zip(panels, _METRICS):
-        for label, group in _groups(rows).items():
-            points = sorted((r[axis], r[metric]) for r in group if _is_number(r.get(metric)))
-            if points:
-                panel.plot(*zip(*points), "o-", label=label or None, markersize=4)
-        panel.set_xlabel(axis)
-        panel.set_ylabel(metric)
-        if metric == "loss":
-            panel.set_yscale("log")
-    if any(label for label in _groups(rows)):
-        panels[-1].legend(fontsize=7)
-    figure.tight_layout()
-    path = os.path.join(folder, f"metrics_vs_{axis}.png")
-    figure.savefig(path, dpi=100)
-    plt.close(figure)
-    return path
+def _x_positions(rows: list[dict], axis: str):
+    """``(x of a value, tick positions, tick labels)``: numbers as they are, text
+    values as categories in the order the trials meet them."""
+    if all(_is_number(r.get(axis)) for r in rows):
+        values = sorted({r[axis] for r in rows})
+        integers = all(float(v).is_integer() for v in values) and len(values) <= 12
+        # Integer axes (n_starts) get a tick per value, not 1.5 and 2.5.
+        return (lambda v: v), (values if integers else None), None
+    categories = list(dict.fromkeys(r.get(axis) for r in rows))
+    return categories.index, list(range(len(categories))), [_cell(c) for c in categories]
 
 
-def _plot_params(plt, rows, axis, folder) -> str:
-    figure, panels = plt.subplots(1, len(_SCALARS), figsize=(4 * len(_SCALARS), 3.2))
-    for panel, name in zip(panels, _SCALARS):
-        for label, group in _groups(rows).items():
-            points = sorted((r[axis], r[f"param.{name}"], r.get(f"stderr.{name}") or 0.0)
-                            for r in group if _is_number(r.get(f"param.{name}")))
-            if points:
-                x, y, err = zip(*points)
-                panel.errorbar(x, y, yerr=err, fmt="o-", capsize=3, markersize=4, label=label or None)
+_LINE_STYLES = ("-", "--", ":", "-.")
+_MARKERS = ("o", "s", "^", "D", "v", "P")
+
+
+def _plot_against(plt, rows, axis, axes, keys: _SampleKeys, names, y_of, err_of, path) -> str:
+    """One panel per name in ``names``: ``y_of(row, name)`` against ``axis``, a line
+    (for a sampled axis or categories, points) per :func:`_series`: a colour per
+    pair and a line style and marker per value of the other axes, each with its
+    own legend beside the panels."""
+    from matplotlib.lines import Line2D
+
+    series = _series(rows, axis, axes, keys.sampled)
+    pairs = list(dict.fromkeys(pair for pair, _ in series))
+    others = list(dict.fromkeys(other for _, other in series))
+    # The colour tells the pairs apart; with one pair, the other axes' values.
+    coloured = pairs if len(pairs) > 1 else others
+    palette = plt.get_cmap("tab10" if len(coloured) <= 10 else "tab20")
+
+    def colour(k):
+        return palette(k) if len(coloured) <= 20 else plt.get_cmap("viridis")(k / (len(coloured) - 1))
+
+    def style(other):
+        k = others.index(other) if len(pairs) > 1 else 0
+        return _LINE_STYLES[k % len(_LINE_STYLES)], _MARKERS[k % len(_MARKERS)]
+
+    x_of, ticks, tick_labels = _x_positions(rows, axis)
+    joined = tick_labels is None and axis not in keys.sampled
+    figure, panels = plt.subplots(1, len(names), figsize=(4 * len(names), 3.2), squeeze=False)
+    for panel, name in zip(panels[0], names):
+        for (pair, other), group in series.items():
+            points = sorted((x_of(r[axis]), y_of(r, name), err_of(r, name)) for r in group
+                            if _is_number(y_of(r, name)))
+            if not points:
+                continue
+            x, y, err = zip(*points)
+            line, marker = style(other)
+            panel.errorbar(x, y, yerr=err if any(err) else None, linestyle=line if joined else "none",
+                           marker=marker, capsize=3, markersize=4,
+                           color=colour(coloured.index(pair if len(pairs) > 1 else other)))
         panel.set_xlabel(axis)
         panel.set_ylabel(name)
-    if any(label for label in _groups(rows)):
-        panels[-1].legend(fontsize=7)
+        if axis in keys.log:
+            panel.set_xscale("log")
+        if tick_labels is not None:
+            panel.set_xticks(ticks, tick_labels, rotation=30, fontsize=7)
+        elif ticks is not None:
+            panel.set_xticks(ticks)
+        if name == "loss":
+            panel.set_yscale("log")
+    legends = []
+    if any(coloured):
+        legends.append([Line2D([], [], color=colour(k), marker="o", label=label) for k, label in enumerate(coloured)])
+    if len(pairs) > 1 and len(others) > 1:
+        legends.append([Line2D([], [], color="0.3", linestyle=style(o)[0] if joined else "none",
+                               marker=style(o)[1], label=o) for o in others])
+    # Beside the panels, not over the last one; long lists in two columns.
+    top = 1.0
+    for handles in legends:
+        legend = figure.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.0, top), fontsize=7,
+                               ncol=1 if len(handles) <= 20 else 2, frameon=False)
+        figure.add_artist(legend)
+        top -= 0.06 + 0.045 * min(len(handles), 20)
     figure.tight_layout()
-    path = os.path.join(folder, f"params_vs_{axis}.png")
-    figure.savefig(path, dpi=100)
+    figure.savefig(path, dpi=100, bbox_inches="tight")
     plt.close(figure)
     return path
+
+
+def _plot_metrics(plt, rows, axis, axes, keys, folder) -> str:
+    return _plot_against(plt, rows, axis, axes, keys, _METRICS, lambda r, m: r.get(m), lambda r, m: 0.0,
+                         os.path.join(folder, f"metrics_vs_{axis}.png"))
+
+
+def _plot_params(plt, rows, axis, axes, keys, folder) -> str:
+    return _plot_against(plt, rows, axis, axes, keys, _SCALARS, lambda r, n: r.get(f"param.{n}"),
+                         lambda r, n: r.get(f"stderr.{n}") or 0.0, os.path.join(folder, f"params_vs_{axis}.png"))
 
 
 def _plot_spread(plt, rows, folder) -> str:
@@ -144,7 +240,7 @@ def _plot_spread(plt, rows, folder) -> str:
                       if r["pair"] == pair and _is_number(r.get(f"param.{name}"))]
             if values:
                 y, err = zip(*values)
-                panel.errorbar([k] * len(y), y, yerr=err, fmt="o", capsize=3, markersize=4, color=f"C{k}")
+                panel.errorbar([k] * len(y), y, yerr=err, fmt="o", capsize=3, markersize=4, color=f"C{k % 10}")
         panel.set_xticks(range(len(pairs)), pairs, rotation=30, fontsize=7)
         panel.set_ylabel(name)
     figure.tight_layout()
@@ -152,6 +248,10 @@ def _plot_spread(plt, rows, folder) -> str:
     figure.savefig(path, dpi=100)
     plt.close(figure)
     return path
+
+
+#: A contact sheet is drawn for two grid axes of at most this many values each.
+CONTACT_SHEET_MAX = 12
 
 
 def _contact_sheets(plt, rows, axes, out, folder) -> list[str]:
@@ -162,9 +262,11 @@ def _contact_sheets(plt, rows, axes, out, folder) -> list[str]:
 
     first, second = axes[:2]
     written = []
-    for label, group in _groups(rows).items():
+    for (label, _), group in _series(rows, first, [first, second, "pair"], {second}).items():
         rows_values = sorted({r[first] for r in group})
         cols_values = sorted({r[second] for r in group})
+        if max(len(rows_values), len(cols_values)) > CONTACT_SHEET_MAX:
+            continue
         figure, panels = plt.subplots(len(rows_values), len(cols_values), squeeze=False,
                                       figsize=(2.2 * len(cols_values), 2.7 * len(rows_values)))
         for panel in panels.flat:
@@ -192,12 +294,21 @@ def _contact_sheets(plt, rows, axes, out, folder) -> list[str]:
 def _write_parquet(rows: list[dict], path: str) -> None:
     import pandas
 
+    import pyarrow
+
     table = pandas.DataFrame(rows)
     # A column mixing numbers and None or lists is stored as it is; an empty
     # column of None has no type Parquet knows, so it is written as text.
     for column in table.columns:
         if table[column].isna().all():
             table[column] = table[column].astype("string")
+        elif any(isinstance(v, (list, dict)) for v in table[column]):
+            try:
+                pyarrow.array(list(table[column]))
+            except (pyarrow.ArrowInvalid, pyarrow.ArrowTypeError):
+                # Nestings Parquet cannot hold in one column (a grey fit's weights,
+                # [w], beside an RGB fit's, [[r, g, b]]): JSON text, as in the CSV.
+                table[column] = [None if v is None else json.dumps(v) for v in table[column]]
     table.to_parquet(path, index=False)
 
 
@@ -226,6 +337,7 @@ def write_report(out, *, plots: bool = True, parquet: bool = False) -> tuple[str
     rows, meta = flat_rows(out)
     if not rows:
         raise InvalidInputError(f"{out}: the sweep has no trials")
+    keys = _SampleKeys.of(meta)
     folder = os.path.join(out, "report")
     os.makedirs(folder, exist_ok=True)
     written = [os.path.join(folder, "results.csv")]
@@ -239,7 +351,7 @@ def write_report(out, *, plots: bool = True, parquet: bool = False) -> tuple[str
     if len(tasks) == 1:
         meta_axes = list(meta.get("axes", []))
         axes = [a for a in dict.fromkeys([*meta_axes, "pair"]) if any(a in r for r in rows)]
-        written.extend(_task_plots(rows, axes, rows[0]["task"], out, folder) if plots else [])
+        written.extend(_task_plots(rows, axes, rows[0]["task"], out, folder, keys) if plots else [])
         return format_table(rows, axes), written
     # Trials of several experiments: a fit's and a render's rows share no columns
     # worth comparing, so each task has its own table and plots.
@@ -250,11 +362,12 @@ def write_report(out, *, plots: bool = True, parquet: bool = False) -> tuple[str
                 if any(r.get(a) is not None for r in task_rows)]
         tables.append(f"task {task}: {len(task_rows)} trial(s)\n{format_table(task_rows, axes)}")
         if plots:
-            written.extend(_task_plots(task_rows, axes, task, out, os.path.join(folder, task)))
+            written.extend(_task_plots(task_rows, axes, task, out, os.path.join(folder, task), keys))
     return "\n\n".join(tables), written
 
 
-def _task_plots(rows: list[dict], axes: list[str], task: str, out: str, folder: str) -> list[str]:
+def _task_plots(rows: list[dict], axes: list[str], task: str, out: str, folder: str,
+                keys: _SampleKeys) -> list[str]:
     """The plots of the done trials of one task (module docstring) in ``folder``."""
     done = [r for r in rows if r["status"] == "done"]
     if not done:
@@ -266,13 +379,14 @@ def _task_plots(rows: list[dict], axes: list[str], task: str, out: str, folder: 
 
     os.makedirs(folder, exist_ok=True)
     written = []
-    numeric = _numeric_axes(done, axes)
-    for axis in numeric:
-        written.append(_plot_metrics(plt, done, axis, folder))
+    for axis in _plotted_axes(done, axes):
+        written.append(_plot_metrics(plt, done, axis, axes, keys, folder))
         if task != "render":
-            written.append(_plot_params(plt, done, axis, folder))
+            written.append(_plot_params(plt, done, axis, axes, keys, folder))
     if task == "fit" and len({r.get("pair") for r in done}) > 1:
         written.append(_plot_spread(plt, done, folder))
-    if task == "render" and len(numeric) >= 2:
-        written.extend(_contact_sheets(plt, done, numeric, out, folder))
+    # Sampled points fill no grid: a sheet of them would be almost all empty panels.
+    grid = [a for a in _numeric_axes(done, axes) if a not in keys.sampled]
+    if task == "render" and len(grid) >= 2:
+        written.extend(_contact_sheets(plt, done, grid, out, folder))
     return written
