@@ -1,7 +1,8 @@
 """Reading a sweep's results back: :func:`results`.
 
 One flat row per trial, the shape a table or a plot wants: ``id``,
-``status``, ``task`` (a folder may hold the trials of several experiments), one column per varied key (``sss_level``, ``fix.maxdd``, ``pair``),
+``status`` (``pending``, ``running``, ``done``, ``failed``, or ``interrupted``: marked
+running by a sweep that no longer runs, which runs it again when resumed), ``task`` (a folder may hold the trials of several experiments), one column per varied key (``sss_level``, ``fix.maxdd``, ``pair``),
 the metrics (``loss``, ``psnr``, ``ssim``, and for fits ``sigma``,
 ``converged``, ``iterations``), the parameters (``param.sss_level``,
 ``param.weights``...; ``param.light_shift``, ``param.grazing``, ``param.incidence`` and
@@ -18,7 +19,7 @@ import os
 
 from ..forward.params import PARAM_NAMES
 from ..validation import InvalidInputError
-from .store import DATABASE_NAME, ResultsStore
+from .store import DATABASE_NAME, ResultsStore, sweep_running
 
 #: The light terms' unknowns a fit trial may report beside the five parameters
 #: (the values of invsss.estimator.parametrisation.LIGHT_UNKNOWNS, written out so
@@ -39,6 +40,7 @@ def flat_rows(out) -> tuple[list[dict], dict]:
         raise InvalidInputError(f"{out}: no sweep results here (no {DATABASE_NAME}); run invsss sweep first")
     with ResultsStore(out, readonly=True) as store:
         stored, meta = store.rows(), store.meta()
+    alive = sweep_running(out)
     # The file's order (grid keys first, then zip, sample, pair), then any key of older trials.
     axes = list(dict.fromkeys([*meta.get("axes", []), "pair", *(k for row in stored for k in row["axes"])]))
     axes = [key for key in axes if any(key in row["axes"] for row in stored)]
@@ -46,7 +48,8 @@ def flat_rows(out) -> tuple[list[dict], dict]:
     light = [name for name in LIGHT_PARAMS if any(name in (row["params"] or {}) for row in stored)]
     rows = []
     for row in stored:
-        flat = {"id": row["id"], "status": row["status"], "task": row["task"]}
+        status = "interrupted" if row["status"] == "running" and not alive else row["status"]
+        flat = {"id": row["id"], "status": status, "task": row["task"]}
         flat.update({key: row["axes"].get(key) for key in axes})
         metrics = row["metrics"] or {}
         fit_only = () if row["task"] == "render" else ("sigma", "converged", "iterations")

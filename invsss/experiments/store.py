@@ -30,6 +30,7 @@ which :func:`rebuild` makes the table again.
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import functools
 import json
 import math
@@ -43,6 +44,8 @@ __all__ = ["DATABASE_NAME", "ResultsStore", "STATUSES", "StoreError", "rebuild"]
 
 #: The database's file name inside the sweep's output folder.
 DATABASE_NAME = "results.sqlite"
+#: The file a running sweep holds an exclusive ``flock`` on (:mod:`.sweep`).
+LOCK_NAME = ".sweep.lock"
 
 #: The statuses a trial can have.
 STATUSES = ("pending", "running", "done", "failed")
@@ -149,6 +152,24 @@ def _guarded(method):
             raise _store_error(self.path, err) from None
 
     return guarded
+
+
+def sweep_running(out) -> bool:
+    """Whether a sweep holds ``out`` now: a trial marked ``running`` without one
+    was left so by a sweep that was killed, and runs again when it is resumed."""
+    try:
+        fd = os.open(os.path.join(os.fspath(out), LOCK_NAME), os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        # A shared lock is refused while the sweep holds its exclusive one; held
+        # only for this call, so a sweep starting now is not kept out.
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except OSError:
+        return True
+    finally:
+        os.close(fd)
+    return False
 
 
 class ResultsStore:

@@ -43,11 +43,10 @@ from ..validation import InvalidInputError, error_line
 from .executors import make_executor
 from .experiment import Experiment, load
 from .runner import execute, trial_folder
-from .store import ResultsStore, StoreError, rebuild
+from .store import LOCK_NAME, ResultsStore, StoreError, rebuild
 
 __all__ = ["SweepSummary", "run"]
 
-_LOCK_NAME = ".sweep.lock"
 _POLL_SECONDS = 0.2
 
 
@@ -86,7 +85,7 @@ class _SweepLock:
     """An exclusive ``flock`` on ``OUT/.sweep.lock`` for the duration of a run."""
 
     def __init__(self, out: str):
-        self.path = os.path.join(out, _LOCK_NAME)
+        self.path = os.path.join(out, LOCK_NAME)
         self._fd = None
 
     def __enter__(self) -> "_SweepLock":
