@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import os
+import re
 import subprocess
 import sys
 import time
@@ -118,6 +119,8 @@ def test_a_sweep_whose_trials_failed_exits_1(root, capsys):
     assert main(["sweep", str(path), "--out", str(out)]) == 1
     captured = capsys.readouterr()
     assert "sweep: 4 done, 4 failed, 0 not run" in captured.out
+    # Each progress line says which trial it was, not only its id.
+    assert re.search(r"\(trial \w+ \(sss_level=\d+, correction=\d+, pair=broken\) FAILED: ", captured.err)
     # Rerun: the failed trials run again and fail again; still 1.
     assert main(["sweep", str(path), "--out", str(out)]) == 1
 

@@ -143,7 +143,7 @@ class _Progress:
             # file ends the progress lines, not the sweep: its trials go on.
             self.log = None
 
-    def finished(self, outcome: dict, previous: str) -> None:
+    def finished(self, outcome: dict, previous: str, axes: dict | None = None) -> None:
         self.ran += 1
         if outcome["status"] == "done":
             self.done += 1
@@ -156,9 +156,12 @@ class _Progress:
         eta = f", ETA {_duration(elapsed / self.ran * remaining)}" if remaining else ""
         what = "done" if outcome["status"] == "done" else f"FAILED: {outcome['error']}"
         seconds = outcome.get("timings", {}).get("total", 0.0)
+        # What the trial was, not only its id: the values of its axes.
+        values = ", ".join(f"{k}={v}" for k, v in (axes or {}).items())
+        label = f"trial {outcome['id']}" + (f" ({values})" if values else "")
         self.say(
             f"{self.done}/{self.total} done, {self.failed} failed, {remaining} remaining{eta} "
-            f"(trial {outcome['id']} {what}, {seconds:.1f}s)"
+            f"({label} {what}, {seconds:.1f}s)"
         )
 
 
@@ -324,7 +327,7 @@ def _drive(executor, store, out, queue, statuses, stop, progress, running) -> bo
                 return True
             _record(store, out, outcome)
             running.remove(trial["id"])
-            progress.finished(outcome, statuses.get(trial["id"]))
+            progress.finished(outcome, statuses.get(trial["id"]), trial.get("axes"))
         return False
     queue = list(queue)
     in_flight = {}
@@ -334,7 +337,7 @@ def _drive(executor, store, out, queue, statuses, stop, progress, running) -> bo
             trial = queue.pop(0)
             attempt = store.mark_running(trial["id"])
             running.append(trial["id"])
-            in_flight[executor.submit({**trial, "attempt": attempt}, out)] = trial["id"]
+            in_flight[executor.submit({**trial, "attempt": attempt}, out)] = trial
         if stop() and not told:
             told = True
             progress.say(f"stopping: waiting for the {len(in_flight)} running trial(s) "
@@ -342,7 +345,8 @@ def _drive(executor, store, out, queue, statuses, stop, progress, running) -> bo
         if stop() and not in_flight:
             break
         for future in executor.wait(list(in_flight), _POLL_SECONDS):
-            trial_id = in_flight.pop(future)
+            trial = in_flight.pop(future)
+            trial_id = trial["id"]
             try:
                 outcome = executor.outcome(future)
             except Exception as err:  # noqa: BLE001 -- a lost worker fails its trial, not the sweep
@@ -350,5 +354,5 @@ def _drive(executor, store, out, queue, statuses, stop, progress, running) -> bo
                            "timings": {}, "finished": time.time()}
             _record(store, out, outcome)
             running.remove(trial_id)
-            progress.finished(outcome, statuses.get(trial_id))
+            progress.finished(outcome, statuses.get(trial_id), trial.get("axes"))
     return bool(stop())
