@@ -104,6 +104,11 @@ def _check_artefacts_match(out, rows):
          "unknown key 'grid.fix.maxd' (did you mean 'fix.maxdd'?)"),
         ('task = "render"\n[data]\npairs = ["data/*/"]\n[base]\nmaxdd = 0.5\ncorrection = 0.0\n'
          '[grid]\nsss_levle = [1.0]\n', "unknown key 'grid.sss_levle' (did you mean 'sss_level'?)"),
+        # A [base] value that an axis would silently replace in every trial.
+        ('task = "render"\n[data]\npairs = ["data/*/"]\n[base]\nmaxdd = 0.5\ncorrection = 0.0\nsss_level = 100.0\n'
+         '[grid]\nsss_level = [300.0, 600.0]\n', "grid.sss_level: also set in [base] (base.sss_level)"),
+        ('task = "fit"\n[data]\npairs = ["data/*/"]\n[base]\nfix = {maxdd = 0.5, correction = 0.0}\n'
+         '[zip]\nfix.maxdd = [0.1, 0.2]\n', "zip.fix.maxdd: also set in [base] (base.fix.maxdd)"),
         # A fit holds a parameter through fix: suggested as such, not the nearest option's name.
         ('task = "fit"\n[data]\npairs = ["data/*/"]\n[grid]\nsss_level = [300.0, 600.0]\n',
          "unknown key 'grid.sss_level' (did you mean 'grid.fix.sss_level'?)"),

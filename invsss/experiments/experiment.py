@@ -91,6 +91,18 @@ def _check_axis_keys(spec: ExperimentSpec, name: str) -> None:
     if spec.sample is not None:
         for path in flatten(spec.sample.ranges):
             check_option_key(path, spec.task, "sample.ranges", name)
+    # An axis sets its key in every trial, so a [base] value of the same key would
+    # be silently dropped: refuse the pair instead.
+    axes = [(where, path) for where, table in (("grid", spec.grid), ("zip", spec.zip),
+                                               ("sample.ranges", spec.sample.ranges if spec.sample else {}))
+            for path in flatten(table)]
+    for base in flatten(spec.base):
+        for where, path in axes:
+            if base == path or base.startswith(path + ".") or path.startswith(base + "."):
+                raise InvalidInputError(
+                    f"{name}: {where}.{path}: also set in [base] (base.{base}); the axis sets it in "
+                    "every trial, so remove one of them"
+                )
 
 
 def _pair_rows(spec: ExperimentSpec, rows: list[dict], pairs: list[dict], name: str) -> list[dict]:
