@@ -104,6 +104,8 @@ def _check_artefacts_match(out, rows):
          "unknown key 'grid.fix.maxd' (did you mean 'fix.maxdd'?)"),
         ('task = "render"\n[data]\npairs = ["data/*/"]\n[base]\nmaxdd = 0.5\ncorrection = 0.0\n'
          '[grid]\nsss_levle = [1.0]\n', "unknown key 'grid.sss_levle' (did you mean 'sss_level'?)"),
+        # A folder named outright that holds no pair: named as written ('.' before).
+        ('task = "render"\n[data]\npairs = ["./"]\n', "data.pairs: './' has no source.exr"),
         # A [base] value that an axis would silently replace in every trial.
         ('task = "render"\n[data]\npairs = ["data/*/"]\n[base]\nmaxdd = 0.5\ncorrection = 0.0\nsss_level = 100.0\n'
          '[grid]\nsss_level = [300.0, 600.0]\n', "grid.sss_level: also set in [base] (base.sss_level)"),

@@ -82,7 +82,9 @@ def resolve_pairs(data: DataSpec, root: str, name: str) -> list[dict]:
                 path = os.path.join(folder, file)
                 if not os.path.isfile(path):
                     raise InvalidInputError(
-                        f"{name}: data.pairs: {os.path.relpath(folder, root)} has no {file} "
+                        # A folder named outright, as the user wrote it ('../x/' is '.' relative to the file).
+                        f"{name}: data.pairs: {pattern if not glob.has_magic(pattern) else os.path.relpath(folder, root)!r}"
+                        f" has no {file} "
                         f"(a pair folder holds {', '.join(PAIR_FILES.values())})"
                     )
                 files[role] = _relative(path, root)
