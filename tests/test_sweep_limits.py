@@ -168,7 +168,11 @@ def test_the_report_separates_the_tasks_of_one_folder(root, capsys):
     assert columns[5] == "loss"
     assert len(render_part.splitlines()) == 2 + 4
     assert fit_part.splitlines()[0] == "task fit: 2 trial(s)"
-    assert fit_part.splitlines()[1].split()[:5] == ["id", "status", "fix.maxdd", "pair", "loss"]
+    fit_columns = fit_part.splitlines()[1].split()
+    assert fit_columns[:5] == ["id", "status", "fix.maxdd", "pair", "loss"]
+    # A fit's table shows its estimates; a render's has none to show.
+    assert fit_columns[7:10] == ["param.sss_level", "param.correction", "param.maxdd"]
+    assert not any(c.startswith("param.") for c in columns)
     assert len(fit_part.splitlines()) == 2 + 2
     with open(out / "report" / "results.csv", newline="") as f:
         tasks = [row["task"] for row in csv.DictReader(f)]

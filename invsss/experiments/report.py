@@ -60,8 +60,9 @@ def _cell(value) -> str:
     return str(value)
 
 
-def format_table(rows: list[dict], axes: list[str]) -> str:
-    """Plain-text table: id, status, the axes, loss/PSNR/SSIM, seconds, error.
+def format_table(rows: list[dict], axes: list[str], fitted: tuple = ()) -> str:
+    """Plain-text table: id, status, the axes, loss/PSNR/SSIM, the ``fitted``
+    columns (a fit's ``param.sss_level``...), seconds, error.
 
     Examples
     --------
@@ -70,7 +71,7 @@ def format_table(rows: list[dict], axes: list[str]) -> str:
     id   status  x    loss  psnr  ssim  seconds  error
     abc  done    1.5  0.25  30    0.9   2        -
     """
-    columns = ["id", "status", *axes, *_METRICS, "seconds", "error"]
+    columns = ["id", "status", *axes, *_METRICS, *fitted, "seconds", "error"]
     cells = [columns] + [[_cell(row.get(c)) for c in columns] for row in rows]
     widths = [max(len(line[i]) for line in cells) for i in range(len(columns))]
     return "\n".join(
@@ -352,7 +353,7 @@ def write_report(out, *, plots: bool = True, parquet: bool = False) -> tuple[str
         meta_axes = list(meta.get("axes", []))
         axes = [a for a in dict.fromkeys([*meta_axes, "pair"]) if any(a in r for r in rows)]
         written.extend(_task_plots(rows, axes, rows[0]["task"], out, folder, keys) if plots else [])
-        return format_table(rows, axes), written
+        return format_table(rows, axes, _fitted_columns(rows[0]["task"])), written
     # Trials of several experiments: a fit's and a render's rows share no columns
     # worth comparing, so each task has its own table and plots.
     tables = []
@@ -360,10 +361,16 @@ def write_report(out, *, plots: bool = True, parquet: bool = False) -> tuple[str
         # The pair last, as in a folder of one experiment.
         axes = [a for a in (*(a for a in meta["row_axes"] if a != "pair"), "pair")
                 if any(r.get(a) is not None for r in task_rows)]
-        tables.append(f"task {task}: {len(task_rows)} trial(s)\n{format_table(task_rows, axes)}")
+        tables.append(f"task {task}: {len(task_rows)} trial(s)\n"
+                      f"{format_table(task_rows, axes, _fitted_columns(task))}")
         if plots:
             written.extend(_task_plots(task_rows, axes, task, out, os.path.join(folder, task), keys))
     return "\n\n".join(tables), written
+
+
+def _fitted_columns(task: str) -> tuple:
+    """The estimates a fit's table shows (the rest are in results.csv)."""
+    return () if task == "render" else tuple(f"param.{name}" for name in _SCALARS)
 
 
 def _task_plots(rows: list[dict], axes: list[str], task: str, out: str, folder: str,
