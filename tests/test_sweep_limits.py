@@ -156,9 +156,14 @@ def test_the_report_separates_the_tasks_of_one_folder(root, capsys):
                       f'profile = {PROFILE}\nn_starts = 1\nrobust = "none"\nmax_steps = 3\n'
                       '[grid]\nfix.maxdd = [0.5, 1.0]\n')
     assert main(["sweep", str(render), "--out", str(out)]) == 0
+    # A report of the render alone draws its plots at the top of report/ ...
+    assert main(["sweep-report", str(out)]) == 0
+    assert os.path.isfile(out / "report" / "contact_a.png")
     assert main(["sweep", str(fit), "--out", str(out)]) == 0
     capsys.readouterr()
     assert main(["sweep-report", str(out)]) == 0
+    # ... which a report of both tasks moves into report/render/, leaving no stale copy.
+    assert sorted(p.name for p in (out / "report").glob("*.png")) == []
     printed = capsys.readouterr().out
     assert printed.splitlines()[-1].startswith("wrote ")
     render_part, fit_part = printed.rsplit("\nwrote ", 1)[0].split("\n\n")

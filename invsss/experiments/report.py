@@ -21,7 +21,9 @@ Written into ``OUT/report/``:
   rendered images laid out on those axes with the PSNR under each (the
   thesis's sssLevel x correction matrix, made from the results).
 
-The table :func:`write_report` returns is plain text, one line per trial. A
+Plots an earlier report drew and this one does not (an axis no longer varied,
+a folder that gained a second task) are removed, so that every plot there is
+of the results as they are. The table :func:`write_report` returns is plain text, one line per trial. A
 folder that holds the trials of experiments with different tasks (a render
 matrix and a fit written into one ``--out``) gets one table per task, each
 under a ``task <name>: N trial(s)`` line, and each task's plots in
@@ -32,6 +34,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import fnmatch
 import json
 import math
 import os
@@ -353,6 +356,7 @@ def write_report(out, *, plots: bool = True, parquet: bool = False) -> tuple[str
         meta_axes = list(meta.get("axes", []))
         axes = [a for a in dict.fromkeys([*meta_axes, "pair"]) if any(a in r for r in rows)]
         written.extend(_task_plots(rows, axes, rows[0]["task"], out, folder, keys) if plots else [])
+        _remove_stale_plots(folder, written, plots)
         return format_table(rows, axes, _fitted_columns(rows[0]["task"])), written
     # Trials of several experiments: a fit's and a render's rows share no columns
     # worth comparing, so each task has its own table and plots.
@@ -365,7 +369,27 @@ def write_report(out, *, plots: bool = True, parquet: bool = False) -> tuple[str
                       f"{format_table(task_rows, axes, _fitted_columns(task))}")
         if plots:
             written.extend(_task_plots(task_rows, axes, task, out, os.path.join(folder, task), keys))
+    _remove_stale_plots(folder, written, plots)
     return "\n\n".join(tables), written
+
+
+#: The names of the plots a report draws (``fnmatch`` patterns).
+_PLOT_NAMES = ("metrics_vs_*.png", "params_vs_*.png", "params_by_pair.png", "contact_*.png", "contact.png")
+
+
+def _remove_stale_plots(folder: str, written: list[str], plots: bool) -> None:
+    """Remove the plots of an earlier report that this one did not draw again (an
+    axis no longer varied, a folder that gained a second task and moved its plots
+    into ``report/<task>/``), so that every plot in ``folder`` is of these results.
+    Only the report's own file names are touched; ``--no-plots`` keeps them all."""
+    if not plots:
+        return
+    kept = {os.path.abspath(p) for p in written}
+    for directory, _, files in os.walk(folder):
+        for name in files:
+            path = os.path.abspath(os.path.join(directory, name))
+            if path not in kept and any(fnmatch.fnmatch(name, pattern) for pattern in _PLOT_NAMES):
+                os.remove(path)
 
 
 def _fitted_columns(task: str) -> tuple:
