@@ -131,7 +131,7 @@ class _Progress:
     def __init__(self, log, total: int, done: int, failed: int):
         self.log, self.total, self.done, self.failed = log, total, done, failed
         self.ran = 0
-        self.start = time.monotonic()
+        self.first_finished = time.monotonic()
 
     def say(self, text: str) -> None:
         if self.log is None:
@@ -152,8 +152,12 @@ class _Progress:
         if previous == "failed":  # a failed trial from an earlier run, now run again
             self.failed -= 1
         remaining = self.total - self.done - self.failed
-        elapsed = time.monotonic() - self.start
-        eta = f", ETA {_duration(elapsed / self.ran * remaining)}" if remaining else ""
+        now = time.monotonic()
+        if self.ran == 1:
+            # The first trial's time is mostly compiling: the rate is counted from its end.
+            self.first_finished = now
+        rate = (now - self.first_finished) / (self.ran - 1) if self.ran > 1 else None
+        eta = f", ETA {_duration(rate * remaining)}" if remaining and rate is not None else ""
         what = "done" if outcome["status"] == "done" else f"FAILED: {outcome['error']}"
         seconds = outcome.get("timings", {}).get("total", 0.0)
         # What the trial was, not only its id: the values of its axes.
