@@ -279,3 +279,14 @@ def test_ordinary_values_do_not_warn():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert check_plausible(invsss.SSSParams(600.0, 250.0, 0.01, [1.0], [2.0]), np.full((16, 20), 500.0)) == []
+
+
+def test_text_for_a_number_is_refused_in_memory_as_in_a_file():
+    # NumPy reads "600" as 600.0; a params file refuses text, and so do the objects.
+    with pytest.raises(InvalidInputError, match=r"^sss_level: expected numbers, got the text '600'$"):
+        invsss.SSSParams("600", 800.0, 0.5, [1.0], [1.0])
+    with pytest.raises(InvalidInputError, match=r"^variances: expected numbers, got the text \['1'\]$"):
+        invsss.SSSParams(600.0, 800.0, 0.5, [1.0], ["1"])
+    with pytest.raises(InvalidInputError, match=r"^fix\['maxdd'\]: expected numbers, got the text '0.5'$"):
+        invsss.FitOptions(fix={"maxdd": "0.5"})
+    assert float(invsss.SSSParams(600, 800, 0.5, [1], [1]).sss_level) == 600.0  # integers are numbers

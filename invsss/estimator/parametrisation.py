@@ -142,6 +142,8 @@ def check_fix(fix) -> dict[str, np.ndarray]:
         )
     out = {}
     for k, v in fix.items():
+        if np.asarray(v).dtype.kind in "US":  # NumPy would read "0.5" as 0.5
+            raise InvalidInputError(f"fix[{k!r}]: expected numbers, got the text {v!r}")
         try:
             a = np.asarray(v, dtype=np.float64)
         except (TypeError, ValueError):

@@ -7,10 +7,12 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
+from ..validation import InvalidInputError
+
 __all__ = ["float_array"]
 
 
-def float_array(x, dtype=None) -> Array:
+def float_array(x, dtype=None, name: str | None = None) -> Array:
     """``x`` as a JAX array of ``dtype``, by default JAX's float type (float32, or float64 under x64).
 
     A JAX array (or a tracer, inside ``jit``) is converted by ``jnp.asarray``; a host
@@ -26,4 +28,9 @@ def float_array(x, dtype=None) -> Array:
     Array(0.5, dtype=float16)
     """
     dtype = dtype or jnp.result_type(float)
-    return jnp.asarray(x, dtype=dtype) if isinstance(x, jax.Array) else jax.device_put(np.asarray(x, dtype))
+    if isinstance(x, jax.Array):
+        return jnp.asarray(x, dtype=dtype)
+    if np.asarray(x).dtype.kind in "US":
+        # NumPy would parse "600" as 600.0; a params file refuses text, and so does this.
+        raise InvalidInputError(f"{name + ': ' if name else ''}expected numbers, got the text {x!r}")
+    return jax.device_put(np.asarray(x, dtype))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import warnings
 
 import equinox as eqx
@@ -54,11 +56,12 @@ class SSSParams(eqx.Module):
     SSSParams(sss_level=0.5, correction=2000.0, maxdd=0.001, weights=[0.4, 0.6], variances=[0.5, 2.0])
     """
 
-    sss_level: Float[Array, ""] = eqx.field(converter=float_array)
-    correction: Float[Array, ""] = eqx.field(converter=float_array)
-    maxdd: Float[Array, ""] = eqx.field(converter=float_array)
-    weights: Float[Array, "K *C"] = eqx.field(converter=float_array)
-    variances: Float[Array, " K"] = eqx.field(converter=float_array)
+    # Each converter names its field in an error ("sss_level: expected numbers, got the text '600'").
+    sss_level: Float[Array, ""] = eqx.field(converter=functools.partial(float_array, name="sss_level"))
+    correction: Float[Array, ""] = eqx.field(converter=functools.partial(float_array, name="correction"))
+    maxdd: Float[Array, ""] = eqx.field(converter=functools.partial(float_array, name="maxdd"))
+    weights: Float[Array, "K *C"] = eqx.field(converter=functools.partial(float_array, name="weights"))
+    variances: Float[Array, " K"] = eqx.field(converter=functools.partial(float_array, name="variances"))
 
     def __repr__(self) -> str:
         # The values, as a user reads them (equinox's default shows only f32[5,3]);
