@@ -10,6 +10,7 @@ responsible (the file readers in :mod:`invsss.io` always validate).
 
 from __future__ import annotations
 
+import difflib
 import json
 import numbers
 import warnings
@@ -33,6 +34,7 @@ __all__ = [
     "is_concrete",
     "one_line",
     "error_line",
+    "did_you_mean",
 ]
 
 
@@ -60,6 +62,20 @@ def one_line(text) -> str:
     'cannot open file.png: no such file'
     """
     return " ".join(str(text).split())
+
+
+def did_you_mean(key, known) -> str:
+    """`` (did you mean 'x'?)`` for the known name closest to a misspelt ``key``, or ``""``.
+
+    Examples
+    --------
+    >>> did_you_mean("shfit", ["shift", "grazing"])
+    " (did you mean 'shift'?)"
+    >>> did_you_mean("zzz", ["shift"])
+    ''
+    """
+    close = difflib.get_close_matches(str(key), list(known), n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
 
 
 def error_line(err: BaseException) -> str:

@@ -36,11 +36,10 @@ normal equations over strongly correlated layers need it.
 from __future__ import annotations
 
 import dataclasses
-import difflib
 
 from ..forward.light_terms import LightBuffers
 from ..forward.pair import ImagePair
-from ..validation import InvalidInputError
+from ..validation import InvalidInputError, did_you_mean
 from .core import Fit, FitCall, core
 from .options import FitOptions
 from .result import FitResult
@@ -168,10 +167,9 @@ def _options(options, keywords) -> FitOptions:
     known = [f.name for f in dataclasses.fields(FitOptions)]
     unknown = [name for name in keywords if name not in known]
     if unknown:
-        close = difflib.get_close_matches(unknown[0], known, n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise InvalidInputError(
-            f"{unknown[0]}: not an option of the fit{hint}; expected one of {', '.join(known)}"
+            f"{unknown[0]}: not an option of the fit{did_you_mean(unknown[0], known)}; expected one of "
+            f"{', '.join(known)}"
         )
     if options is None:
         return FitOptions(**keywords)

@@ -28,7 +28,6 @@ How a shader uses the constants (docs/model.md, sections 2, 3 and 5):
 
 from __future__ import annotations
 
-import difflib
 import json
 import math
 import os
@@ -44,7 +43,7 @@ from ..forward.params import SSSParams
 from ..forward.passes import TAP_OFFSETS, tap_spread
 from ..forward.passes import tap_weights as tap_weight_set
 from ..forward.screen_space import separable_kernel
-from ..validation import InvalidInputError
+from ..validation import InvalidInputError, did_you_mean
 
 __all__ = ["EXPORT_FORMATS", "shader_constants", "to_hlsl", "to_json", "export_params", "write_shader",
            "scale_to_resolution"]
@@ -225,10 +224,9 @@ def _check_light_term_keys(light_terms) -> None:
     known = (*LIGHT_TERM_FIELDS, *LIGHT_TERMS_RECORD_KEYS)
     for key in light_terms:
         if key not in known:
-            close = difflib.get_close_matches(str(key), known, n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
             raise InvalidInputError(
-                f"light_terms: unknown key {key!r}{hint}; expected terms among {', '.join(LIGHT_TERM_FIELDS)}"
+                f"light_terms: unknown key {key!r}{did_you_mean(key, known)}; expected terms among "
+                f"{', '.join(LIGHT_TERM_FIELDS)}"
             )
 
 

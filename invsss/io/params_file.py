@@ -14,7 +14,6 @@ than :data:`SCHEMA_VERSION` is refused with a message saying to upgrade.
 
 from __future__ import annotations
 
-import difflib
 import json
 import os
 import warnings
@@ -29,7 +28,7 @@ from ..forward.params import PARAM_NAMES, SSSParams
 from ..forward.passes import TAP_WEIGHTS
 from .result_dir import MANIFEST_NAME, result_state
 from ..forward.screen_space import MODELS
-from ..validation import InvalidInputError, number_array, one_line
+from ..validation import InvalidInputError, did_you_mean, number_array, one_line
 from .writing import write_text_atomic
 
 __all__ = [
@@ -176,10 +175,8 @@ def _check_keys(keys, name: str) -> None:
     allowed = PARAMS_KEYS + PARAMS_OPTIONAL_KEYS
     for key in keys:
         if key not in allowed:
-            close = difflib.get_close_matches(str(key), allowed, n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
             raise InvalidInputError(
-                f"{name}: unknown key {key!r}{hint}; expected {', '.join(PARAMS_KEYS)} "
+                f"{name}: unknown key {key!r}{did_you_mean(key, allowed)}; expected {', '.join(PARAMS_KEYS)} "
                 f"and optionally {', '.join(PARAMS_OPTIONAL_KEYS)}"
             )
     missing = [k for k in PARAMS_KEYS if k not in keys]
