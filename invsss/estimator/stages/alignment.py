@@ -9,6 +9,7 @@ final fit's (:class:`WarpSensitivity`).
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -17,7 +18,7 @@ from scipy import ndimage
 
 from ...forward.pair import ImagePair
 from ...forward.screen_space import render
-from ...validation import InvalidInputError
+from ...validation import InputNotice, InvalidInputError
 from ..canvas import frame_terms, unused_note
 from ..core import Fit, FitCall, estimate_of
 from ..inputs import prepare_pairs
@@ -115,8 +116,12 @@ def _refined_warps(trial, checked, prepared, warps, options) -> list:
         lit = {} if trial.light_terms is None else {
             "light_terms": trial.light_terms_params(),
             "light_buffers": pair.light_buffers}
-        prediction = np.asarray(render(source, depth, mask, trial.params, options.model,
-                                       tap_weights=options.tap_weights, **lit), np.float64)
+        with warnings.catch_warnings():
+            # A round's own estimate, not the user's parameters: a collapsed blur is
+            # reported by the fit (undetermined sss_level), not as absurd input.
+            warnings.simplefilter("ignore", InputNotice)
+            prediction = np.asarray(render(source, depth, mask, trial.params, options.model,
+                                           tap_weights=options.tap_weights, **lit), np.float64)
         prediction = prediction[..., None] if prediction.ndim == 2 else prediction
         if trial.vignetting is not None:
             # Shaded as the photograph is, where the warp puts each source pixel: an
