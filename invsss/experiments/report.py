@@ -23,7 +23,8 @@ Written into ``OUT/report/``:
 
 Plots an earlier report drew and this one does not (an axis no longer varied,
 a folder that gained a second task) are removed, so that every plot there is
-of the results as they are. The table :func:`write_report` returns is plain text, one line per trial. A
+of the results as they are. The table :func:`write_report` returns is plain
+text, one line per trial. A
 folder that holds the trials of experiments with different tasks (a render
 matrix and a fit written into one ``--out``) gets one table per task, each
 under a ``task <name>: N trial(s)`` line, and each task's plots in
@@ -41,6 +42,7 @@ import os
 import tomllib
 
 from ..validation import InvalidInputError
+from .axes import flatten
 from .results import flat_rows
 
 __all__ = ["write_report", "format_table"]
@@ -120,15 +122,7 @@ class _SampleKeys:
             sample = tomllib.loads(meta.get("text") or "").get("sample") or {}
         except tomllib.TOMLDecodeError:
             return cls()
-
-        def keys(table, prefix=""):
-            for key, value in table.items():
-                if isinstance(value, dict):
-                    yield from keys(value, f"{prefix}{key}.")
-                else:
-                    yield prefix + key
-
-        return cls(frozenset(keys(sample.get("ranges") or {})), frozenset(sample.get("log") or ()))
+        return cls(frozenset(flatten(sample.get("ranges") or {})), frozenset(sample.get("log") or ()))
 
 
 def _series(rows: list[dict], axis: str, axes: list[str], sampled) -> dict:
