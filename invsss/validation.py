@@ -210,12 +210,14 @@ def depth_is_valid(depth) -> np.ndarray:
 
 
 def check_depth(depth, shape_hw: tuple[int, int], name: str = "depth", mask=None) -> None:
-    """Depth is (H, W), finite and > 0 wherever the mask is non-zero.
+    """Depth is (H, W), finite and > 0 wherever the mask is 1.
 
     With ``mask=None`` every pixel counts as masked. Off the mask (the background),
     depth may be 0, NaN or infinite as renderers write it: the model never uses
     it there once :func:`invsss.forward.pair.fill_background_depth` has replaced it, which
-    every public entry point does. Pass a mask already checked with
+    every public entry point does. So may it on the mask's soft edge (0 < mask < 1):
+    an anti-aliased mask reaches into pixels whose depth sample saw the background,
+    and the fill gives them the nearest skin's depth. Pass a mask already checked with
     :func:`check_mask`.
 
     Examples
@@ -240,8 +242,8 @@ def check_depth(depth, shape_hw: tuple[int, int], name: str = "depth", mask=None
     if mask is None:
         bad, where = int(np.count_nonzero(invalid)), "on every pixel (no mask given)"
     else:
-        bad = int(np.count_nonzero(invalid & (np.asarray(mask) > 0)))
-        where = "wherever the mask is non-zero"
+        bad = int(np.count_nonzero(invalid & (np.asarray(mask) >= 1)))
+        where = "wherever the mask is 1"
     if bad:
         what = "pixel(s) are" if mask is None else "masked pixel(s) are"
         raise InvalidInputError(
@@ -359,13 +361,14 @@ def check_mask_background(mask, depth, mask_name: str = "mask") -> None:
         )
 
 
-def check_pair(source, target, depth, mask, names) -> None:
+def check_pair(source, target, depth, mask, names, *, background: bool = True) -> None:
     """Check one ``(source, target, depth, mask)`` example; ``names`` names each input.
 
     The one place that checks an example's shapes, sizes and channel layout, for
     arrays and for files alike: ``names`` maps ``"source"``, ``"target"``,
     ``"depth"``, ``"mask"`` to what the messages call them (file paths, or
     ``pairs[1].target``). ``mask=None`` means every pixel and is not checked.
+    ``background=False`` skips :func:`check_mask_background` (done once already).
     """
     check_image(source, names["source"])
     check_image(target, names["target"])
@@ -378,5 +381,5 @@ def check_pair(source, target, depth, mask, names) -> None:
     # Depth is checked where the mask needs it, so the mask comes first.
     check_depth(depth, hw, names["depth"], mask)
     check_target_channels(channels(source), channels(target), names["target"])
-    if mask is not None:
+    if mask is not None and background:
         check_mask_background(mask, depth, names["mask"])

@@ -148,3 +148,53 @@ def test_torch_twin_accepts_renderer_background_like_the_jax_model(background):
     # ... and agrees with the JAX model given the same renderer-style depth.
     jax_out = np.asarray(invsss.render(image, renderer_depth, mask, PARAMS))
     np.testing.assert_allclose(got.numpy(), jax_out, rtol=1e-4, atol=1e-6)
+
+
+def test_a_loaded_pair_is_looked_at_for_background_once_and_on_the_depth_as_read(tmp_path):
+    import warnings
+
+    import jax
+
+    from invsss.estimator.inputs import prepare_pairs
+
+    image, depth, mask = _scene()
+    invsss.write_image(tmp_path / "s.exr", image.astype(np.float32))
+    invsss.write_image(tmp_path / "t.exr", image.astype(np.float32))
+    def notices(depth_map, mask_map):
+        np.save(tmp_path / "d.npy", depth_map)
+        np.save(tmp_path / "m.npy", mask_map)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            pair = invsss.load_pair(tmp_path / "s.exr", tmp_path / "t.exr", tmp_path / "d.npy", tmp_path / "m.npy")
+            with jax.enable_x64(True):
+                prepare_pairs([pair])
+        return [str(w.message) for w in caught if "far plane" in str(w.message)]
+
+    # 0 off the mask, as renderers write it: once filled, the skin's flat edge is the
+    # largest depth and covers most of the frame, which read as a far plane before.
+    assert notices(_renderer_depth(depth, mask, 0.0), mask) == []
+    # A far plane the mask reaches into: one notice, naming the file, not a second as "mask".
+    leaky = mask.copy()
+    leaky[0, 0] = 1.0
+    far = np.where(leaky > 0, depth, 1e4)
+    far[0, 0] = 1e4
+    found = notices(far, leaky)
+    assert len(found) == 1 and found[0].startswith(str(tmp_path / "m.npy"))
+
+
+def test_a_soft_rim_may_lack_depth_where_the_background_does():
+    # An anti-aliased mask reaches into pixels whose depth saw the background (0):
+    # filled like the background, not refused (the rim used to be "293 masked pixels").
+    image, depth, mask = _scene()
+    soft = mask.copy()
+    soft[2, 4:20] = soft[17, 4:20] = 0.5  # a rim above and below the hard mask
+    renderer = _renderer_depth(depth, mask, 0.0)  # no depth on the rim
+    got = np.asarray(invsss.render(image, renderer, soft, PARAMS))
+    expected = np.asarray(invsss.render(image, fill_background_depth(renderer), soft, PARAMS))
+    np.testing.assert_array_equal(got, expected)
+    assert np.all(np.isfinite(got))
+    # Where the mask is 1 a missing depth is still an error.
+    holed = renderer.copy()
+    holed[5, 6] = np.nan
+    with pytest.raises(InvalidInputError, match=r"^depth: expected finite depth > 0 wherever the mask is 1, 1 masked"):
+        invsss.render(image, holed, soft, PARAMS)

@@ -295,7 +295,8 @@ def render(
     image : array, shape (H, W) or (H, W, C), C in {1, 3}
         Linear radiance without scattering.
     depth : array, shape (H, W)
-        Linear eye-space depth, > 0 (mm recommended) where ``mask`` is non-zero;
+        Linear eye-space depth, > 0 (mm recommended) where ``mask`` is 1 (on its soft
+        edge it may be missing, and is filled like the background's);
         off the mask it may be 0 or infinite, as renderers write it.
     mask : array, shape (H, W)
         1 on skin, 0 elsewhere; fractional values blend.

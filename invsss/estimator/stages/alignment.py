@@ -103,7 +103,8 @@ def _resampled(checked, prepared, warps) -> list[ImagePair]:
         out.append(ImagePair(moved, target[..., 0] if ndim == 2 else target, moved_depth, kept,
                              fit_weight=inner, normal=align_vectors(pair.normal, warp, target.shape[:2]),
                              light=align_vectors(pair.light, warp, target.shape[:2]), key=key,
-                             fill_light=align_vectors(pair.fill_light, warp, target.shape[:2])))
+                             fill_light=align_vectors(pair.fill_light, warp, target.shape[:2]),
+                             background_checked=True))
     return out
 
 
