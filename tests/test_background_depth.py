@@ -198,3 +198,30 @@ def test_a_soft_rim_may_lack_depth_where_the_background_does():
     holed[5, 6] = np.nan
     with pytest.raises(InvalidInputError, match=r"^depth: expected finite depth > 0 wherever the mask is 1, 1 masked"):
         invsss.render(image, holed, soft, PARAMS)
+
+
+def test_depth_in_whole_millimetres_is_noted_once_and_smooth_depth_is_not(tmp_path):
+    import warnings
+
+    import jax
+
+    from invsss.estimator.inputs import prepare_pairs
+
+    image, depth, mask = _scene()  # slopes of up to 4 mm a pixel on the bump, 0 on the flat edge
+    y, x = np.mgrid[0:H, 0:W]
+    smooth = depth + 0.2 * x + 0.15 * y  # and a tilt: no two neighbours at one depth
+    invsss.write_image(tmp_path / "s.exr", image.astype(np.float32))
+    np.save(tmp_path / "m.npy", mask)
+
+    def notices(depth_map):
+        np.save(tmp_path / "d.npy", depth_map)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            pair = invsss.load_pair(tmp_path / "s.exr", tmp_path / "s.exr", tmp_path / "d.npy", tmp_path / "m.npy")
+            with jax.enable_x64(True):
+                prepare_pairs([pair])
+                prepare_pairs([(image, image, depth_map, mask)])  # arrays: noted as "depth"
+        return [str(w.message).split(":")[0] for w in caught if "comes in steps of" in str(w.message)]
+
+    assert notices(smooth) == []
+    assert notices(np.round(smooth)) == [str(tmp_path / "d.npy"), "depth"]

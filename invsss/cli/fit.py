@@ -188,7 +188,7 @@ def _with_light_buffers(pairs, args):
         fill = (read_light_buffer(args.fill_light[k], "fill-light", pair.mask.shape) if args.fill_light
                 else None)
         out.append(ImagePair(pair.source, pair.target, pair.depth, pair.mask, normal=normal, light=light, key=key,
-                             fill_light=fill, background_checked=pair.background_checked))
+                             fill_light=fill, inputs_noted=pair.inputs_noted))
     return out
 
 

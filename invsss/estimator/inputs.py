@@ -29,12 +29,12 @@ def _check_fit_weight(fit_weight, shape, mask, name: str):
 
 
 def prepare_pair(source, target, depth, mask=None, *, fit_weight=None, normal=None, light=None, key=None,
-                 fill_light=None, name: str = "", background_checked: bool = False) -> ImagePair:
+                 fill_light=None, name: str = "", inputs_noted: bool = False) -> ImagePair:
     """Validate one pair and convert it to float64 (call under ``jax.enable_x64``).
 
     ``mask=None`` fits every pixel. ``name`` prefixes the input names in errors.
-    ``background_checked`` skips the look for background in the mask (a pair from
-    :func:`invsss.load_pair` has had it, on the depth as read).
+    ``inputs_noted`` skips the notices about the inputs (a pair from
+    :func:`invsss.load_pair` has had them, on the depth as read).
     ``normal``, ``light``, ``key`` and ``fill_light`` are the optional buffers of the light-aware
     terms (:class:`invsss.LightBuffers`), checked (and the vectors normalised) here.
 
@@ -47,7 +47,7 @@ def prepare_pair(source, target, depth, mask=None, *, fit_weight=None, normal=No
     ((3, 1), 2, 'float64')
     """
     names = {key: f"{name}{key}" for key in ("source", "target", "depth", "mask")}
-    check_pair(source, target, depth, mask, names, background=not background_checked)
+    check_pair(source, target, depth, mask, names, notices=not inputs_noted)
     if mask is None:
         mask = np.ones(np.shape(source)[:2])
     # Renderer-style background depth (0, inf) never reaches the model.
@@ -59,13 +59,13 @@ def prepare_pair(source, target, depth, mask=None, *, fit_weight=None, normal=No
                                                                    channels=channels)
     return ImagePair(source, target, depth, mask, fit_weight=fit_weight, normal=buffers.normal,
                      light=buffers.light, key=buffers.key, fill_light=buffers.fill_light,
-                     background_checked=True).as_float64()
+                     inputs_noted=True).as_float64()
 
 
 def _unpack(pair, index: int):
     if isinstance(pair, ImagePair):
         return (pair.source, pair.target, pair.depth, pair.mask, pair.fit_weight, pair.normal, pair.light,
-                pair.key, pair.fill_light, pair.background_checked)
+                pair.key, pair.fill_light, pair.inputs_noted)
     if isinstance(pair, (tuple, list)) and len(pair) in (3, 4):
         return (*pair, *(None,) * (9 - len(pair)), False)
     raise InvalidInputError(
@@ -83,7 +83,7 @@ def prepare_pairs(pairs) -> tuple[ImagePair, ...]:
         source, target, depth, mask, fit_weight, normal, light, key, fill_light, checked = _unpack(p, i)
         out.append(prepare_pair(source, target, depth, mask, fit_weight=fit_weight, normal=normal, light=light,
                                 key=key, fill_light=fill_light, name=f"pairs[{i}]." if len(pairs) > 1 else "",
-                                background_checked=checked))
+                                inputs_noted=checked))
     out = tuple(out)
     layouts = {p.channels for p in out}
     if len(layouts) > 1:

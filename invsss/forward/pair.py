@@ -52,11 +52,12 @@ class ImagePair(eqx.Module):
         The source lit by the key light alone (the ``law`` term; None without it).
     fill_light : array, shape (H, W, 3), or None
         Camera-space unit vectors towards the other lights (the ``fill`` term).
-    background_checked : bool, static
-        True when :func:`invsss.load_pair` has already looked for background in the
-        mask (:func:`invsss.validation.check_mask_background`, on the depth as read,
-        naming the files), so that a fit does not warn again, and not wrongly on the
-        depth whose background it has filled.
+    inputs_noted : bool, static
+        True when :func:`invsss.load_pair` has already given the notices about the
+        inputs as read, naming the files (background in the mask,
+        :func:`invsss.validation.check_mask_background`; depth in coarse steps,
+        :func:`invsss.validation.check_depth_steps`), so that a fit does not give them
+        again, and not wrongly on the depth whose background it has filled.
 
     Examples
     --------
@@ -78,7 +79,7 @@ class ImagePair(eqx.Module):
     light: Float[Array, "H W 3"] | None = None
     key: Float[Array, "H W C"] | None = None
     fill_light: Float[Array, "H W 3"] | None = None
-    background_checked: bool = eqx.field(static=True, default=False)
+    inputs_noted: bool = eqx.field(static=True, default=False)
 
     @property
     def light_buffers(self):
@@ -115,7 +116,7 @@ class ImagePair(eqx.Module):
             _float64_or_none(self.light),
             None if self.key is None else _as_hwc64(self.key),
             _float64_or_none(self.fill_light),
-            self.background_checked,
+            self.inputs_noted,
         )
 
 

@@ -368,4 +368,4 @@ def finish_pair(source_image, target_image, depth_map, mask_map, names: dict) ->
     # Background depth as a renderer writes it (0, inf) is replaced here, so
     # pair.depth is safe to pass to render() or any other model code.
     return ImagePair(source_image, target_image, fill_background_depth(depth_map), mask_map,
-                     background_checked=True)
+                     inputs_noted=True)

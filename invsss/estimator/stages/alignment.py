@@ -104,7 +104,7 @@ def _resampled(checked, prepared, warps) -> list[ImagePair]:
                              fit_weight=inner, normal=align_vectors(pair.normal, warp, target.shape[:2]),
                              light=align_vectors(pair.light, warp, target.shape[:2]), key=key,
                              fill_light=align_vectors(pair.fill_light, warp, target.shape[:2]),
-                             background_checked=True))
+                             inputs_noted=True))
     return out
 
 
