@@ -169,7 +169,15 @@ def test_16bit_png_is_linear_despite_its_default_srgb_label(tmp_path):
     label = stored.spec().get_string_attribute("oiio:ColorSpace")
     stored.close()
     assert oiio.equivalent_colorspace(label, "srgb_rec709_scene")  # why the rule exists
-    np.testing.assert_allclose(invsss.read_image(path), 30000 / 65535, rtol=1e-6)
+    # Read as linear, and said so, as the 8-bit half of the rule is (an editor's
+    # 16-bit export is sRGB, and nothing else would tell).
+    with pytest.warns(invsss.InputNotice, match=r"plain16.png: 16-bit codes read as linear values \(the file does not say"):
+        image = invsss.read_image(path)
+    np.testing.assert_allclose(image, 30000 / 65535, rtol=1e-6)
+    # Declared linear (linear=True): nothing to say.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        invsss.read_image(path, linear=True)
 
 
 def test_declared_colour_spaces_override_the_bit_depth_default(tmp_path):

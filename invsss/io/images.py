@@ -57,26 +57,28 @@ __all__ = [
 ]
 
 
-def _decode_colour(raster: Raster, linear: bool = False) -> tuple[np.ndarray, str | float | None]:
+def _decode_colour(raster: Raster, linear: bool = False) -> tuple[np.ndarray, str | float | None, bool]:
     """Linear float values from stored codes, by the rule in the module docstring.
 
-    Returns the values and the transfer function undone: "srgb", a gamma, or
-    None for float data. ``linear=True`` takes integer codes as linear values.
+    Returns the values, the transfer function undone ("srgb", a gamma, or None
+    for float data) and whether it was assumed (the file does not say, and
+    ``linear`` was not given). ``linear=True`` takes integer codes as linear values.
     """
     codes = raster.codes
     bits = code_bits(codes)
     if bits is None:
-        return codes.astype(np.float32), None
+        return codes.astype(np.float32), None, False
     c = codes.astype(np.float64) / float(2**bits - 1)
     encoding = raster.encoding
     if encoding == "srgb" and bits > 8 and raster.file_format == "png":
         encoding = None  # OpenImageIO's default label for every PNG: no information
+    assumed = encoding is None and not linear
     if encoding is None:
         encoding = "srgb" if bits == 8 else 1.0
     if linear:
         encoding = 1.0
     decoded = srgb_to_linear(c) if encoding == "srgb" else c**encoding
-    return decoded.astype(np.float32), encoding
+    return decoded.astype(np.float32), encoding, assumed
 
 
 def read_image(path, *, linear: bool = False, grey: bool = False) -> np.ndarray:
@@ -140,11 +142,21 @@ def _read_colour(path, linear: bool) -> tuple[np.ndarray, bool]:
             f"{name}: expected a float NPY array of linear values, got {raster.codes.dtype} "
             "(save integer-coded images as PNG or TIFF so their encoding is known)"
         )
-    image, encoding = _decode_colour(raster, linear)
+    image, encoding, assumed = _decode_colour(raster, linear)
     if encoding == "srgb":
         warnings.warn(
             f"{name}: {code_bits(raster.codes)}-bit codes decoded as sRGB to linear values "
             "(if they are linear already, use linear=True / --linear-codes)",
+            InputNotice,
+            stacklevel=3,
+        )
+    elif assumed:
+        # The other half of the rule, said as the 8-bit half is: a 16-bit PNG exported
+        # from an image editor is sRGB, and read as linear it fitted sss_level 1013
+        # where the same image in linear codes gave 598 (fran_front's target).
+        warnings.warn(
+            f"{name}: {code_bits(raster.codes)}-bit codes read as linear values (the file does not say; "
+            "if they are sRGB-encoded, convert the image to linear, e.g. a float EXR)",
             InputNotice,
             stacklevel=3,
         )
