@@ -228,3 +228,20 @@ def test_a_term_fit_below_the_plain_fit_falls_back_to_it(monkeypatch):
     assert any("below the plain fit" in w for w in fit.warnings)
     plain = _fit(source, target, depth, mask)
     np.testing.assert_array_equal(np.asarray(fit.fitted), np.asarray(plain.fitted))
+
+
+def test_a_residual_at_the_level_of_rounding_points_at_no_pixel():
+    from invsss.estimator.summary import CONCENTRATED_FLOOR_DB, concentrated_residual
+
+    rng = np.random.default_rng(2)
+    target = rng.uniform(0.2, 1.0, (40, 50, 1))
+    mask = np.ones((40, 50))
+    spike = np.zeros_like(target)
+    spike[7, 9] = 1.0  # one pixel carries all of the residual
+    # 65 dB below the peak: rounding, nothing to point at (a target that was the source).
+    tiny = 10.0 ** (-(CONCENTRATED_FLOOR_DB + 5.0) / 20.0) * np.sqrt(target.size)
+    assert concentrated_residual([target + tiny * spike], [target], [mask], True) == []
+    # The same pattern 55 dB below it is a pixel to look at.
+    large = tiny * 10.0 ** (10.0 / 20.0)
+    found = concentrated_residual([target + large * spike], [target], [mask], True)
+    assert len(found) == 1 and "the worst at row 7, column 9;" in found[0]
