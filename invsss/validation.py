@@ -275,7 +275,8 @@ def check_same_size(a_shape, b_shape, a_name: str, b_name: str) -> None:
     if tuple(a_shape[:2]) != tuple(b_shape[:2]):
         raise InvalidInputError(
             f"{b_name}: expected {a_shape[0]}x{a_shape[1]} pixels to match {a_name}, "
-            f"got {b_shape[0]}x{b_shape[1]}"
+            f"got {b_shape[0]}x{b_shape[1]} (every image of a pair is on one pixel grid: crop or "
+            "resample them to it; --align registers a shift or rotation, not another size)"
         )
 
 
@@ -291,7 +292,7 @@ def check_same_frame(named_arrays) -> None:
     >>> check_same_frame([("image", np.zeros((4, 6, 3))), ("depth", np.zeros((4, 5)))])
     Traceback (most recent call last):
     ...
-    invsss.validation.InvalidInputError: depth: expected 4x6 pixels to match image, got 4x5
+    invsss.validation.InvalidInputError: depth: expected 4x6 pixels to match image, got 4x5 (every image of a pair is on one pixel grid: crop or resample them to it; --align registers a shift or rotation, not another size)
     """
     (reference_name, reference), *others = named_arrays
     for name, array in others:
@@ -302,9 +303,10 @@ def check_same_frame(named_arrays) -> None:
 def check_target_channels(source_channels: int, target_channels: int, target_name: str) -> None:
     """A target has the source's channel count, or 1 (grey) for an RGB source."""
     if target_channels != source_channels and not (source_channels == 3 and target_channels == 1):
+        hint = (" (a colour target needs a colour source; for a grey source, give the target as grey too)"
+                if source_channels == 1 else " (or 1: a grey target of an RGB source)")
         raise InvalidInputError(
-            f"{target_name}: expected {source_channels} channel(s) like the source "
-            f"(or 1 for a grey target of an RGB source), got {target_channels}"
+            f"{target_name}: expected {source_channels} channel(s) like the source{hint}, got {target_channels}"
         )
 
 

@@ -57,7 +57,7 @@ def test_objects_that_merely_look_like_pairs_are_refused():
 def test_check_pair_names_the_input_that_is_wrong():
     source, target, depth, mask = _arrays()
     names = {"source": "s.exr", "target": "t.exr", "depth": "d.npy", "mask": "m.png"}
-    with pytest.raises(InvalidInputError, match=r"^d.npy: expected 6x8 pixels to match s.exr, got 6x7$"):
+    with pytest.raises(InvalidInputError, match=r"^d.npy: expected 6x8 pixels to match s.exr, got 6x7 \(every image of a pair is on one pixel grid"):
         check_pair(source, target, depth[:, :-1], mask, names)
     with pytest.raises(InvalidInputError, match=r"^t.exr: expected 1 channel\(s\) like the source .*, got 3$"):
         check_pair(source[..., :1], target, depth, mask, names)

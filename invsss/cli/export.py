@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 
@@ -70,5 +71,9 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
     else:
         print(f"wrote {args.out} ({args.format})")
         if args.with_shader:
-            print("wrote the reference shader beside it (docs/renderer.md)")
+            from ..shaders import shader_sources
+
+            # The files export_params wrote beside the constants, by name.
+            names = sorted(shader_sources(os.path.basename(args.out)))
+            print(f"wrote the reference shader beside it: {', '.join(names)} (docs/renderer.md)")
     return 0
