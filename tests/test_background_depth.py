@@ -150,35 +150,39 @@ def test_torch_twin_accepts_renderer_background_like_the_jax_model(background):
     np.testing.assert_allclose(got.numpy(), jax_out, rtol=1e-4, atol=1e-6)
 
 
-def test_a_loaded_pair_is_looked_at_for_background_once_and_on_the_depth_as_read(tmp_path):
+def _notices(folder, image, depth_map, mask_map, about: str, arrays_too: bool = False) -> list[str]:
+    """The notices containing ``about`` that a pair loaded from files and fitted
+    gives (then the same arrays given to the fit directly, with ``arrays_too``)."""
     import warnings
 
     import jax
 
     from invsss.estimator.inputs import prepare_pairs
 
-    image, depth, mask = _scene()
-    invsss.write_image(tmp_path / "s.exr", image.astype(np.float32))
-    invsss.write_image(tmp_path / "t.exr", image.astype(np.float32))
-    def notices(depth_map, mask_map):
-        np.save(tmp_path / "d.npy", depth_map)
-        np.save(tmp_path / "m.npy", mask_map)
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            pair = invsss.load_pair(tmp_path / "s.exr", tmp_path / "t.exr", tmp_path / "d.npy", tmp_path / "m.npy")
-            with jax.enable_x64(True):
-                prepare_pairs([pair])
-        return [str(w.message) for w in caught if "far plane" in str(w.message)]
+    invsss.write_image(folder / "s.exr", image.astype(np.float32))
+    np.save(folder / "d.npy", depth_map)
+    np.save(folder / "m.npy", mask_map)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        pair = invsss.load_pair(folder / "s.exr", folder / "s.exr", folder / "d.npy", folder / "m.npy")
+        with jax.enable_x64(True):
+            prepare_pairs([pair])
+            if arrays_too:
+                prepare_pairs([(image, image, depth_map, mask_map)])
+    return [str(w.message) for w in caught if about in str(w.message)]
 
+
+def test_a_loaded_pair_is_looked_at_for_background_once_and_on_the_depth_as_read(tmp_path):
+    image, depth, mask = _scene()
     # 0 off the mask, as renderers write it: once filled, the skin's flat edge is the
     # largest depth and covers most of the frame, which read as a far plane before.
-    assert notices(_renderer_depth(depth, mask, 0.0), mask) == []
+    assert _notices(tmp_path, image, _renderer_depth(depth, mask, 0.0), mask, "far plane") == []
     # A far plane the mask reaches into: one notice, naming the file, not a second as "mask".
     leaky = mask.copy()
     leaky[0, 0] = 1.0
     far = np.where(leaky > 0, depth, 1e4)
     far[0, 0] = 1e4
-    found = notices(far, leaky)
+    found = _notices(tmp_path, image, far, leaky, "far plane")
     assert len(found) == 1 and found[0].startswith(str(tmp_path / "m.npy"))
 
 
@@ -201,27 +205,10 @@ def test_a_soft_rim_may_lack_depth_where_the_background_does():
 
 
 def test_depth_in_whole_millimetres_is_noted_once_and_smooth_depth_is_not(tmp_path):
-    import warnings
-
-    import jax
-
-    from invsss.estimator.inputs import prepare_pairs
-
     image, depth, mask = _scene()  # slopes of up to 4 mm a pixel on the bump, 0 on the flat edge
     y, x = np.mgrid[0:H, 0:W]
     smooth = depth + 0.2 * x + 0.15 * y  # and a tilt: no two neighbours at one depth
-    invsss.write_image(tmp_path / "s.exr", image.astype(np.float32))
-    np.save(tmp_path / "m.npy", mask)
-
-    def notices(depth_map):
-        np.save(tmp_path / "d.npy", depth_map)
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            pair = invsss.load_pair(tmp_path / "s.exr", tmp_path / "s.exr", tmp_path / "d.npy", tmp_path / "m.npy")
-            with jax.enable_x64(True):
-                prepare_pairs([pair])
-                prepare_pairs([(image, image, depth_map, mask)])  # arrays: noted as "depth"
-        return [str(w.message).split(":")[0] for w in caught if "comes in steps of" in str(w.message)]
-
-    assert notices(smooth) == []
-    assert notices(np.round(smooth)) == [str(tmp_path / "d.npy"), "depth"]
+    assert _notices(tmp_path, image, smooth, mask, "comes in steps of", arrays_too=True) == []
+    found = _notices(tmp_path, image, np.round(smooth), mask, "comes in steps of", arrays_too=True)
+    # Once for the file, once for the same arrays given directly: not twice for the file.
+    assert [m.split(":")[0] for m in found] == [str(tmp_path / "d.npy"), "depth"]
