@@ -11,7 +11,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ..forward.params import PARAM_NAMES
+from ..forward.params import PARAM_NAMES, entry_name
 from .canvas import crop
 from .diagnostics import MISALIGNMENT_PX, masked_psnr, masked_ssim, misalignment
 from .parametrisation import LIGHT_UNKNOWNS
@@ -20,11 +20,6 @@ from .result import FitResult, masked_list
 from .uncertainty import gauss_newton_uncertainty, structural_reasons
 
 __all__ = ["concentrated_residual", "entry_name", "mean_psnr", "summarise"]
-
-
-def entry_name(name, index) -> str:
-    """``"weights[2]"`` or ``"weights[2,0]"`` for an entry of an array parameter."""
-    return f"{name}[{','.join(str(int(i)) for i in index)}]"
 
 
 def mean_psnr(fitted, targets, masks) -> float:
@@ -114,6 +109,7 @@ def rival_basin_warning(rival_basins, level_determined: bool) -> str:
         "at a measured profile (fix weights=...) to decide"
     )
 
+
 def _uncertainty(problem, path, final, natural, nuisance, messages):
     """Standard errors and undetermined parameters: ``(unc, stderr, undetermined)``;
     appends the reasons to ``messages``."""
@@ -174,9 +170,9 @@ def _goodness(problem, final, single, messages):
 #: normal facing away from the camera) put 90 % of the loss on ten pixels.
 CONCENTRATED_PIXELS = 0.001
 CONCENTRATED_SHARE = 0.25
-#: ... unless the residual is this far (dB) below the target's peak on the mask: a
-#: fit that good leaves rounding, which has no wrong buffer to point at (a target
-#: that was the source itself warned at 82.8 dB).
+#: ... unless the pair's PSNR (as the fit reports it) is at least this (dB): a fit
+#: that good leaves rounding, which has no wrong buffer to point at (a target that
+#: was the source itself warned at 82.8 dB).
 CONCENTRATED_FLOOR_DB = 60.0
 
 
@@ -189,9 +185,7 @@ def concentrated_residual(fitted, targets, masks, single) -> list[str]:
         total = float(per_pixel.sum())
         if not total > 0.0:
             continue
-        peak = float(np.max(np.abs(np.asarray(t, np.float64)).reshape(f.shape)[weight > 0]))
-        mean_square = total / (float(weight.sum()) * f.shape[-1])
-        if mean_square <= peak**2 * 10.0 ** (-CONCENTRATED_FLOOR_DB / 10.0):
+        if masked_psnr(f, np.asarray(t, np.float64).reshape(f.shape), weight) >= CONCENTRATED_FLOOR_DB:
             continue
         count = max(1, int(np.ceil(CONCENTRATED_PIXELS * np.count_nonzero(weight))))
         flat = per_pixel.ravel()

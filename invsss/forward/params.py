@@ -16,6 +16,7 @@ from ..validation import InputNotice, InvalidInputError, is_concrete, number_arr
 
 __all__ = [
     "PARAM_NAMES",
+    "entry_name",
     "SSSParams",
     "check_parameter_values",
     "check_plausible",
@@ -27,6 +28,11 @@ __all__ = [
 #: twin) uses this tuple.
 PARAM_NAMES = ("sss_level", "correction", "maxdd", "weights", "variances")
 
+
+def entry_name(name: str, index) -> str:
+    """``"weights[2]"`` or ``"weights[2,0]"`` for an entry of an array parameter: how
+    a fit's ``undetermined`` list and a params file's filled entries name it."""
+    return f"{name}[{','.join(str(int(i)) for i in index)}]"
 
 
 class SSSParams(eqx.Module):

@@ -24,7 +24,7 @@ from typing import Annotated, Any, Literal, Optional, Union
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from ..forward.params import PARAM_NAMES, SSSParams
+from ..forward.params import PARAM_NAMES, SSSParams, entry_name
 from ..forward.passes import TAP_WEIGHTS
 from .result_dir import MANIFEST_NAME, result_state
 from ..forward.screen_space import MODELS
@@ -284,7 +284,7 @@ def _null_entries(value, where: str) -> list[str]:
             return [found for i, item in enumerate(v) for found in indices(item, (*index, i))]
         return [index] if v is None else []
 
-    return [f"{where}[{','.join(map(str, i))}]" if i else where for i in indices(value, ())]
+    return [entry_name(where, i) if i else where for i in indices(value, ())]
 
 
 def _filled(value, estimate):
