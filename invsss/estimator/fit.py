@@ -212,6 +212,5 @@ def _require_light_buffers(pairs, single: bool, terms) -> None:
     if not terms or not isinstance(pairs, (list, tuple)):
         return  # prepare_pairs names a malformed sequence
     for i, pair in enumerate(pairs):
-        buffers = (LightBuffers(pair.normal, pair.light, pair.key, pair.fill_light)
-                   if isinstance(pair, ImagePair) else LightBuffers())
+        buffers = pair.light_buffers if isinstance(pair, ImagePair) else LightBuffers()
         buffers.require(terms, "light_buffers." if single else f"pairs[{i}].")

@@ -265,7 +265,6 @@ def choose_basin(problem, finished, robust):
     return chosen
 
 
-
 def active_set(problem, path, run, prefix: str = "") -> None:
     """Weights are ratios on the simplex: hold negative ones at 0, re-solving
     after each change. An interrupted fit still gets this pass, without the

@@ -30,7 +30,8 @@ def float_array(x, dtype=None, name: str | None = None) -> Array:
     dtype = dtype or jnp.result_type(float)
     if isinstance(x, jax.Array):
         return jnp.asarray(x, dtype=dtype)
-    if np.asarray(x).dtype.kind in "US":
+    host = np.asarray(x)
+    if host.dtype.kind in "US":
         # NumPy would parse "600" as 600.0; a params file refuses text, and so does this.
         raise InvalidInputError(f"{name + ': ' if name else ''}expected numbers, got the text {x!r}")
-    return jax.device_put(np.asarray(x, dtype))
+    return jax.device_put(host.astype(dtype, copy=False))
