@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..validation import InvalidInputError
+
 __all__ = [
     "SHADER_DIR",
     "SHADER_FILES",
@@ -61,15 +63,64 @@ class ShaderUnavailable(RuntimeError):
     """No HLSL compiler or no Vulkan device: the message says which and how to get it."""
 
 
-def shader_sources(constants_name: str = CONSTANTS_FILE) -> dict[str, str]:
-    """The text of every shader file, by name, including ``constants_name`` for the constants."""
+def shader_sources(constants_name: str = CONSTANTS_FILE, *, model: str | None = None) -> dict[str, str]:
+    """The text of the shader files, by name, each including ``constants_name`` for the constants.
+
+    Parameters
+    ----------
+    constants_name : str
+        The file name the shaders ``#include`` the exported constants by
+        (default ``invsss_constants.hlsl``).
+    model : str, optional
+        A key of :data:`MODEL_SHADERS`: only the files that model's shader
+        needs, its own file and the files it includes (the light terms' files,
+        ``invsss_law.hlsl`` and ``invsss_light_terms.hlsl``, are not part of
+        any model's). Default: every file of :data:`SHADER_FILES`.
+
+    Returns
+    -------
+    dict
+        File name to text, in the order of :data:`SHADER_FILES`.
+
+    Raises
+    ------
+    InvalidInputError
+        A ``model`` that has no reference shader.
+
+    Examples
+    --------
+    >>> list(shader_sources(model="separable"))
+    ['invsss_common.hlsl', 'invsss_separable.hlsl']
+    """
+    names = SHADER_FILES if model is None else _model_files(model)
     out = {}
-    for name in SHADER_FILES:
+    for name in names:
         text = (SHADER_DIR / name).read_text()
         if constants_name != CONSTANTS_FILE:
             text = text.replace(f'#include "{CONSTANTS_FILE}"', f'#include "{constants_name}"')
         out[name] = text
     return out
+
+
+def _model_files(model) -> tuple[str, ...]:
+    """The files of ``model``'s shader: its own and, transitively, what it includes (not the constants)."""
+    if not isinstance(model, str) or model not in MODEL_SHADERS:
+        raise InvalidInputError(
+            f"model: expected one of {', '.join(MODEL_SHADERS)} (a reference shader), got {model!r}"
+        )
+    needed, todo = set(), [MODEL_SHADERS[model][0]]
+    while todo:
+        name = todo.pop()
+        if name in needed:
+            continue
+        needed.add(name)
+        for line in (SHADER_DIR / name).read_text().splitlines():
+            words = line.split()
+            if len(words) == 2 and words[0] == "#include":
+                included = words[1].strip('"')
+                if included != CONSTANTS_FILE:
+                    todo.append(included)
+    return tuple(name for name in SHADER_FILES if name in needed)
 
 
 def find_compiler() -> str | None:
