@@ -359,11 +359,30 @@ def _separable_constants(weights, variances, taps, strength) -> dict:
 #: How each layout of :data:`invsss.forward.models.LAYOUTS` is exported.
 # --- issue 34: the burley model's disk (invsss.forward.burley_screen_space) ---
 def _disk_constants(entry, weights, variances, options) -> dict:
-    """The ``burley`` layout: shape parameters and the fixed sample pattern."""
+    """The ``burley`` layout: shape parameters and the fixed sample pattern.
+
+    ``shapeParameters`` holds Burley's ``d`` (scene units), one for every
+    channel or one per red, green and blue, and ``numShapeParameters`` their
+    count (HLSL has no length of an array). Sample ``j`` of ``numSamples`` sits
+    at ``pixel + max(d) * sampleRadii[j] * sssLevel / depth * (sampleCos[j],
+    sampleSin[j])``; ``invsss/shaders/invsss_burley.hlsl`` gives the weights.
+    ``units`` replaces the 7-tap layouts' text, which does not apply.
+    """
     from ..forward.burley_screen_space import sample_pattern
 
+    if variances.ndim != 1 or variances.size not in (1, 3):
+        raise InvalidInputError(
+            f"params.variances: a burley export takes d^2 for every channel (1 value) or for red, green "
+            f"and blue (3), got {variances.size}"
+        )
     x, cos_a, sin_a = sample_pattern()
-    return {"shapeParameters": _floats(np.sqrt(variances)), "numSamples": int(x.size),
+    units = _SCALE_UNITS + (
+        "shapeParameters (Burley's d) in scene units; sampleRadii in units of max(d), sample j at "
+        "pixel + max(d) * sampleRadii[j] * sssLevel / depth * (sampleCos[j], sampleSin[j]) "
+        "(correction and maxdd unused)"
+    )
+    return {"units": units, "shapeParameters": _floats(np.sqrt(variances)),
+            "numShapeParameters": int(variances.size), "numSamples": int(x.size),
             "sampleRadii": _floats(x), "sampleCos": _floats(cos_a), "sampleSin": _floats(sin_a)}
 
 

@@ -48,6 +48,7 @@ SHADER_FILES = (
     "invsss_sog.hlsl",
     "invsss_thesis.hlsl",
     "invsss_separable.hlsl",
+    "invsss_burley.hlsl",
     "invsss_law.hlsl",
     "invsss_light_terms.hlsl",
 )
@@ -56,6 +57,7 @@ MODEL_SHADERS = {
     "sog": ("invsss_sog.hlsl", ("BlurPassCS", "AccumulateCS")),
     "thesis": ("invsss_thesis.hlsl", ("BlurPassCS",)),
     "separable": ("invsss_separable.hlsl", ("SeparablePassCS",)),
+    "burley": ("invsss_burley.hlsl", ("BurleyDiskCS",)),
 }
 
 
@@ -296,7 +298,9 @@ def run_shader(
     constants_hlsl : str
         The text ``invsss export --format hlsl`` writes (or :func:`invsss.io.export.to_hlsl`);
         it becomes ``invsss_constants.hlsl`` beside the shaders.
-    model : {"sog", "thesis", "separable"}
+    model : {"sog", "thesis", "separable", "burley"}
+        The constants must be of this model (``burley``: a burley fit's, whose
+        ``shapeParameters`` the shader reads).
     normal, light, key, fill_light : arrays, optional
         The light terms' buffers (view-space unit vectors (H, W, 3); the key
         light's part of the source, shaped like ``image``; the direction towards
@@ -309,7 +313,7 @@ def run_shader(
         Receives the compiler's messages per entry point (file, entry, text).
     """
     if model not in MODEL_SHADERS:
-        raise ValueError(f"model: expected one of {', '.join(MODEL_SHADERS)}, got {model!r}")
+        raise InvalidInputError(f"model: expected one of {', '.join(MODEL_SHADERS)}, got {model!r}")
     device = _device(adapter_name)
     h, w = np.shape(depth)
     channels = 1 if np.ndim(image) == 2 else np.shape(image)[2]
@@ -359,10 +363,13 @@ def run_shader(
             for i in range(passes):
                 run("BlurPassCS", a, b, i, axis)
                 a, b = b, a
-    else:
+    elif model == "separable":
         for axis in (0, 1):
             run("SeparablePassCS", a, b, 0, axis)
             a, b = b, a
+    else:  # burley: one gather over the disk
+        run("BurleyDiskCS", a, b)
+        a, b = b, a
     if after_blur:
         run("LightTermsCS", a, b)
         a = b
