@@ -20,7 +20,7 @@ from invsss.io.engine_profiles import (
     engine_profile,
     hdrp_distances,
     hdrp_profile,
-    searchlight_scaling,
+    perpendicular_scaling,
     unreal_distances,
     unreal_profile,
 )
@@ -196,12 +196,13 @@ def test_engine_fields_convert_both_ways():
     np.testing.assert_allclose(hdrp_distances(hdrp), d, rtol=1e-14)
     albedo = [0.9, 0.55, 0.4]
     unreal = unreal_profile(d, albedo)
-    # Christensen & Burley's searchlight fit typed in again: s = 1.85 - A + 7 |A - 0.8|^3.
+    # Christensen & Burley's perpendicular fit typed in again, s = 1.85 - A + 7 |A - 0.8|^3,
+    # with Unreal's 0.6 between its mean free path and d (Dmfp2MfpMagicNumber).
     s = np.array([1.85 - a + 7 * abs(a - 0.8) ** 3 for a in albedo])
     np.testing.assert_allclose(np.asarray(unreal["MeanFreePathColor"]) * unreal["MeanFreePathDistance"],
-                               d * s / 10.0, rtol=1e-14)  # cm
+                               0.6 * d * s / 10.0, rtol=1e-14)  # cm
     np.testing.assert_allclose(unreal_distances(unreal), d, rtol=1e-14)
-    assert searchlight_scaling(0.8) == pytest.approx(1.05)
+    assert perpendicular_scaling(0.8) == pytest.approx(1.05)
 
 
 def test_export_names_what_the_pair_cannot_determine():

@@ -12,12 +12,17 @@ HDRP (``format="hdrp"``)
     is the size of one scene unit in metres (HDRP converts view-space positions
     with ``mmPerUnit = 1000 worldScale``).
 Unreal (``format="unreal"``)
-    ``MeanFreePathColor`` times ``MeanFreePathDistance`` (world units, cm) is
-    the mean free path ``l`` per channel; the engine turns it into Burley's
-    shape with the albedo ``A`` (``SurfaceAlbedo``) through Christensen &
-    Burley's fit for the searchlight configuration, ``d = l / s(A)`` with
-    ``s(A) = 1.85 - A + 7 |A - 0.8|^3`` (their section 5; Unreal's
-    ``GetPerpendicularScalingFactor``).
+    ``MeanFreePathColor`` times ``MeanFreePathDistance`` (cm) is the mean free
+    path ``l`` per channel; the engine turns it into Burley's shape with the
+    albedo ``A`` (``SurfaceAlbedo``) as ``d = 10 l / (0.6 s(A))`` mm, where
+    ``s(A) = 1.85 - A + 7 |A - 0.8|^3`` is Christensen & Burley's fit for light
+    entering perpendicular to the surface (their section 5; Unreal's
+    ``GetPerpendicularScalingFactor``) and 0.6 is Unreal's
+    ``Dmfp2MfpMagicNumber`` (``SubsurfaceProfile.cpp``). The editor holds
+    ``MeanFreePathDistance`` at 0.1 cm or more: a smaller widest ``l`` is
+    written as distance 0.1 with the colour scaled down, as Unreal's own asset
+    upgrade does (``UpgradeDiffuseMeanFreePathToMeanFreePath``).
+    :mod:`invsss.io.engine_readings` follows the engine's reading step by step.
 
 One photograph pair determines ``L d_c`` (the blur in pixels), hence ``d_c`` in
 the depth's unit once ``sss_level`` is known (the camera's focal length in
@@ -38,8 +43,9 @@ from ..validation import InvalidInputError
 __all__ = [
     "ENGINE_FORMATS",
     "UNREAL_DEFAULT_ALBEDO",
+    "perpendicular_scaling",
     "searchlight_scaling",
-    "dmfp_scaling",
+    "UNREAL_DMFP_TO_MFP",
     "hdrp_profile",
     "hdrp_distances",
     "unreal_profile",
@@ -58,24 +64,41 @@ UNREAL_DEFAULT_ALBEDO = (0.91058, 0.338275, 0.2718)
 _MM_PER_CM = 10.0
 
 
-def searchlight_scaling(albedo):
+#: Unreal's ``Dmfp2MfpMagicNumber`` (SubsurfaceProfile.cpp): its diffuse mean free
+#: path is ``l s_sl(A) / (0.6 s(A))``, so ``d = l / (0.6 s(A))``.
+UNREAL_DMFP_TO_MFP = 0.6
+#: Unreal's editor range of ``MeanFreePathDistance`` (cm): ClampMin, ClampMax.
+_UNREAL_DISTANCE_CM = (0.1, 50.0)
+#: The smallest colour and albedo Unreal's profile texture keeps (CreateTexture's Bias).
+_UNREAL_FLOOR = 0.009
+#: Unreal encodes the diffuse mean free path up to 500 mm.
+_UNREAL_DMFP_MAX_MM = 500.0
+
+
+def perpendicular_scaling(albedo):
     """Christensen & Burley's ``s(A) = 1.85 - A + 7 |A - 0.8|^3``: ``d = l / s`` for mean free path ``l``.
+
+    Their fit for light entering perpendicular to the surface (Unreal's
+    ``GetPerpendicularScalingFactor``).
 
     Examples
     --------
-    >>> round(float(searchlight_scaling(0.8)), 12)
+    >>> round(float(perpendicular_scaling(0.8)), 12)
     1.05
     """
     a = np.asarray(albedo, np.float64)
     return 1.85 - a + 7.0 * np.abs(a - 0.8) ** 3
 
 
-def dmfp_scaling(albedo):
+def searchlight_scaling(albedo):
     """Christensen & Burley's ``s(A) = 3.5 + 100 (A - 0.33)^4``: ``d = l_d / s`` for diffuse mean free path ``l_d``.
+
+    Their fit for the searchlight configuration (Unreal's
+    ``GetSearchLightDiffuseScalingFactor``).
 
     Examples
     --------
-    >>> round(float(dmfp_scaling(0.33)), 12)
+    >>> round(float(searchlight_scaling(0.33)), 12)
     3.5
     """
     a = np.asarray(albedo, np.float64)
@@ -135,28 +158,64 @@ def hdrp_distances(fields: dict) -> np.ndarray:
 def unreal_profile(d_mm, albedo=UNREAL_DEFAULT_ALBEDO, world_unit_scale: float = 0.1) -> dict:
     """Unreal Subsurface Profile fields (Burley, mean free path) for shape parameters ``d_mm``.
 
-    ``l_c = d_c s(A_c)`` (:func:`searchlight_scaling`), in cm as Unreal's
-    ``MeanFreePathDistance`` takes it.
+    ``l_c = 0.6 d_c s(A_c) / 10`` cm (:func:`perpendicular_scaling`,
+    :data:`UNREAL_DMFP_TO_MFP`); the widest ``l`` is ``MeanFreePathDistance`` and
+    the colour ``l_c / max(l)``, except that a widest ``l`` under the editor's
+    0.1 cm is written as 0.1 with the colour scaled by ``max(l) / 0.1``. A
+    profile Unreal would clamp (a channel under 0.009 of the distance, a
+    distance over 50 cm, a diffuse mean free path over 500 mm) is refused.
+
+    ``Implementation`` (Unreal 5.6 and later) selects the Burley sampling
+    (``SIH_AFIS``); ``bEnableBurley`` and ``bEnableMeanFreePath`` are hidden in
+    Unreal 5's editor but must be true, or loading the asset converts its
+    values as an older profile's.
 
     Examples
     --------
-    >>> p = unreal_profile([1.0, 0.5, 0.25], albedo=0.8)
+    >>> p = unreal_profile([10.0, 5.0, 2.5], albedo=0.8)
     >>> [round(x, 6) for x in p["MeanFreePathColor"]], round(p["MeanFreePathDistance"], 6)
-    ([1.0, 0.5, 0.25], 0.105)
+    ([1.0, 0.5, 0.25], 0.63)
+    >>> p = unreal_profile([1.0, 0.5, 0.25], albedo=0.8)
+    >>> [round(x, 6) for x in p["MeanFreePathColor"]], p["MeanFreePathDistance"]
+    ([0.63, 0.315, 0.1575], 0.1)
     """
     d = _distances(d_mm, "d_mm")
     a = np.broadcast_to(np.asarray(albedo, np.float64).reshape(-1), (3,))
-    if not np.all((a > 0) & (a < 1)):
-        raise InvalidInputError(f"albedo: expected one or three values in (0, 1), got {np.asarray(albedo).tolist()}")
-    mfp_cm = d * searchlight_scaling(a) / _MM_PER_CM
+    if a.size != 3 or not np.all((a >= 0.01) & (a <= 1.0)):
+        raise InvalidInputError(
+            f"albedo: expected one or three values in [0.01, 1] (Unreal's range), got {np.asarray(albedo).tolist()}"
+        )
+    mfp_cm = UNREAL_DMFP_TO_MFP * d * perpendicular_scaling(a) / _MM_PER_CM
     colour, distance = _colour_and_scale(mfp_cm)
+    low, high = _UNREAL_DISTANCE_CM
+    if distance < low:
+        # Unreal's own upgrade of small profiles: the distance at its floor, the colour scaled down.
+        colour = (np.asarray(colour) * distance / low).tolist()
+        distance = low
+    if distance > high:
+        raise InvalidInputError(
+            f"d_mm: the widest mean free path {distance:g} cm is over Unreal's {high:g} cm "
+            f"(d = {d.max():g} mm); is the fit's depth in mm?"
+        )
+    if min(colour) < _UNREAL_FLOOR:
+        raise InvalidInputError(
+            f"d_mm: a channel's mean free path is {min(colour):.3g} of MeanFreePathDistance, under the "
+            f"{_UNREAL_FLOOR} Unreal keeps (it would render wider); d = {d.tolist()} mm"
+        )
+    if np.any(d * searchlight_scaling(a) > _UNREAL_DMFP_MAX_MM):
+        raise InvalidInputError(
+            f"d_mm: {d.tolist()} mm is over the {_UNREAL_DMFP_MAX_MM:g} mm diffuse mean free path Unreal encodes"
+        )
     return {"SurfaceAlbedo": a.tolist(), "MeanFreePathColor": colour, "MeanFreePathDistance": distance,
             "WorldUnitScale": _positive(world_unit_scale, "world_unit_scale"),
-            "bEnableBurley": True, "bEnableMeanFreePath": True}
+            "Implementation": "SIH_AFIS", "bEnableBurley": True, "bEnableMeanFreePath": True}
 
 
 def unreal_distances(fields: dict) -> np.ndarray:
-    """Burley's ``d`` per channel (mm) from Unreal fields: ``10 colour distance / s(A)``, shape (3,).
+    """Burley's ``d`` per channel (mm) from Unreal fields: ``10 colour distance / (0.6 s(A))``, shape (3,).
+
+    The inverse of :func:`unreal_profile` within the engine's ranges; for what
+    Unreal does outside them, :func:`invsss.io.engine_readings.unreal_reading`.
 
     Examples
     --------
@@ -165,7 +224,8 @@ def unreal_distances(fields: dict) -> np.ndarray:
     """
     colour = np.asarray(fields["MeanFreePathColor"], np.float64)[:3]
     mfp_mm = colour * _positive(fields["MeanFreePathDistance"], "MeanFreePathDistance") * _MM_PER_CM
-    return mfp_mm / searchlight_scaling(np.asarray(fields["SurfaceAlbedo"], np.float64)[:3])
+    albedo = np.asarray(fields["SurfaceAlbedo"], np.float64)[:3]
+    return mfp_mm / (UNREAL_DMFP_TO_MFP * perpendicular_scaling(albedo))
 
 
 def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None, world_scale=None) -> dict:
@@ -229,6 +289,6 @@ def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None
         undetermined["IOR"] = "the blur does not see the specular reflection"
         undetermined["Tint, BoundaryColorBleed, TransmissionTintColor"] = "not in a front-lit photograph pair"
         units = ("MeanFreePathColor x MeanFreePathDistance = mean free path l per channel in cm; "
-                 "Burley's d = 10 l / (1.85 - A + 7 |A - 0.8|^3) mm")
+                 "Burley's d = 10 l / (0.6 (1.85 - A + 7 |A - 0.8|^3)) mm (Unreal 5; Implementation: Unreal 5.6+)")
     return {"format": format, "fields": fields, "shapeParameterMm": d.reshape(-1).tolist(),
             "undetermined": undetermined, "units": units}

@@ -1,0 +1,95 @@
+"""The engines' assets read back as the engines read them (issue 46).
+
+``invsss.io.engine_profiles`` writes an HDRP Diffusion Profile or an Unreal Subsurface
+Profile from Burley's ``d``; ``invsss.io.engine_readings`` follows each engine's own
+code from those fields to the ``d`` it renders. Export then reading must give ``d``
+back, over the albedos and distances skin and its exports span, including the
+distances under Unreal's 0.1 cm clamp.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from invsss.io.engine_profiles import hdrp_profile, unreal_profile
+from invsss.io.engine_readings import UNREAL_LIMITS, hdrp_reading, unreal_reading
+from invsss.validation import InvalidInputError
+
+ALBEDOS = np.linspace(0.05, 0.95, 20)
+SCALES = np.geomspace(0.05, 5.0, 9)  # the widest channel's d, mm
+RATIOS = ([1.0, 1.0, 1.0], [1.0, 0.5, 0.25], [0.25, 1.0, 0.5], [1.0, 0.1, 0.01])
+
+
+def _profiles():
+    for scale in SCALES:
+        for ratio in RATIOS:
+            d = scale * np.asarray(ratio)
+            if d.min() >= 0.05 - 1e-12:  # the issue's range, 0.05 to 5 mm
+                yield d
+
+
+@pytest.mark.parametrize("albedo", ALBEDOS)
+def test_unreal_renders_the_exported_distances(albedo):
+    for d in _profiles():
+        fields = unreal_profile(d, albedo)
+        np.testing.assert_allclose(unreal_reading(fields), d, rtol=1e-6)
+
+
+def test_unreal_reads_per_channel_albedos():
+    albedo = [0.91058, 0.338275, 0.2718]  # Unreal's default SurfaceAlbedo
+    for d in _profiles():
+        np.testing.assert_allclose(unreal_reading(unreal_profile(d, albedo)), d, rtol=1e-6)
+
+
+def test_unreal_fields_stay_inside_the_editor_ranges():
+    # Fitted skin (0.25-1.29 mm) lies mostly under the 0.1 cm distance floor: the
+    # export must move the scale into the colour, not write a distance the editor clamps.
+    low, high = UNREAL_LIMITS["MeanFreePathDistance"]
+    for albedo in (0.05, 0.5, 0.95):
+        for d in _profiles():
+            fields = unreal_profile(d, albedo)
+            assert low <= fields["MeanFreePathDistance"] <= high
+            colour = np.asarray(fields["MeanFreePathColor"])
+            assert colour.max() <= 1.0 and colour.min() >= UNREAL_LIMITS["render_floor"]
+            assert fields["Implementation"] == "SIH_AFIS"
+            assert fields["bEnableBurley"] is True and fields["bEnableMeanFreePath"] is True
+    skin = unreal_profile([1.29, 0.6, 0.25], [0.9, 0.55, 0.4])
+    assert skin["MeanFreePathDistance"] == 0.1 and max(skin["MeanFreePathColor"]) < 1.0
+
+
+def test_unreal_reading_applies_the_engines_own_factor():
+    # Typed from SubsurfaceProfile.cpp: dmfp = mfp * s_sl / s_perp * 10 / 0.6 (mm), and
+    # the shader's profile takes d = dmfp / s_sl; A = 0.8: s_perp = 1.05.
+    fields = {"SurfaceAlbedo": [0.8] * 3, "MeanFreePathColor": [1.0, 0.5, 0.25], "MeanFreePathDistance": 0.63}
+    np.testing.assert_allclose(unreal_reading(fields), [10.0, 5.0, 2.5], rtol=1e-12)
+    # A distance under the editor's floor is held at 0.1 cm, as the editor holds it.
+    small = dict(fields, MeanFreePathDistance=0.02)
+    np.testing.assert_allclose(unreal_reading(small), unreal_reading(dict(fields, MeanFreePathDistance=0.1)))
+
+
+def test_unreal_refuses_what_the_engine_would_clamp():
+    with pytest.raises(InvalidInputError, match="0.009"):
+        unreal_profile([5.0, 0.5, 0.02], 0.5)  # a channel 250x narrower than the widest
+    with pytest.raises(InvalidInputError, match="50 cm"):
+        unreal_profile([600.0, 300.0, 150.0], 0.5)
+    with pytest.raises(InvalidInputError, match="500 mm"):
+        unreal_profile([200.0, 100.0, 50.0], 0.5)  # l = 18.5 cm, but d s_sl(A) = 700 mm
+    with pytest.raises(InvalidInputError, match="albedo"):
+        unreal_profile([1.0, 0.5, 0.25], 0.0)
+    with pytest.raises(InvalidInputError, match="bEnableMeanFreePath"):
+        unreal_reading(dict(unreal_profile([1.0, 0.5, 0.25], 0.5), bEnableMeanFreePath=False))
+
+
+@pytest.mark.parametrize("world_scale", [0.01, 1.0])
+def test_hdrp_renders_the_exported_distances(world_scale):
+    for d in _profiles():
+        fields = hdrp_profile(d, world_scale=world_scale)
+        np.testing.assert_allclose(hdrp_reading(fields), d, rtol=1e-6)
+        assert max(fields["scatteringDistance"]) == 1.0
+
+
+def test_hdrp_reading_caps_the_shape_parameter():
+    # HDRP's UpdateKernel: S = min(2^24, 1 / sd), so a zero channel renders d = 2^-24 mm.
+    d = hdrp_reading({"scatteringDistance": [1.0, 0.0, 0.5], "scatteringDistanceMultiplier": 2.0})
+    np.testing.assert_allclose(d, [2.0, 2.0**-24, 1.0])
