@@ -13,7 +13,7 @@ import pytest
 from invsss import InvalidInputError, SSSParams, render, write_params
 from invsss.cli import main
 from invsss.io.export import export_params, scale_to_resolution, shader_constants, to_hlsl
-from invsss.shaders import SHADER_FILES, compile_entry, find_compiler
+from invsss.shaders import MODEL_SHADERS, compile_entry, find_compiler, shader_sources
 
 #: Entry points and the constants they need (a file is built only where its constants exist).
 ENTRIES = {
@@ -45,11 +45,13 @@ def test_cli_export_with_shader_compiles_without_a_message(tmp_path, model, caps
     out.parent.mkdir()
     assert main(["export", str(params), "--format", "hlsl", "--out", str(out), "--with-shader"]) == 0
     assert "reference shader" in capsys.readouterr().out
-    assert sorted(os.listdir(out.parent)) == sorted([out.name, *SHADER_FILES])
+    # The model's files and the light terms' (the fit uses them), not the other models'.
+    written = {*shader_sources(model=model), *(file for file, _ in LIGHT_ENTRIES)}
+    assert sorted(os.listdir(out.parent)) == sorted([out.name, *written])
     assert out.read_text() == export_params(params, format="hlsl")
     # The shader includes the constants under the name they were written to.
-    sog = (out.parent / "invsss_sog.hlsl").read_text()
-    assert '#include "skin_constants.hlsl"' in sog and '#include "invsss_constants.hlsl"' not in sog
+    own = (out.parent / MODEL_SHADERS[model][0]).read_text()
+    assert '#include "skin_constants.hlsl"' in own and '#include "invsss_constants.hlsl"' not in own
     for file, entry in ENTRIES[model] + LIGHT_ENTRIES:
         # -I a folder without the constants: only the written file's own folder resolves them.
         _, messages = compile_entry(out.parent / file, entry, tmp_path)

@@ -9,8 +9,9 @@ import sys
 
 from ..runtime.interrupts import StopSignals
 from ..validation import InvalidInputError
-from ..io.export import EXPORT_FORMATS, export_params
-from .arguments import add_model_arguments
+from ..io import read_params
+from ..io.export import EXPORT_FORMATS, export_params, shader_files
+from .arguments import add_model_arguments, model_choice
 
 
 def add_parser(subparsers) -> None:
@@ -31,7 +32,11 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--strength", type=float, default=1.0,
                         help="separable only: blend of the kernel with the identity (default: 1)")
     parser.add_argument("--out", default=None, metavar="FILE",
-                        help="output file (default: standard output)")
+                        help="output file (default: standard output); a file that is already there "
+                        "is refused unless --overwrite is given")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace --out, and with --with-shader the shader files, when they are "
+                        "already there (other files beside them are kept)")
     # The engines' profile assets (invsss.io.engine_profiles).
     parser.add_argument("--mm-per-unit", type=float, default=1.0,
                         help="hdrp/unreal: millimetres per unit of the fitted pair's depth (default: 1)")
@@ -60,20 +65,32 @@ def _engine_options(args) -> dict | None:
     return {"mm_per_unit": args.mm_per_unit, "albedo": albedo, "world_scale": args.world_scale}
 
 
+def _checked_albedo(engine: dict | None) -> dict | None:
+    """Refuse an ``--albedo`` of a count other than one or three (R/G/B) in one line."""
+    albedo = (engine or {}).get("albedo")
+    if albedo is not None and len(albedo) not in (1, 3):
+        raise InvalidInputError(
+            f"--albedo: expected one number or three (R/G/B), got {len(albedo)} ({'/'.join(map(str, albedo))})"
+        )
+    return engine
+
+
 def run(args: argparse.Namespace, stop: StopSignals) -> int:
+    if args.overwrite and args.out is None:
+        raise InvalidInputError("--overwrite: replaces an --out file; without --out nothing is written")
     text = export_params(
         args.params, args.out, args.format, model=args.model, tap_weights=args.tap_weights,
         taps=args.taps, strength=args.strength, with_shader=args.with_shader,
-        engine=_engine_options(args),
+        engine=_checked_albedo(_engine_options(args)), overwrite=args.overwrite,
     )
     if args.out is None:
         sys.stdout.write(text)
     else:
         print(f"wrote {args.out} ({args.format})")
         if args.with_shader:
-            from ..shaders import shader_sources
-
             # The files export_params wrote beside the constants, by name.
-            names = sorted(shader_sources(os.path.basename(args.out)))
-            print(f"wrote the reference shader beside it: {', '.join(names)} (docs/renderer.md)")
+            _, extras = read_params(args.params)
+            model, _ = model_choice(args, extras)
+            names = [os.path.basename(p) for p in shader_files(args.out, model, extras.get("light_terms"))]
+            print(f"wrote the {model} reference shader beside it: {', '.join(names)} (docs/renderer.md)")
     return 0

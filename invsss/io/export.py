@@ -36,7 +36,8 @@ from collections.abc import Mapping
 import jax
 import numpy as np
 
-from . import read_params, write_text_atomic
+from . import read_params
+from .writing import write_texts_atomic
 from ..forward.light_terms import AFTER_BLUR, LAW_TRUST, LIGHT_TERM_FIELDS, LightTerms
 from ..forward.models import get_model, resolve_tap_weights
 from ..forward.params import SSSParams
@@ -46,7 +47,7 @@ from ..forward.screen_space import separable_kernel
 from ..validation import InvalidInputError, did_you_mean
 
 __all__ = ["EXPORT_FORMATS", "shader_constants", "to_hlsl", "to_json", "export_params", "write_shader",
-           "scale_to_resolution"]
+           "shader_files", "scale_to_resolution"]
 
 #: Output formats of :func:`export_params` and ``invsss export``; ``hdrp`` and
 #: ``unreal`` are the engines' profile assets (:mod:`invsss.io.engine_profiles`, issue 34).
@@ -508,30 +509,91 @@ def scale_to_resolution(constants: dict, factor: float) -> dict:
     return out
 
 
-def write_shader(constants_path) -> list:
-    """Write the reference shader (``invsss/shaders/*.hlsl``, docs/renderer.md) beside a constants file.
+#: The light terms' shader files, by the constant that says a fit uses them
+#: (:func:`shader_constants` writes ``lawAlbedo`` with the law, ``lightShift``
+#: with a term after the blur).
+_LIGHT_TERM_SHADERS = {"lawAlbedo": "invsss_law.hlsl", "lightShift": "invsss_light_terms.hlsl"}
 
-    The shader files include the constants as ``invsss_constants.hlsl``; written
-    here, they include ``constants_path``'s file name instead. Returns the paths
-    written (each atomically).
+
+def shader_files(constants_path, model: str | None = None, light_terms=None) -> dict[str, str]:
+    """The reference shader files that go beside a constants file: path to text.
+
+    Parameters
+    ----------
+    constants_path : str or os.PathLike
+        The constants file; the shader files sit in its folder and include it
+        by its file name (instead of ``invsss_constants.hlsl``).
+    model : str, optional
+        The fit's model: its shader's files (:func:`invsss.shaders.shader_sources`),
+        and the light terms' files the fit's ``light_terms`` use. Default: every
+        shader file.
+    light_terms : LightTerms or mapping, optional
+        As in :func:`shader_constants` (a params file's ``light_terms``).
+
+    Raises
+    ------
+    InvalidInputError
+        A model without a reference shader, light terms that
+        :func:`shader_constants` refuses, or ``constants_path`` named like one
+        of the shader files.
     """
-    from ..shaders import shader_sources
+    from ..shaders import SHADER_FILES, shader_sources
 
     constants_path = os.fspath(constants_path)
+    name = os.path.basename(constants_path)
+    sources = shader_sources(name) if model is None else shader_sources(name, model=model)
+    if model is not None and light_terms is not None:
+        used = _light_constants(light_terms)
+        every = shader_sources(name)
+        sources.update({file: every[file] for key, file in _LIGHT_TERM_SHADERS.items() if key in used})
     folder = os.path.dirname(os.path.abspath(constants_path))
-    written = []
-    for name, text in shader_sources(os.path.basename(constants_path)).items():
-        path = os.path.join(folder, name)
+    files = {}
+    for file in SHADER_FILES:
+        if file not in sources:
+            continue
+        path = os.path.join(folder, file)
         if os.path.abspath(path) == os.path.abspath(constants_path):
             raise InvalidInputError(f"{constants_path}: has the name of a shader file; choose another name")
-        write_text_atomic(path, text)
-        written.append(path)
-    return written
+        files[path] = sources[file]
+    return files
+
+
+def write_shader(constants_path, model: str | None = None, *, light_terms=None, overwrite: bool = False) -> list:
+    """Write the reference shader (``invsss/shaders/*.hlsl``, docs/renderer.md) beside a constants file.
+
+    The files of :func:`shader_files`, each including ``constants_path``'s file
+    name for the constants. They are written as a set: all are checked first,
+    and none is written when one cannot be (:func:`invsss.io.writing.write_texts_atomic`).
+
+    Parameters
+    ----------
+    constants_path : str or os.PathLike
+        The constants file (:func:`to_hlsl`), written or to be written.
+    model, light_terms
+        As in :func:`shader_files`: only the files a fit of ``model`` with
+        these light terms uses (default: every file).
+    overwrite : bool
+        Replace shader files already there; otherwise an existing one is refused.
+
+    Returns
+    -------
+    list of str
+        The paths written.
+
+    Raises
+    ------
+    InvalidInputError
+        As :func:`shader_files`, or a file that is there (without ``overwrite``),
+        a folder in a file's way, or a folder that cannot be written to.
+    """
+    files = shader_files(constants_path, model, light_terms)
+    return write_texts_atomic(files, overwrite=overwrite, roles=dict.fromkeys(files, "a shader file"))
 
 
 def export_params(
     params_json_path, out_path=None, format: str = "json", *, model: str | None = None,
     tap_weights=None, taps: int = 17, strength: float = 1.0, with_shader: bool = False, engine: dict | None = None,
+    overwrite: bool = False,
 ) -> str:
     """Read a params JSON file and export its shader constants.
 
@@ -541,7 +603,8 @@ def export_params(
         A params file (:func:`invsss.io.read_params`); its ``model`` and
         ``tap_weights`` entries are used unless given here.
     out_path : str or os.PathLike, optional
-        Where to write (atomically); nothing is written when omitted.
+        Where to write (atomically: the whole file or nothing); nothing is
+        written when omitted. An existing file is refused unless ``overwrite``.
     format : {"json", "hlsl", "hdrp", "unreal"}
         ``hdrp`` and ``unreal`` write a ``burley`` fit as the engine's profile
         asset (:func:`invsss.io.engine_profiles.engine_profile`, JSON).
@@ -552,8 +615,14 @@ def export_params(
     model, tap_weights, taps, strength
         As in :func:`shader_constants`; ``model`` and ``tap_weights`` override the file.
     with_shader : bool
-        Also write the reference shader beside ``out_path`` (:func:`write_shader`);
-        needs ``format="hlsl"`` and ``out_path``.
+        Also write the model's reference shader beside ``out_path``
+        (:func:`write_shader`; its files and those of the fit's light terms);
+        needs ``format="hlsl"`` and ``out_path``. The constants and the shader
+        files are checked together before any is written, and none is written
+        when one cannot be.
+    overwrite : bool
+        Replace ``out_path`` and shader files that are already there
+        (``invsss export --overwrite``); otherwise an existing one is refused.
 
     Returns
     -------
@@ -593,13 +662,14 @@ def export_params(
             )
         text = to_json(engine_profile(params, format, **(engine or {})))
         if out_path is not None:
-            write_text_atomic(out_path, text)
+            write_texts_atomic({out_path: text}, overwrite=overwrite)
         return text
     constants = shader_constants(params, model, tap_weights=tap_weights, taps=taps, strength=strength,
                                  light_terms=extras.get("light_terms"))
     text = to_json(constants) if format == "json" else to_hlsl(constants)
     if out_path is not None:
-        write_text_atomic(out_path, text)
-    if with_shader:
-        write_shader(out_path)
+        files = {os.fspath(out_path): text}
+        shaders = shader_files(out_path, model, extras.get("light_terms")) if with_shader else {}
+        files.update(shaders)
+        write_texts_atomic(files, overwrite=overwrite, roles=dict.fromkeys(shaders, "a shader file"))
     return text

@@ -18,7 +18,7 @@ from ..validation import InvalidInputError, check_image, one_line
 from .colour import linear_to_srgb
 from .rasters import image_extension, openimageio
 
-__all__ = ["write_image", "write_text_atomic"]
+__all__ = ["write_image", "write_text_atomic", "write_texts_atomic", "check_file_target", "atomic_output"]
 
 # Bits written for each extension when write_image is not told (EXR/TIFF keep
 # full float precision, PNG/JPEG are 8-bit sRGB like any viewer expects).
@@ -53,13 +53,140 @@ def _atomic_target(path: str):
         raise
 
 
+def _write_temporary(temporary: str, text: str) -> None:
+    with open(temporary, "x", encoding="utf-8") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+
+
 def write_text_atomic(path, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` so that an interrupted run leaves no half file."""
     with _atomic_target(os.fspath(path)) as temporary:
-        with open(temporary, "x", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
+        _write_temporary(temporary, text)
+
+
+def check_file_target(path, *, overwrite: bool, option: str = "--overwrite", role: str = "") -> None:
+    """Raise unless a file can be written at ``path`` without losing anything.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write.
+    overwrite : bool
+        Whether an existing file at ``path`` may be replaced.
+    option : str
+        How the user says ``overwrite``, for the message (``"--overwrite"``).
+    role : str
+        What the file is, for the message of a folder in its way (``"the
+        shader file"``); default: the output file.
+
+    Raises
+    ------
+    InvalidInputError
+        Its folder is missing, is a file or cannot be written to (by
+        permission; a write can still fail later, which :func:`write_texts_atomic`
+        reports the same way), ``path`` is a folder or another non-file, or
+        ``path`` is a file and ``overwrite`` is false.
+    """
+    name = os.fspath(path)
+    directory = os.path.dirname(os.path.abspath(name))
+    if not os.path.isdir(directory):
+        if os.path.lexists(directory):
+            raise InvalidInputError(f"{name}: cannot write, {directory} is a file, not a folder")
+        raise InvalidInputError(f"{name}: cannot write, directory {directory} does not exist")
+    what = role or "the output file"
+    if os.path.isdir(name):
+        raise InvalidInputError(f"{name}: is a folder, in the way of {what}; name a file, or move the folder away")
+    if os.path.lexists(name) and not os.path.isfile(name):
+        raise InvalidInputError(f"{name}: is in the way of {what} (not a regular file); move it away")
+    if os.path.lexists(name) and not overwrite:
+        raise InvalidInputError(f"{name}: already exists; pass {option} to replace it")
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise InvalidInputError(f"{name}: cannot write, folder {directory} is not writable")
+
+
+def write_texts_atomic(files, *, overwrite: bool = False, option: str = "--overwrite",
+                       roles=None) -> list[str]:
+    """Write a set of text files (UTF-8): every one whole, and none when one cannot be.
+
+    Every target is checked first (:func:`check_file_target`), then every text
+    is written to a hidden temporary file beside its target, and only then are
+    the temporaries renamed over the targets. A failure before the renames
+    (a check, a full disk, a folder that refuses the temporary) leaves every
+    target as it was; the renames themselves (one ``os.replace`` each, on one
+    file system) fail only when the file system changes under the run.
+
+    Parameters
+    ----------
+    files : mapping of str or os.PathLike to str
+        Path to text, in the order to write them.
+    overwrite : bool
+        Whether existing files may be replaced (default: refused).
+    option : str
+        How the user says ``overwrite``, for the message.
+    roles : mapping of path to str, optional
+        What each file is, for the message of a folder in its way.
+
+    Returns
+    -------
+    list of str
+        The paths written, in order.
+
+    Raises
+    ------
+    InvalidInputError
+        One line naming the first file that cannot be written and why.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> folder = tempfile.mkdtemp()
+    >>> a, b = os.path.join(folder, "a.txt"), os.path.join(folder, "b.txt")
+    >>> [os.path.basename(p) for p in write_texts_atomic({a: "one\\n", b: "two\\n"})]
+    ['a.txt', 'b.txt']
+    >>> write_texts_atomic({a: "three\\n"})  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    invsss.validation.InvalidInputError: ...a.txt: already exists; pass --overwrite to replace it
+    """
+    texts = {os.fspath(path): text for path, text in files.items()}
+    roles = {os.fspath(path): role for path, role in (roles or {}).items()}
+    for path in texts:
+        check_file_target(path, overwrite=overwrite, option=option, role=roles.get(path, ""))
+    temporaries: dict[str, str] = {}
+    current = None
+    try:
+        for current, text in texts.items():
+            directory, base = os.path.split(os.path.abspath(current))
+            temporaries[current] = os.path.join(directory, f".{base}.{secrets.token_hex(4)}.tmp")
+            _write_temporary(temporaries[current], text)
+        for current, temporary in temporaries.items():
+            os.replace(temporary, current)
+    except OSError as err:
+        raise InvalidInputError(f"{current}: cannot write ({err.strerror or err})") from None
+    finally:
+        for temporary in temporaries.values():
+            with contextlib.suppress(OSError):
+                os.remove(temporary)
+    return list(texts)
+
+
+@contextlib.contextmanager
+def atomic_output(path):
+    """A temporary sibling of ``path`` to write to; on success it replaces ``path``.
+
+    As the writers of this module do it, for a writer that takes a path
+    (``figure.savefig``, ``DataFrame.to_parquet``): the temporary has ``path``'s
+    extension. An ``OSError`` (a read-only folder, a full disk) becomes an
+    :class:`~invsss.validation.InvalidInputError` naming ``path``, and the
+    temporary is removed, so ``path`` is either the old file or the whole new one.
+    """
+    name = os.fspath(path)
+    try:
+        with _atomic_target(name) as temporary:
+            yield temporary
+    except OSError as err:
+        raise InvalidInputError(f"{name}: cannot write ({err.strerror or err})") from None
 
 
 def _encode(image: np.ndarray, bits: int, ext: str) -> tuple[np.ndarray, str, str | None]:
