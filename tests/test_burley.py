@@ -173,15 +173,18 @@ def model_made_pair(size, seed):
 @pytest.mark.slow
 @pytest.mark.parametrize("size", [64, 96])
 def test_cli_fit_recovers_the_distances(size, tmp_path):
+    # No option but the model: its default gauge ("depth") must measure every channel's d,
+    # not hold the start (0.759 mm on each channel before issue 46).
     pair = write_pair(tmp_path, "pair", model_made_pair(size, seed=size))
     out = tmp_path / "fit"
     with redirect_stderr(io.StringIO()), redirect_stdout(io.StringIO()):
-        code = main(["fit", *pair_args(pair), "--model", "burley", "--gauge", "sss_level",
-                     "--fix", "sss_level=800", "--starts", "1", "--out", str(out)])
+        code = main(["fit", *pair_args(pair), "--model", "burley", "--out", str(out)])
     assert code == 0
     result = json.loads((out / "params.json").read_text())
+    assert result["gauge"] == "depth" and "variances" not in result["fixed"]
     d = np.sqrt(result["variances"])
     np.testing.assert_allclose(d, D, rtol=0.02)
+    assert result["sss_level"] == pytest.approx(800.0, rel=0.02)
     stderr = np.asarray(result["stderr"]["variances"])
     assert stderr.shape == (3,) and np.all(stderr > 0)
 

@@ -93,10 +93,12 @@ class FitOptions:
     fix : dict, optional
         Parameters to hold at given values, e.g. ``{"maxdd": 0.01}`` or
         ``{"sss_level": 1200.0}``.
-    gauge : {"variances", "sss_level"}
+    gauge : {"auto", "variances", "sss_level", "depth"}
         Which side of the ``L`` / variance-scale degeneracy is fixed: the profile's
-        variances (default), or ``sss_level`` (must be given in ``fix``; the
-        variances are then estimated).
+        variances, or ``sss_level`` (must be given in ``fix``; the variances are
+        then estimated); ``depth`` fixes neither, for a model whose depth weighting
+        separates them (``burley``). ``auto`` (default): the model's own
+        (``variances``, ``depth`` for ``burley``); the fit reports the one used.
     solver : {"lm", "gauss-newton", "bfgs"}
     n_starts : int
         Number of starting points (best grid points of a coarse search).
@@ -195,8 +197,10 @@ class FitOptions:
         "variances a comma-separated list (e.g. --fix maxdd=0.05 variances=0.5,2,8)",
         action="extend", nargs="+", cli_default=[], metavar="NAME=VALUE", parse=fix_from_text)
     gauge: str = _option(
-        "variances", "which side of the sss_level/variance-scale degeneracy is fixed: the profile's "
-        "variances, or sss_level (then give --fix sss_level=VALUE)", choices=lambda: GAUGES)
+        "auto", "which side of the sss_level/variance-scale degeneracy is fixed: the profile's "
+        "variances, or sss_level (then give --fix sss_level=VALUE); depth fixes neither (burley, whose "
+        "depth weighting separates them); auto: the model's own (variances; depth for burley)",
+        choices=lambda: ("auto", *GAUGES))
     solver: str = _option("lm", "nonlinear solver", choices=lambda: SOLVERS)
     n_starts: int = _option(4, "starting points of the multi-start search", flag="--starts", type=int,
                             metavar="N")
@@ -253,9 +257,11 @@ class FitOptions:
             held = {**held, **check_light_terms(dict(self.light_fixed))[1]}
         object.__setattr__(self, "light_terms", tuple(t for t in LIGHT_TERM_NAMES if t in terms or t in held))
         object.__setattr__(self, "light_fixed", types.MappingProxyType(held))
-        get_model(self.model)  # one-line error naming the known models
-        if self.gauge not in GAUGES:
-            raise InvalidInputError(f"gauge: expected one of {', '.join(GAUGES)}, got {self.gauge!r}")
+        entry = get_model(self.model)  # one-line error naming the known models
+        if self.gauge not in ("auto", *GAUGES):
+            raise InvalidInputError(f"gauge: expected one of auto, {', '.join(GAUGES)}, got {self.gauge!r}")
+        if self.gauge == "auto":
+            object.__setattr__(self, "gauge", entry.default_gauge)
         if self.solver not in SOLVERS:
             raise InvalidInputError(f"solver: expected one of {', '.join(SOLVERS)}, got {self.solver!r}")
         for name in ("n_starts", "max_steps"):

@@ -52,6 +52,9 @@ Gauss-Newton covariance assume.
 The gauge (docs/model.md, section 6): scaling every variance by ``a^2`` and ``L`` by
 ``1 / a`` gives the same image, so one of them must be fixed: ``gauge="variances"``
 takes the variances from a profile, ``gauge="sss_level"`` takes ``L`` from ``fix``.
+A model whose image also sees the variances in scene units (``burley``: its
+samples are weighted by the 3D distance, the depth difference in mm) has no such
+degeneracy; ``gauge="depth"`` estimates both, and is that model's default.
 """
 
 from __future__ import annotations
@@ -82,7 +85,7 @@ __all__ = [
     "Parametrisation",
 ]
 
-GAUGES = ("variances", "sss_level")
+GAUGES = ("variances", "sss_level", "depth")
 
 #: The estimator's unknown for each light-aware term (docs/model.md, section 8);
 #: ``shift`` is ``light_shift`` here so that it is not read as a warp's shift. The
@@ -178,6 +181,11 @@ def assign_roles(model: str, gauge: str, fixed: dict) -> dict[str, str]:
             "gauge: 'sss_level' needs the value of sss_level in fix= (e.g. the focal length in pixels)"
         )
     entry = get_model(model)
+    if gauge == "depth" and entry.default_gauge != "depth":
+        raise InvalidInputError(
+            f"gauge: 'depth' estimates sss_level and the variances together, which model {model} cannot tell "
+            "apart (scaling one scales the other away); use variances or sss_level"
+        )
     roles = {}
     roles["sss_level"] = "fixed" if "sss_level" in fixed else "free"
     roles["variances"] = "fixed" if ("variances" in fixed or gauge == "variances") else "free"

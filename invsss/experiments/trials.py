@@ -19,6 +19,7 @@ import json
 
 from pydantic import ValidationError
 
+from ..forward.models import MODEL_NAMES, get_model
 from ..validation import InvalidInputError
 from .axes import set_path
 from .data import BUFFER_FILES
@@ -101,6 +102,10 @@ class Trial:
         """
         options = {k: v for k, v in self.options.items()
                    if not (k in LATER_OPTIONS and v == LATER_OPTIONS[k])}
+        if options.get("gauge") == "auto":
+            # The gauge a fit resolves "auto" to: the ids of sweeps from before
+            # "auto" existed (when "variances" was the default) stay the same.
+            options["gauge"] = get_model(options.get("model", MODEL_NAMES[0])).default_gauge
         # The buffers count only for a trial that reads them: a folder that
         # gained light.exr keeps the ids of its trials without light terms, one
         # that gained key.exr those without the law, and one that gained
