@@ -36,11 +36,13 @@ from __future__ import annotations
 import csv
 import dataclasses
 import fnmatch
+import io
 import json
 import math
 import os
 import tomllib
 
+from ..io.writing import atomic_output, write_texts_atomic
 from ..validation import InvalidInputError
 from .axes import flatten
 from .results import flat_rows
@@ -86,13 +88,33 @@ def format_table(rows: list[dict], axes: list[str], fitted: tuple = ()) -> str:
 
 def _write_csv(rows: list[dict], path: str) -> None:
     columns = list(dict.fromkeys(key for row in rows for key in row))
-    with open(path, "w", newline="", encoding="utf-8") as f:
-        writer = csv.writer(f)
-        writer.writerow(columns)
-        for row in rows:
-            writer.writerow(["" if row.get(c) is None else
-                             json.dumps(row[c]) if isinstance(row.get(c), (list, dict)) else row[c]
-                             for c in columns])
+    text = io.StringIO(newline="")
+    writer = csv.writer(text)
+    writer.writerow(columns)
+    for row in rows:
+        writer.writerow(["" if row.get(c) is None else
+                         json.dumps(row[c]) if isinstance(row.get(c), (list, dict)) else row[c]
+                         for c in columns])
+    # A report is made again from the results: its earlier file is replaced, whole.
+    write_texts_atomic({path: text.getvalue()}, overwrite=True)
+
+
+def _report_folder(folder: str) -> None:
+    """Create ``folder`` for the report, or refuse in one line before anything is written."""
+    if os.path.lexists(folder) and not os.path.isdir(folder):
+        raise InvalidInputError(f"{folder}: is in the way of the report (not a folder); move it away")
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as err:
+        raise InvalidInputError(f"{folder}: cannot create the report's folder ({err.strerror or err})") from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InvalidInputError(f"{folder}: cannot write the report, the folder is not writable")
+
+
+def _save_figure(figure, path: str, **options) -> None:
+    """``figure.savefig`` to a temporary beside ``path``, renamed over it when whole."""
+    with atomic_output(path) as temporary:
+        figure.savefig(temporary, **options)
 
 
 def _numeric_axes(rows: list[dict], axes: list[str]) -> list[str]:
@@ -214,7 +236,7 @@ def _plot_against(plt, rows, axis, axes, keys: _SampleKeys, names, y_of, err_of,
         figure.add_artist(legend)
         top -= 0.06 + 0.045 * min(len(handles), 20)
     figure.tight_layout()
-    figure.savefig(path, dpi=100, bbox_inches="tight")
+    _save_figure(figure, path, dpi=100, bbox_inches="tight")
     plt.close(figure)
     return path
 
@@ -243,7 +265,7 @@ def _plot_spread(plt, rows, folder) -> str:
         panel.set_ylabel(name)
     figure.tight_layout()
     path = os.path.join(folder, "params_by_pair.png")
-    figure.savefig(path, dpi=100)
+    _save_figure(figure, path, dpi=100)
     plt.close(figure)
     return path
 
@@ -283,7 +305,7 @@ def _contact_sheets(plt, rows, axes, out, folder) -> list[str]:
         figure.tight_layout()
         name = f"contact_{label}.png" if label else "contact.png"
         path = os.path.join(folder, name)
-        figure.savefig(path, dpi=100)
+        _save_figure(figure, path, dpi=100)
         plt.close(figure)
         written.append(path)
     return written
@@ -307,7 +329,8 @@ def _write_parquet(rows: list[dict], path: str) -> None:
                 # Nestings Parquet cannot hold in one column (a grey fit's weights,
                 # [w], beside an RGB fit's, [[r, g, b]]): JSON text, as in the CSV.
                 table[column] = [None if v is None else json.dumps(v) for v in table[column]]
-    table.to_parquet(path, index=False)
+    with atomic_output(path) as temporary:
+        table.to_parquet(temporary, index=False)
 
 
 def _check_parquet_available() -> None:
@@ -324,10 +347,16 @@ def _check_parquet_available() -> None:
 def write_report(out, *, plots: bool = True, parquet: bool = False) -> tuple[str, list[str]]:
     """Write ``OUT/report/`` (see the module docstring); return the table and the files.
 
+    Each file is written whole, through a temporary file renamed over it, and
+    replaces the one an earlier report wrote; a report folder that cannot be
+    written to is refused before anything is written.
+
     Raises
     ------
     InvalidInputError
-        ``out`` holds no sweep, or ``parquet=True`` without pandas and pyarrow.
+        ``out`` holds no sweep, ``parquet=True`` without pandas and pyarrow, a
+        report folder that is a file or cannot be created or written to, or a
+        file that cannot be written.
     """
     out = os.fspath(out)
     if parquet:
@@ -337,7 +366,7 @@ def write_report(out, *, plots: bool = True, parquet: bool = False) -> tuple[str
         raise InvalidInputError(f"{out}: the sweep has no trials")
     keys = _SampleKeys.of(meta)
     folder = os.path.join(out, "report")
-    os.makedirs(folder, exist_ok=True)
+    _report_folder(folder)
     written = [os.path.join(folder, "results.csv")]
     _write_csv(rows, written[0])
     if parquet:
@@ -383,7 +412,12 @@ def _remove_stale_plots(folder: str, written: list[str], plots: bool) -> None:
         for name in files:
             path = os.path.abspath(os.path.join(directory, name))
             if path not in kept and any(fnmatch.fnmatch(name, pattern) for pattern in _PLOT_NAMES):
-                os.remove(path)
+                try:
+                    os.remove(path)
+                except OSError as err:
+                    raise InvalidInputError(
+                        f"{path}: cannot remove this plot of an earlier report ({err.strerror or err})"
+                    ) from None
 
 
 def _fitted_columns(task: str) -> tuple:
@@ -402,7 +436,7 @@ def _task_plots(rows: list[dict], axes: list[str], task: str, out: str, folder: 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    os.makedirs(folder, exist_ok=True)
+    _report_folder(folder)
     written = []
     for axis in _plotted_axes(done, axes):
         written.append(_plot_metrics(plt, done, axis, axes, keys, folder))
