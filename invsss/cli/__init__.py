@@ -14,8 +14,9 @@ Exit codes, all without a traceback:
   is then saved elsewhere and the message says where), or a sweep ran to its
   end but some of its trials failed (each failure is in ``sweep-report``);
 * 2: bad input, reported as ``invsss: error: <message>`` (an
-  :class:`~invsss.validation.InvalidInputError`), or an output directory that
-  already holds a result (``--overwrite``) or is in use by another run;
+  :class:`~invsss.validation.InvalidInputError`), an output directory that
+  already holds a result or an output file that is already there
+  (``--overwrite``), or an output directory in use by another run;
 * 130 / 143: interrupted by SIGINT (Ctrl-C) / SIGTERM (:mod:`invsss.runtime.interrupts`).
   ``fit`` then writes the best estimate so far, marked ``"interrupted": true``,
   when at least one solver step has finished.
