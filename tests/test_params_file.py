@@ -131,7 +131,7 @@ def test_write_params_refuses_what_read_params_would(tmp_path):
 
 def test_a_fit_result_round_trips_with_every_report_key(tmp_path):
     report = {
-        "model": "sog", "tap_weights": "jimenez", "stderr": {"sss_level": 1.0}, "undetermined": [],
+        "model": "sog", "depth_unit": "cm", "tap_weights": "jimenez", "stderr": {"sss_level": 1.0}, "undetermined": [],
         "loss": 0.1, "psnr": 40.0, "ssim": 0.99, "converged": True, "interrupted": False,
         "iterations": 7, "fixed": {}, "gauge": "variances", "channels_mix": [0.3, 0.6, 0.1],
         "gain": [1.0], "offset": [0.0], "profile": "thesis-nir", "estimate": PARAMS,

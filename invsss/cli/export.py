@@ -38,8 +38,12 @@ def add_parser(subparsers) -> None:
                         help="replace --out, and with --with-shader the shader files, when they are "
                         "already there (other files beside them are kept)")
     # The engines' profile assets (invsss.io.engine_profiles).
-    parser.add_argument("--mm-per-unit", type=float, default=1.0,
-                        help="hdrp/unreal: millimetres per unit of the fitted pair's depth (default: 1)")
+    parser.add_argument("--mm-per-unit", type=float, default=None,
+                        help="hdrp/unreal: millimetres per unit of the fitted pair's depth (default: from the "
+                        "depth_unit PARAMS records, mm for older files)")
+    parser.add_argument("--accept-assumed", action="store_true",
+                        help="hdrp/unreal: write Burley's d even where the fit held it or left it undetermined, "
+                        "marked as assumed in the output (refused otherwise)")
     parser.add_argument("--albedo", default=None, metavar="A or R/G/B",
                         help="unreal: surface albedo for the mean-free-path conversion (default: Unreal's "
                         "default, reported as undetermined)")
@@ -62,7 +66,8 @@ def _engine_options(args) -> dict | None:
             albedo = [float(a) for a in args.albedo.split("/")]
         except ValueError:
             raise InvalidInputError(f"--albedo: expected a number or R/G/B numbers, got {args.albedo!r}") from None
-    return {"mm_per_unit": args.mm_per_unit, "albedo": albedo, "world_scale": args.world_scale}
+    return {"mm_per_unit": args.mm_per_unit, "albedo": albedo, "world_scale": args.world_scale,
+            "accept_assumed": args.accept_assumed}
 
 
 def _checked_albedo(engine: dict | None) -> dict | None:

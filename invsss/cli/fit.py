@@ -25,6 +25,7 @@ from ..runtime.interrupts import StopSignals
 from ..io import photo_pair, shared_clipping_level, write_image, write_params
 from ..io.result_dir import ResultDir, ResultWriteError
 from ..forward.pair import ImagePair
+from ..forward.params import DEPTH_UNITS
 from ..validation import InvalidInputError
 
 import dataclasses
@@ -73,6 +74,11 @@ def add_parser(subparsers) -> None:
         type=float,
         default=1.0,
         help="multiplies every stored depth (unit conversion, e.g. 1000 for metres to mm)",
+    )
+    parser.add_argument(
+        "--depth-unit", choices=tuple(DEPTH_UNITS), default="mm",
+        help="unit of the depth after --depth-scale (default: mm); params.json records it, and render and "
+        "export convert from it",
     )
     add_fit_option_arguments(parser)
     parser.add_argument("--light", action="append", default=[], metavar="FILE",
@@ -253,7 +259,7 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
                 progress.close()
             for message in result.warnings:
                 print(f"invsss: warning: {message}", file=sys.stderr)
-            written = _write_fit(out, names, result, pairs, inputs)
+            written = _write_fit(out, names, result, pairs, inputs, "mm" if args.distance else args.depth_unit)
         if written is None:
             return 1
     if stop.exit_status is not None:
@@ -289,12 +295,13 @@ def _with_file_names(text: str, args: argparse.Namespace, count: int) -> str:
     return text
 
 
-def _write_fit(out: ResultDir, names: list[str], result, pairs, inputs=None) -> list[str] | None:
+def _write_fit(out: ResultDir, names: list[str], result, pairs, inputs=None,
+               depth_unit: str = "mm") -> list[str] | None:
     """Commit the fit's files to ``out``; on failure keep the estimate elsewhere and say where."""
     # matplotlib is only needed here; `invsss render` should not pay for importing it.
     from .report import plot_fit_report
 
-    content = result.to_dict()
+    content = {**result.to_dict(), "depth_unit": depth_unit}
     if inputs is not None and inputs.record is not None:
         content["inputs"] = inputs.record  # a distance, made masks, held parameters
     writers = {"params.json": lambda path: write_params(path, content)}

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 import numpy as np
 
@@ -11,6 +12,7 @@ from ..io import read_depth, read_image, read_mask, read_params, write_image
 from ..forward.screen_space import render
 from ..forward.light_terms import LIGHT_TERM_FIELDS, NEEDED_BUFFERS, LightBuffers, LightTerms
 from ..forward.pair import fill_background_depth
+from ..forward.params import DEPTH_UNITS
 from ..validation import InvalidInputError, check_depth, check_same_frame
 from .arguments import (
     add_model_arguments,
@@ -38,6 +40,11 @@ def add_parser(subparsers) -> None:
         type=float,
         default=1.0,
         help="multiplies the stored depth (unit conversion, e.g. 1000 for metres to mm)",
+    )
+    parser.add_argument(
+        "--depth-unit", choices=tuple(DEPTH_UNITS), default=None,
+        help="unit of the depth after --depth-scale (default: the unit PARAMS records, mm for older files); "
+        "another unit than PARAMS's is converted",
     )
     parser.add_argument(
         "--linear-codes",
@@ -96,6 +103,13 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
     model, tap_weights = model_choice(args, extras)
     image = read_image(args.image, linear=args.linear_codes)
     depth = read_depth(args.depth, scale=args.depth_scale)
+    fitted_unit = extras.get("depth_unit", "mm")
+    if args.depth_unit is not None and args.depth_unit != fitted_unit:
+        # The depth goes into the parameters' unit: the blur, the light terms' shift and
+        # the plausibility check then all read one unit.
+        depth = depth * (DEPTH_UNITS[args.depth_unit] / DEPTH_UNITS[fitted_unit])
+        print(f"invsss: depth in {args.depth_unit} converted to {fitted_unit}, the unit {args.params} was "
+              "fitted in", file=sys.stderr)
     mask = read_mask(args.mask)
     check_same_frame([(args.image, image), (args.depth, depth), (args.mask, mask)])
     # A renderer's 0/inf background is fine off the mask; filled before any use.

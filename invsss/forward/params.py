@@ -21,7 +21,14 @@ __all__ = [
     "check_parameter_values",
     "check_plausible",
     "parameter_arrays",
+    "DEPTH_UNITS",
+    "check_depth_unit",
+    "convert_params",
 ]
+
+#: The depth units a params file records (``depth_unit``), in millimetres each.
+#: Millimetres are the recommended unit and the default wherever none is recorded.
+DEPTH_UNITS = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
 
 #: The five parameters of the model, in the order of docs/model.md, section 6. Every
 #: module that lists them (params files, the estimator, the report, the torch
@@ -162,6 +169,44 @@ def check_parameter_values(params, name: str = "params", *, values: bool = True)
         raise InvalidInputError(f"{name}: maxdd must be > 0, got {float(vals['maxdd']):g}")
 
 
+def check_depth_unit(unit, name: str = "depth_unit") -> str:
+    """``unit`` if it is one of :data:`DEPTH_UNITS`, else a one-line error.
+
+    Examples
+    --------
+    >>> check_depth_unit("cm")
+    'cm'
+    """
+    if not isinstance(unit, str) or unit not in DEPTH_UNITS:
+        raise InvalidInputError(f"{name}: expected one of {', '.join(DEPTH_UNITS)}, got {unit!r}")
+    return unit
+
+
+def convert_params(params: SSSParams, from_unit: str, to_unit: str) -> SSSParams:
+    """The same blur for depth given in ``to_unit`` instead of ``from_unit``.
+
+    With depth ``k`` times larger in the new unit (``k`` new units per old one),
+    ``s = L / (d + c min(|dd|, delta))`` stays the same on the same surface when
+    the variances (scene units squared) become ``k^2`` times larger and ``maxdd``
+    (a depth step per pixel) ``k`` times: ``L`` and ``c`` do not change
+    (docs/model.md, section 2). For ``burley`` the variances are ``d^2``.
+
+    Examples
+    --------
+    >>> p = convert_params(SSSParams(600.0, 800.0, 0.5, [1.0], [4.0]), "mm", "cm")
+    >>> float(p.sss_level), float(p.correction), float(p.maxdd), p.variances.tolist()
+    (600.0, 800.0, 0.05, [0.04])
+    """
+    k = DEPTH_UNITS[check_depth_unit(from_unit, "from_unit")] / DEPTH_UNITS[check_depth_unit(to_unit, "to_unit")]
+    if k == 1.0:
+        return params
+    return SSSParams(params.sss_level, params.correction, np.asarray(params.maxdd, np.float64) * k,
+                     params.weights, np.asarray(params.variances, np.float64) * k * k)
+
+
+#: The distances from a camera to a face that depth in mm is expected to show.
+PLAUSIBLE_FACE_DEPTH_MM = (100.0, 5000.0)
+
 #: Blur narrower than this (standard deviation, pixels) changes no pixel visibly.
 NARROWEST_USEFUL_BLUR_PX = 0.01
 
@@ -203,6 +248,15 @@ def check_plausible(params: SSSParams, depth, name: str = "params") -> list[str]
         messages.append(
             f"{name}: sss_level {level:g} blurs by up to {widest:.2g} px at the median depth "
             f"{d:g}, wider than the {height}x{width} image"
+        )
+    low, high = PLAUSIBLE_FACE_DEPTH_MM
+    if 0 < d < low:
+        # Parameters fitted on mm and rendered on cm blur 10 times as wide, with no other sign.
+        likely = "cm" if d * DEPTH_UNITS["cm"] >= low else "m"
+        messages.append(
+            f"{name}: the median depth {d:g} would put a face {d:g} mm from the camera (expected "
+            f"{low:g}-{high:g} mm); if the depth is in {likely}, give it in the params' unit "
+            f"(x{DEPTH_UNITS[likely]:g} for mm, or --depth-unit {likely})"
         )
     positive = variances[variances > 0]
     if positive.size:

@@ -51,6 +51,8 @@ __all__ = [
     "unreal_profile",
     "unreal_distances",
     "engine_profile",
+    "unmeasured_distances",
+    "engine_asset",
 ]
 
 #: The engine formats of ``invsss export``.
@@ -62,6 +64,9 @@ ENGINE_FORMATS = ("hdrp", "unreal")
 UNREAL_DEFAULT_ALBEDO = (0.91058, 0.338275, 0.2718)
 
 _MM_PER_CM = 10.0
+#: Burley's d (mm) an export accepts: skin's is 0.05-5 mm (Christensen & Burley's
+#: measured skins and invsss's fits), wax and marble reach a few tens.
+PLAUSIBLE_D_MM = (0.01, 50.0)
 
 
 #: Unreal's ``Dmfp2MfpMagicNumber`` (SubsurfaceProfile.cpp): its diffuse mean free
@@ -228,7 +233,43 @@ def unreal_distances(fields: dict) -> np.ndarray:
     return mfp_mm / (UNREAL_DMFP_TO_MFP * perpendicular_scaling(albedo))
 
 
-def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None, world_scale=None) -> dict:
+def unmeasured_distances(extras: dict) -> dict[str, str]:
+    """Which of a fit's shape parameters were not measured, and why, from its params file's report.
+
+    A ``burley`` fit's ``variances`` are Burley's ``d_c^2``. They are not a
+    measurement when the fit held them (``fixed``: given with ``--fix`` or held
+    at the start by ``gauge="variances"``), when the data left them
+    undetermined (``undetermined``; ``read_params`` then fills them from the
+    estimate), or when the inputs could not determine them (``inputs.held``).
+    A params file without a fit report (written by hand) claims nothing and
+    gives an empty dict.
+
+    Examples
+    --------
+    >>> unmeasured_distances({"fixed": {"variances": [0.576] * 3}, "gauge": "variances"})
+    {'variances': 'held at 0.759, 0.759, 0.759 mm by the fit (gauge variances), not measured'}
+    >>> unmeasured_distances({"undetermined": ["variances[1]"], "gauge": "depth"})
+    {'variances[1]': 'not determined by the fit (no standard error)'}
+    """
+    out = {}
+    fixed = extras.get("fixed") or {}
+    if "variances" in fixed:
+        d = ", ".join(f"{x:.3g}" for x in np.sqrt(np.asarray(fixed["variances"], np.float64)).reshape(-1))
+        how = f"gauge {extras['gauge']}" if extras.get("gauge") == "variances" else "--fix"
+        out["variances"] = f"held at {d} mm by the fit ({how}), not measured"
+    for entry in extras.get("undetermined") or ():
+        if isinstance(entry, str) and entry.startswith("variances"):
+            out[entry] = "not determined by the fit (no standard error)"
+    held = (extras.get("inputs") or {}).get("held") if isinstance(extras.get("inputs"), dict) else None
+    for entry in held or ():
+        name = entry if isinstance(entry, str) else (entry.get("name") if isinstance(entry, dict) else None)
+        if isinstance(name, str) and name.startswith("variances") and name not in out:
+            out[name] = "held because the inputs cannot determine it"
+    return out
+
+
+def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None, world_scale=None,
+                   assumed: dict | None = None) -> dict:
     """The asset values of engine ``format`` for a ``burley`` fit's parameters.
 
     Parameters
@@ -244,6 +285,10 @@ def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None
     world_scale : float, optional
         The engine scene's unit: HDRP ``worldScale`` (metres per unit, default 1)
         or Unreal ``WorldUnitScale`` (default 0.1); listed as undetermined when not given.
+    assumed : dict, optional
+        Shape parameters that were not measured (:func:`unmeasured_distances`),
+        written anyway at the user's request: each is listed under ``assumed``
+        in the output, and the distance fields under ``undetermined``.
 
     Returns
     -------
@@ -267,7 +312,20 @@ def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None
         raise InvalidInputError(
             f"params: a burley fit has one or three shape parameters (variances = d^2), got {d.size}"
         )
+    low, high = PLAUSIBLE_D_MM
+    if d.min() < low or d.max() > high:
+        # A fit on depth in metres gives d 1000 times too small, in cm 10 times, with no other sign.
+        raise InvalidInputError(
+            f"params: Burley's d of {', '.join(f'{x:.3g}' for x in d.reshape(-1))} mm (at {scale:g} mm per "
+            f"depth unit) is outside {low:g}-{high:g} mm, where skin and other translucent materials lie; "
+            "was the fit's depth in another unit? Refit with --depth-unit, or give --mm-per-unit"
+        )
     undetermined = {}
+    if assumed:
+        reasons = "; ".join(f"{k}: {v}" for k, v in assumed.items())
+        distance_fields = ("scatteringDistance, scatteringDistanceMultiplier" if format == "hdrp"
+                           else "MeanFreePathColor, MeanFreePathDistance")
+        undetermined[distance_fields] = f"ASSUMED, not measured ({reasons})"
     if format == "hdrp":
         if world_scale is None:
             undetermined["worldScale"] = "the engine scene's unit; assumed HDRP's default 1 (1 unit = 1 m)"
@@ -290,5 +348,64 @@ def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None
         undetermined["Tint, BoundaryColorBleed, TransmissionTintColor"] = "not in a front-lit photograph pair"
         units = ("MeanFreePathColor x MeanFreePathDistance = mean free path l per channel in cm; "
                  "Burley's d = 10 l / (0.6 (1.85 - A + 7 |A - 0.8|^3)) mm (Unreal 5; Implementation: Unreal 5.6+)")
-    return {"format": format, "fields": fields, "shapeParameterMm": d.reshape(-1).tolist(),
-            "undetermined": undetermined, "units": units}
+    out = {"format": format, "fields": fields, "shapeParameterMm": d.reshape(-1).tolist(),
+           "undetermined": undetermined, "units": units}
+    if assumed:
+        out["assumed"] = dict(assumed)
+    return out
+
+
+def engine_asset(params, extras: dict, format: str, *, source: str = "params", mm_per_unit=None,
+                 albedo=None, world_scale=None, accept_assumed: bool = False) -> dict:
+    """:func:`engine_profile` for a params file's content, refusing what the fit did not measure.
+
+    Parameters
+    ----------
+    params : SSSParams
+        A ``burley`` fit's parameters.
+    extras : dict
+        The rest of its params file (``read_params``): the fit's report and ``depth_unit``.
+    format : {"hdrp", "unreal"}
+    source : str
+        What the messages call the file.
+    mm_per_unit : float, optional
+        Millimetres per unit of the fit's depth; default from ``depth_unit`` (mm
+        when absent). A value that disagrees with a recorded unit is refused.
+    albedo, world_scale
+        As in :func:`engine_profile`.
+    accept_assumed : bool
+        Write shape parameters the fit held or left undetermined
+        (:func:`unmeasured_distances`), marked as assumed; otherwise they are refused.
+
+    Examples
+    --------
+    >>> import invsss
+    >>> p = invsss.SSSParams(900.0, 0.0, 1.0, [1.0, 1.0, 1.0], [1.0, 0.25, 0.0625])
+    >>> engine_asset(p, {"depth_unit": "cm"}, "hdrp")["shapeParameterMm"]
+    [10.0, 5.0, 2.5]
+    >>> engine_asset(p, {"fixed": {"variances": [1.0, 0.25, 0.0625]}, "gauge": "variances"}, "hdrp")
+    Traceback (most recent call last):
+    ...
+    invsss.validation.InvalidInputError: params: Burley's d (variances) was held at 1, 0.5, 0.25 mm by the fit (gauge variances), not measured; refit with --model burley and no --gauge (its default measures d), or give --accept-assumed to write it marked as assumed
+    """
+    from ..forward.params import DEPTH_UNITS
+
+    recorded = extras.get("depth_unit")
+    if mm_per_unit is None:
+        mm_per_unit = DEPTH_UNITS[recorded or "mm"]
+    elif recorded is not None and _positive(mm_per_unit, "mm_per_unit") != DEPTH_UNITS[recorded]:
+        raise InvalidInputError(
+            f"mm_per_unit: {mm_per_unit!r} disagrees with {source}, which records depth_unit {recorded} "
+            f"({DEPTH_UNITS[recorded]:g} mm per unit); leave it out to use the recorded unit"
+        )
+    # Nothing unmeasured leaves as if measured: an engine asset has no place to say
+    # that a distance was the fit's start.
+    unmeasured = unmeasured_distances(extras)
+    if unmeasured and not accept_assumed:
+        entry, why = next(iter(unmeasured.items()))
+        raise InvalidInputError(
+            f"{source}: Burley's d ({entry}) was {why}; refit with --model burley and no --gauge (its default "
+            "measures d), or give --accept-assumed to write it marked as assumed"
+        )
+    return engine_profile(params, format, mm_per_unit=mm_per_unit, albedo=albedo, world_scale=world_scale,
+                          assumed=unmeasured or None)

@@ -530,8 +530,8 @@ def export_params(
         asset (:func:`invsss.io.engine_profiles.engine_profile`, JSON).
     engine : dict, optional
         ``hdrp``/``unreal`` only: keyword arguments of
-        :func:`~invsss.io.engine_profiles.engine_profile` (``mm_per_unit``,
-        ``albedo``, ``world_scale``).
+        :func:`~invsss.io.engine_profiles.engine_asset` (``mm_per_unit``,
+        ``albedo``, ``world_scale``, ``accept_assumed``).
     model, tap_weights, taps, strength
         As in :func:`shader_constants`; ``model`` and ``tap_weights`` override the file.
     with_shader : bool
@@ -574,13 +574,14 @@ def export_params(
     model = model or extras.get("model", "sog")
     tap_weights = tap_weights or extras.get("tap_weights")
     if format in ("hdrp", "unreal"):  # issue 34: the engines' assets
-        from .engine_profiles import engine_profile
+        from .engine_profiles import engine_asset
 
         if get_model(model).layout != "disk":
             raise InvalidInputError(
                 f"format: {format} takes a burley fit (model burley), got model {model}; refit with --model burley"
             )
-        text = to_json(engine_profile(params, format, **(engine or {})))
+        # Refuses a d the fit did not measure, and takes the depth unit from the file.
+        text = to_json(engine_asset(params, extras, format, source=os.fspath(params_json_path), **(engine or {})))
         if out_path is not None:
             write_texts_atomic({out_path: text}, overwrite=overwrite)
         return text

@@ -9,7 +9,9 @@ is generated from the model (:func:`params_json_schema`) and
 
 Compatibility: a file without ``schema_version`` was written by an invsss older
 than the versioned schema and is read as version 1; a file with a newer version
-than :data:`SCHEMA_VERSION` is refused with a message saying to upgrade.
+than :data:`SCHEMA_VERSION` is refused with a message saying to upgrade. Version
+2 added ``depth_unit``: a file without it is read as mm, with a notice when a
+fit wrote it before the unit was recorded.
 """
 
 from __future__ import annotations
@@ -24,11 +26,11 @@ from typing import Annotated, Any, Literal, Optional, Union
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from ..forward.params import PARAM_NAMES, SSSParams, entry_name
+from ..forward.params import DEPTH_UNITS, PARAM_NAMES, SSSParams, entry_name
 from ..forward.passes import TAP_WEIGHTS
 from .result_dir import MANIFEST_NAME, result_state
 from ..forward.screen_space import MODELS
-from ..validation import InvalidInputError, did_you_mean, number_array, one_line
+from ..validation import InputNotice, InvalidInputError, did_you_mean, number_array, one_line
 from .writing import write_text_atomic
 
 __all__ = [
@@ -43,7 +45,7 @@ __all__ = [
 ]
 
 #: The version :func:`write_params` writes and the newest :func:`read_params` reads.
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 #: The keys every params JSON file must have (the fields of :class:`SSSParams`).
 PARAMS_KEYS = PARAM_NAMES
@@ -83,6 +85,8 @@ class ParamsFile(BaseModel):
     """Gaussian weights, one per Gaussian (K) or one per Gaussian and channel (K x C)."""
     variances: list[_MaybeNumber]
     """Gaussian variances in scene units squared, one per Gaussian (K)."""
+    depth_unit: Optional[Literal[tuple(DEPTH_UNITS)]] = None  # type: ignore[valid-type]
+    """Unit of the depth the parameters refer to: mm, cm or m (schema 2; absent: mm)."""
     model: Optional[Literal[MODELS]] = None  # type: ignore[valid-type]
     """Screen-space model to render with (default sog)."""
     tap_weights: Union[
@@ -376,6 +380,15 @@ def read_params(path) -> tuple[SSSParams, dict]:
     _check_result_complete(name)
     params, filled = _params_of(content, _validated(content, name), name)
     extras = {k: content[k] for k in content if k not in PARAMS_KEYS and k != "schema_version"}
+    fit_report = any(key in content for key in ("gauge", "converged", "iterations"))
+    if "depth_unit" not in extras and content.get("schema_version", 1) < 2 and fit_report:
+        # A fit's file from before the unit was recorded; a file written by hand
+        # without one has always meant mm and is read so silently.
+        warnings.warn(
+            f"{name}: written before params files recorded the depth unit (schema_version "
+            f"{content.get('schema_version', 1)}); reading its parameters as for depth in mm",
+            InputNotice, stacklevel=2,
+        )
     if filled:
         # A renderer needs numbers: use the estimate that produced the fit's
         # image for exactly the entries the data did not determine, and say so.
