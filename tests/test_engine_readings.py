@@ -75,8 +75,9 @@ def test_unreal_refuses_what_the_engine_would_clamp():
         unreal_profile([600.0, 300.0, 150.0], 0.5)
     with pytest.raises(InvalidInputError, match="500 mm"):
         unreal_profile([200.0, 100.0, 50.0], 0.5)  # l = 18.5 cm, but d s_sl(A) = 700 mm
-    with pytest.raises(InvalidInputError, match="albedo"):
-        unreal_profile([1.0, 0.5, 0.25], 0.0)
+    for albedo in (0.0, [0.9, 0.5], "pale"):
+        with pytest.raises(InvalidInputError, match="albedo"):
+            unreal_profile([1.0, 0.5, 0.25], albedo)
     with pytest.raises(InvalidInputError, match="bEnableMeanFreePath"):
         unreal_reading(dict(unreal_profile([1.0, 0.5, 0.25], 0.5), bEnableMeanFreePath=False))
 

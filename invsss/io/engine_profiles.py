@@ -185,11 +185,15 @@ def unreal_profile(d_mm, albedo=UNREAL_DEFAULT_ALBEDO, world_unit_scale: float =
     ([0.63, 0.315, 0.1575], 0.1)
     """
     d = _distances(d_mm, "d_mm")
-    a = np.broadcast_to(np.asarray(albedo, np.float64).reshape(-1), (3,))
-    if a.size != 3 or not np.all((a >= 0.01) & (a <= 1.0)):
+    try:
+        a = np.asarray(albedo, np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        a = np.array([np.nan])
+    if a.size not in (1, 3) or not np.all((a >= 0.01) & (a <= 1.0)):
         raise InvalidInputError(
-            f"albedo: expected one or three values in [0.01, 1] (Unreal's range), got {np.asarray(albedo).tolist()}"
+            f"albedo: expected one or three values in [0.01, 1] (Unreal's range), got {albedo!r}"
         )
+    a = np.broadcast_to(a, (3,)).copy()
     mfp_cm = UNREAL_DMFP_TO_MFP * d * perpendicular_scaling(a) / _MM_PER_CM
     colour, distance = _colour_and_scale(mfp_cm)
     low, high = _UNREAL_DISTANCE_CM
