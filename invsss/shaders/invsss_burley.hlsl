@@ -35,7 +35,8 @@
 //
 // Cost per skin pixel: numSamples samples of 4 image, 4 mask and 4 depth reads
 // (bilinear by hand; a sampler would do each in one, see invsss_common.hlsl on
-// its precision), plus 2 reads at the centre: 386 reads for the 32 samples.
+// its precision), plus the image, mask and depth at the centre: 387 reads for
+// the 32 samples; off the skin 2 (the mask and the image).
 
 #include "invsss_constants.hlsl"
 #include "invsss_common.hlsl"
