@@ -191,7 +191,8 @@ class FitOptions:
     model: str = _option("sog", "screen-space model", choices=lambda: MODEL_NAMES)
     profile: object = _option(
         "thesis-nir", f"sum-of-Gaussians profile ({', '.join(PROFILE_NAMES)}, or a JSON file); its variances "
-        "are fixed in the default gauge", metavar="NAME|FILE.json")
+        "are fixed in the default gauge; auto: thesis-nir, or single (one Gaussian, all a blur of a few pixels "
+        "determines) with --distance", cli_default="auto", metavar="NAME|FILE.json")
     fix: object = _option(
         None, "hold parameters at given values: sss_level, correction, maxdd take one number, weights and "
         "variances a comma-separated list (e.g. --fix maxdd=0.05 variances=0.5,2,8)",
@@ -236,6 +237,9 @@ class FitOptions:
         "sizes then share their compiled functions, in this process and in the compilation cache, with the "
         "estimate of a fit at the pair's own size (docs/model.md, section 7)", metavar="HxW",
         parse=canvas_from_text)
+    focal_px: float | None = _option(
+        None, "the camera's focal length in pixels: the fit's blur width (params.json's blur) is then also "
+        "given in mm on the skin; the fit itself does not change", type=float, metavar="PX")
 
     def __post_init__(self):
         ALIGN_KINDS = _align_kinds()
@@ -262,6 +266,11 @@ class FitOptions:
             raise InvalidInputError(f"gauge: expected one of auto, {', '.join(GAUGES)}, got {self.gauge!r}")
         if self.gauge == "auto":
             object.__setattr__(self, "gauge", entry.default_gauge)
+        if self.focal_px is not None:
+            focal = self.focal_px
+            if isinstance(focal, bool) or not isinstance(focal, numbers.Real) or not np.isfinite(focal) or focal <= 0:
+                raise InvalidInputError(f"focal_px: expected a number of pixels > 0 or None, got {focal!r}")
+            object.__setattr__(self, "focal_px", float(focal))
         if self.solver not in SOLVERS:
             raise InvalidInputError(f"solver: expected one of {', '.join(SOLVERS)}, got {self.solver!r}")
         for name in ("n_starts", "max_steps"):

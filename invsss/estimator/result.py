@@ -108,6 +108,11 @@ class FitResult(eqx.Module):
         with only the terms in use present; a held term is listed in ``fixed``
         and has a None standard error (:meth:`light_terms_params` gives the
         values as an :class:`invsss.LightTerms`). None without them.
+    blur : dict or None
+        The fitted blur's RMS width per axis, in pixels at the skin's median depth
+        and slope, per channel, with standard errors and whether the pixels
+        resolve it (:func:`invsss.estimator.blur_width.blur_record`): what the
+        pair measured, whatever the gauge.
     gain, offset : numpy.ndarray
         Photometric fit ``pred = gain * out + offset`` per target channel: shape
         (C',) for one pair, (P, C') for :func:`fit_pairs`.
@@ -152,6 +157,7 @@ class FitResult(eqx.Module):
     vignetting: dict | None = None
     highlights: dict | None = None
     light_terms: dict | None = None
+    blur: dict | None = None
 
     def light_terms_params(self):
         """The fitted light-aware terms as an :class:`invsss.LightTerms` (None without them)."""
@@ -200,7 +206,7 @@ class FitResult(eqx.Module):
         ``model``, ``tap_weights``, ``stderr``, ``undetermined``, ``loss``,
         ``psnr``, ``ssim``, ``converged``, ``interrupted``, ``iterations``,
         ``fixed``, ``gauge``, ``gain``, ``offset``, ``sigma``, ``solver``,
-        ``warnings``, ``alignment``, ``vignetting``, ``highlights``, ``light_terms`` and ``estimate`` (every parameter as a number, undetermined
+        ``warnings``, ``alignment``, ``vignetting``, ``highlights``, ``light_terms``, ``blur`` and ``estimate`` (every parameter as a number, undetermined
         ones included: what produced the fitted image). The loss history is not
         written.
         """
@@ -237,6 +243,8 @@ class FitResult(eqx.Module):
         out["highlights"] = copy.deepcopy(self.highlights)
         # The fitted light-aware terms (fit --light-terms), else null.
         out["light_terms"] = copy.deepcopy(self.light_terms)
+        # The blur's width in pixels, with its standard error: what the pixels measured.
+        out["blur"] = copy.deepcopy(self.blur)
         # The numbers that produced the fitted image, undetermined ones included:
         # what a renderer uses when it needs a value anyway. Always written, so a
         # params file has one shape whatever the data determined.

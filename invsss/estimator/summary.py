@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..forward.params import PARAM_NAMES, entry_name
+from .blur_width import blur_record, under_a_pixel_warning
 from .canvas import crop
 from .diagnostics import MISALIGNMENT_PX, masked_psnr, masked_ssim, misalignment
 from .parametrisation import LIGHT_UNKNOWNS
@@ -52,6 +53,10 @@ def summarise(problem, path, single, steps, nuisance=None) -> FitResult:
         messages.append("gain: not positive; the target does not look like a blur of the source")
     natural["weights"] = weights
     unc, stderr, undetermined = _uncertainty(problem, path, final, natural, nuisance, messages)
+    blur = blur_record(problem.model, natural, problem.scales.depth, problem.scales.slope, unc,
+                       problem.options.focal_px)
+    if under_a_pixel_warning(blur):
+        messages.append(under_a_pixel_warning(blur))
     if path.rival_basins is not None:
         # Where the path's own messages end, as before the uncertainty's reasons.
         messages.insert(len(problem.notes) + len(path.messages),
@@ -94,6 +99,7 @@ def summarise(problem, path, single, steps, nuisance=None) -> FitResult:
         },
         vignetting=_vignetting_record(natural, unc),
         light_terms=_light_terms_record(natural, unc),
+        blur=blur,
     )
 
 

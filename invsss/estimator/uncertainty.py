@@ -60,6 +60,7 @@ __all__ = [
     "UNRESOLVED_PX",
     "FEW_SLOPES",
     "Uncertainty",
+    "derived_stderr",
     "linearise",
     "gauss_newton_uncertainty",
     "block_index",
@@ -101,6 +102,9 @@ class Uncertainty(NamedTuple):
 
     ``stderr`` and ``undetermined`` map each reported parameter name to arrays of
     its shape; ``sigma`` is the residual standard deviation in the target's units.
+    ``linear`` holds what :func:`derived_stderr` needs for a quantity computed from
+    the reported ones: their Jacobians with respect to all unknowns, the two
+    covariances of those unknowns and the null directions.
     """
 
     stderr: dict
@@ -108,6 +112,30 @@ class Uncertainty(NamedTuple):
     sigma: float
     dof: int
     nuisance_stderr: np.ndarray | None = None
+    linear: dict | None = None
+
+
+def derived_stderr(unc: Uncertainty, gradients: dict) -> tuple[float, bool]:
+    """Standard error of a quantity ``q(values)`` of the reported values, and whether it is undetermined.
+
+    ``gradients`` maps reported names to ``dq/d value`` (the value's shape); the
+    quantity's covariance is the delta method's on the same unknowns as the
+    parameters', the larger of the white-noise and the block estimate, and it is
+    undetermined where it changes along a null direction. A name not reported
+    (a fixed parameter) contributes nothing.
+    """
+    lin = unc.linear
+    if lin is None:
+        return float("nan"), True
+    g = np.zeros(lin["cov"].shape[0])
+    for name, grad in gradients.items():
+        if name in lin["jacobians"]:
+            g = g + np.asarray(grad, np.float64).ravel() @ lin["jacobians"][name]
+    var = max(float(g @ lin["cov"] @ g), float(g @ lin["cov_blocks"] @ g))
+    null = lin["null_dirs"]
+    size = float(np.linalg.norm(g / lin["scale"]))
+    on_null = bool(null.size) and bool(np.any(np.abs(g @ null) > 1e-6 * max(size, 1e-300)))
+    return float(np.sqrt(max(var, 0.0))), on_null or not np.isfinite(var)
 
 
 def _reported(objective, linear_weights: bool, sizes, theta) -> dict:
@@ -276,8 +304,10 @@ def gauss_newton_uncertainty(
         var = np.maximum(np.diag(cov_theta), np.diag(cov_blocks))[last]
         on_null = np.any(np.abs(null_dirs[last]) > 1e-6, axis=1) if null_dirs.size else np.zeros(q, bool)
         nuisance_stderr = np.where(on_null, np.nan, np.sqrt(np.maximum(var, 0.0)))
+    linear = {"jacobians": {k: np.asarray(jacs[k]).reshape(-1, p) for k in values}, "cov": cov_theta,
+              "cov_blocks": cov_blocks, "null_dirs": null_dirs, "scale": d}
     return Uncertainty(stderr, undetermined, float(np.sqrt(sigma2)) * float(objective.scale), dof,
-                       nuisance_stderr)
+                       nuisance_stderr, linear)
 
 
 def _coinciding(natural, scales, flags, msgs, roles):

@@ -462,8 +462,17 @@ class SumOfGaussians(eqx.Module):
         check_profile_arrays(self.weights, self.variances, name)
 
 
+#: One Gaussian of 1 mm^2: the profile whose one unknown, its scale (``sss_level`` in the
+#: default gauge), a blur of a few pixels can determine. A richer shape needs a blur
+#: that spans several pixels (issue 47: on a 0.3 px blur every weight of thesis-nir
+#: was undetermined). The photo route's default (``invsss fit --distance``).
+SINGLE_GAUSSIAN = MappingProxyType(
+    {"variances": (1.0,), "weights": (1.0,), "source": "one Gaussian, its scale to be fitted"}
+)
+
 _NAMED_PROFILES = MappingProxyType(
-    {"thesis-nir": THESIS_NIR_940, "deon-skin": DEON_SKIN_RGB, "jensen-skin1": JENSEN_SKIN1_SOG}
+    {"thesis-nir": THESIS_NIR_940, "deon-skin": DEON_SKIN_RGB, "jensen-skin1": JENSEN_SKIN1_SOG,
+     "single": SINGLE_GAUSSIAN}
 )
 #: Names :func:`load_profile` knows (besides JSON file paths).
 PROFILE_NAMES = tuple(_NAMED_PROFILES)
@@ -477,7 +486,7 @@ def load_profile(name_or_path) -> SumOfGaussians:
     name_or_path : str or os.PathLike
         ``"thesis-nir"`` (thesis Table 5.1, weights (5,)), ``"deon-skin"`` (d'Eon &
         Luebke, weights (6, 3)), ``"jensen-skin1"`` (a 5-Gaussian fit of Jensen's skin1
-        dipole, weights (5, 3)), or the path of a JSON file
+        dipole, weights (5, 3)), ``"single"`` (one Gaussian of 1 mm^2), or the path of a JSON file
         ``{"weights": [...], "variances": [...], "source": "..."}``.
 
     Raises
