@@ -150,9 +150,10 @@ def _fit_readmes_two_photograph_pair(out, *extra):
 
 @pytest.mark.slow
 def test_the_readmes_two_photograph_pair_gives_a_determined_blur_with_the_weights_held(tmp_path):
-    # README: the bundled pair alone determines nothing (its blur is under a pixel); with
-    # the thesis's 940 nm weights held, sss_level comes out 82 +- 7 and nothing is undetermined.
-    content, _ = _fit_readmes_two_photograph_pair(tmp_path / "o", "--fix", "weights=0.1478,0.1323,0.0004,0.0527,0.09")
+    # README: with the thesis's 940 nm profile and its weights held, sss_level comes out
+    # 82 +- 7 and nothing is undetermined.
+    content, _ = _fit_readmes_two_photograph_pair(tmp_path / "o", "--profile", "thesis-nir", "--fix",
+                                                  "weights=0.1478,0.1323,0.0004,0.0527,0.09")
     assert content["undetermined"] == []
     level, stderr = content["sss_level"], content["stderr"]["sss_level"]
     assert 0.0 < stderr < 0.15 * level
@@ -161,10 +162,25 @@ def test_the_readmes_two_photograph_pair_gives_a_determined_blur_with_the_weight
 
 @pytest.mark.slow
 def test_the_readmes_two_photograph_pair_alone_warns_without_promising_a_standard_error(tmp_path):
-    # With the weights free, another blur scale fits within the noise and the data
+    # With the five weights free, another blur scale fits within the noise and the data
     # determine no sss_level: the basin warning must not speak of its standard error.
-    content, err = _fit_readmes_two_photograph_pair(tmp_path / "o")
+    content, err = _fit_readmes_two_photograph_pair(tmp_path / "o", "--profile", "thesis-nir")
     assert "sss_level" in content["undetermined"] and content["sss_level"] is None
     basin = [w for w in content["warnings"] if "another basin fits as well" in w]
     assert len(basin) == 1 and "standard error" not in basin[0]
     assert "fix weights=" in basin[0] and basin[0] in err
+
+
+@pytest.mark.slow
+def test_the_readmes_two_photograph_pair_measures_one_gaussian_and_says_it_is_under_a_pixel(tmp_path):
+    # README: the photo route's default profile is one Gaussian, whose scale the pair
+    # determines (issue 47); at 1.65 mm a pixel its width is a third of a pixel, and
+    # the fit says that the pixels do not resolve it.
+    content, err = _fit_readmes_two_photograph_pair(tmp_path / "o", "--focal-px", "363")
+    assert content["profile"] == "single" and content["undetermined"] == []
+    assert 0.0 < content["stderr"]["sss_level"] < 0.15 * content["sss_level"]
+    blur = content["blur"]
+    assert not blur["resolved"] and blur["sigma_px"][0] < 1.0
+    assert blur["mm_per_px"] == pytest.approx(600.0 / 363.0)
+    assert blur["sigma_mm"][0] == pytest.approx(blur["sigma_px"][0] * 600.0 / 363.0)
+    assert "under a pixel" in err
