@@ -18,6 +18,7 @@ from invsss.forward.hdrp_screen_space import (
     QUALITY_LEVELS,
     _downsampled,
     _gradient_noise,
+    _in_cache,
     filter_radius,
     render_hdrp_like,
     rotation_phases,
@@ -280,6 +281,21 @@ def test_max_quality_reads_one_pixel_of_each_block():
     assert not np.allclose(render_hdrp_like(fine, depth, mask, 0.5, 800.0, budget=80, rotate=False,
                                             downsample_steps=2),
                            render_hdrp_like(fine, depth, mask, 0.5, 800.0, budget=80, rotate=False))
+
+
+def test_samples_in_the_tiles_cache_read_full_resolution():
+    """The cache of pixel (17, 17)'s tile spans rows and columns 14 to 33; a blur whose
+    samples all stay within 2 px reads only the cache, so downsampling changes nothing."""
+    inside = _in_cache(np.array([17, 17, 17, 17, 0]), np.array([17, 17, 17, 17, 15]),
+                       np.array([14, 13, 33, 17, -2]), np.array([33, 17, 17, 34, 17]))
+    assert inside.tolist() == [True, False, True, False, True]
+    fine = np.random.default_rng(8).uniform(0.1, 1.0, (40, 40))
+    depth, mask = np.full((40, 40), 500.0), np.ones((40, 40))
+    d = 0.12  # the widest of 40 samples reaches 2.4 px, rounded to at most 2 per axis
+    full = render_hdrp_like(fine, depth, mask, d, 800.0, budget=40, footprint=False)
+    assert np.abs(full - fine).max() > 1e-2
+    coarse = render_hdrp_like(fine, depth, mask, d, 800.0, budget=40, footprint=False, downsample_steps=2)
+    np.testing.assert_array_equal(coarse, full)
 
 
 # ------------------------------------------------------------------ bad input

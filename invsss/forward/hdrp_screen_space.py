@@ -44,12 +44,15 @@ The rules, each with the HDRP source it was read from (Unity-Technologies/Graphi
    the rounded one); a sample off the skin gets none; the sum is normalised per
    channel and a pixel that gathered nothing becomes 0. ``S = 1 / d`` is clamped to
    ``2^24`` (``UpdateKernel``), so ``d`` is at least ``2^-24`` mm.
-6. **Max quality reads a downsampled image** (HDRP 17: ``USE_DOWNSAMPLE`` in
-   ``SubsurfaceScattering.compute``, ``RandomDownsample.compute``,
-   ``DefaultSssDownsampleSteps``): with ``downsample_steps = s`` the lit image is
-   read from a copy ``2^s`` times smaller per axis, each of whose pixels is one
-   pixel of its ``2^s x 2^s`` block, picked by Jimenez's interleaved gradient noise
-   of the frame (depth is read at full resolution).
+6. **Max quality reads far samples from a downsampled image** (the current
+   sources, under ``Packages/``; the earlier ones have no downsampling: ``USE_DOWNSAMPLE`` in ``SubsurfaceScattering.compute``'s ``LoadSample``,
+   ``RandomDownsample.compute``, ``DefaultSssDownsampleSteps``): the pass runs in
+   tiles of 16 x 16 pixels, each of which first copies its pixels and a border of
+   2 (20 x 20) at full resolution into a cache; a sample inside its tile's cache
+   reads it there, any other sample reads the lit image from a copy ``2^s`` times
+   smaller per axis (``s = downsample_steps``), each of whose pixels is one pixel of
+   its ``2^s x 2^s`` block, picked by Jimenez's interleaved gradient noise of the
+   frame. Depth is always read at full resolution.
 
 Not modelled: the material's subsurface mask (scaling the distances per pixel;
 taken as 1), the split of the lit image into albedo and irradiance (HDRP blurs
@@ -84,7 +87,7 @@ __all__ = [
 
 #: HDRP's quality levels: ``(sample budget, downsample steps)``
 #: (``DefaultSssSampleBudgetForQualityLevel`` and ``DefaultSssDownsampleSteps`` in
-#: ``DiffusionProfileSettings.cs``; the downsampling exists from HDRP 17 on).
+#: ``DiffusionProfileSettings.cs``; the downsampling is in the current sources only).
 QUALITY_LEVELS = {"low": (20, 0), "medium": (40, 0), "high": (80, 0), "max": (1000, 2)}
 
 #: The share of the widest channel's energy inside the filter radius (``UpdateKernel``).
@@ -95,6 +98,10 @@ PIXELS_PER_SAMPLE = 4
 
 #: ``Golden2dSeq``'s ratio: sample ``i`` turns by ``2 pi frac(i / GOLDEN_RATIO)``.
 GOLDEN_RATIO = (1.0 + math.sqrt(5.0)) / 2.0
+
+#: The pass's tiles (``GROUP_SIZE_1D``) and the border its cache holds around each
+#: (``TEXTURE_CACHE_BORDER``), in pixels.
+TILE, CACHE_BORDER = 16, 2
 
 #: The smallest distance HDRP keeps (its shape parameter ``1 / d`` is clamped to 2^24).
 MIN_DISTANCE_MM = 2.0**-24
@@ -190,6 +197,15 @@ def _downsampled(stack: np.ndarray, steps: int, frame: int) -> np.ndarray:
     inside = (src_r < h) & (src_c < w)
     out = stack[np.minimum(src_r, h - 1), np.minimum(src_c, w - 1)]
     return out * inside[..., None]
+
+
+def _in_cache(rows, cols, y, x) -> np.ndarray:
+    """Whether sample pixel ``(y, x)`` lies in the cache of the tile of pixel ``(rows, cols)``:
+    the tile's 16 x 16 pixels and 2 more on every side."""
+    top = (rows // TILE) * TILE - CACHE_BORDER
+    left = (cols // TILE) * TILE - CACHE_BORDER
+    size = TILE + 2 * CACHE_BORDER
+    return (y >= top) & (y < top + size) & (x >= left) & (x < left + size)
 
 
 def _bilinear(stack: np.ndarray, y: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -310,7 +326,8 @@ def render_hdrp_like(
     rotate : bool
         Rule 3's per-pixel phase. False: phase 0 everywhere.
     downsample_steps : int
-        Rule 6; HDRP 17's Max quality uses 2. Needs ``snap``.
+        Rule 6: samples beyond the tile's cache read an image ``2^s`` times smaller;
+        the current sources' Max quality uses 2. Needs ``snap``.
     frames : int
         The mean of this many frames, each with its own key (``seed + frame``) for
         the phases and the downsampling: TAA's ideal limit. 1: one frame.
@@ -376,7 +393,10 @@ def _one_frame(image, depth, mask, d, level, counts, options, key) -> np.ndarray
             x = cols[on] + np.rint(dx).astype(np.int64)
             inside = (y >= 0) & (y < h) & (x >= 0) & (x < w)
             y, x = np.clip(y, 0, h - 1), np.clip(x, 0, w - 1)
-            read = coarse[y >> steps, x >> steps] * inside[:, None]
+            read = stack[y, x] * inside[:, None]
+            if steps:
+                far = ~_in_cache(rows[on], cols[on], y, x)
+                read[far] = coarse[y[far] >> steps, x[far] >> steps] * inside[far, None]
             z = depth[y, x]
         else:
             read = _bilinear(np.concatenate([stack, depth[..., None]], axis=-1), rows[on] + dy, cols[on] + dx)
