@@ -1,26 +1,34 @@
 #!/usr/bin/env bash
-# Everything issue 35 measures on a lent GPU, in one call. Each part has its own
-# time limit, cut further so that the whole script ends by $DEADLINE seconds
-# (default 530) and one hang does not lose the rest. Run from the repository
-# root (or a copy of it) with OUT set to a folder for the logs; wheels of the
-# packages the machine lacks may lie in ./.whl (installed into /tmp/site).
+# Everything issues 35 and 52 measure on a lent GPU, in one call. Each part has
+# its own time limit, cut further so that the whole script ends by $DEADLINE
+# seconds (default 530) and one hang does not lose the rest. Run from the
+# repository root (or a copy of it) with OUT set to a folder for the logs;
+# wheels of the packages the machine lacks may lie in ./.whl (installed into
+# /tmp/site). PARTS, a space-separated list of part names, runs only those.
 #
 #   OUT=/tmp/out bash experiments/gpu_session.sh
+#   OUT=/tmp/out DEADLINE=300 PARTS="env gpu_tests fresh" bash experiments/gpu_session.sh
 #
 # Parts, most important first:
 #   env          the machine, the libraries, which pass and loop the fit uses;
-#   gpu_tests    the GPU tests (pytest -m gpu) and the stepping-ahead loop;
+#   gpu_tests    the GPU tests (the ones pytest -m gpu selects: the compiled
+#                kernels against the reference, values, JVP and the XLA
+#                transpose's VJP) and the stepping-ahead loop, one line a test;
+#   forward      the sog model's forward and value+grad at 1024 and 256 px,
+#                reference passes against the kernels (the shipped default,
+#                XLA's transpose for reverse mode) and the kernels with the scan
+#                unrolled, with each one's distance from the reference
+#                (bench_forward);
+#   fresh        where a fresh process's seconds go, cold, warm and verified
+#                cache, 1024 x 1024 (gpu_fresh_process.py; $OUT/fresh.json);
 #   fit_1024     a model-made 1024 x 1024 pair's fit: cold, 2nd fit, warm cache,
 #                verified cache (bench_fit --breakdown), stepping ahead;
-#   fit_1024_plain  the same, cold process only, with the plain loop;
 #   cli_gpu      the bundled pair's command-line fit: cold, warm, verified;
 #   cli_cpu2     the same on this machine's CPU pinned to 2 cores;
-#   forward      the models' forward and value+grad at 256, 1024 and 2048 px,
-#                reference passes against the kernels with the scan unrolled,
-#                single calls and queued ones (bench_forward);
-#   quick_tier   the README's test command on the GPU backend;
 #   pass_1024    one pass, reference against the kernel (bench_pass_kernel);
-#   fit_1024_unroll  fit_1024's cold process with the passes' scan unrolled.
+#   quick_tier   the README's test command on the GPU backend;
+#   fit_1024_plain  fit_1024's cold process only, with the plain loop;
+#   fit_1024_unroll fit_1024's cold process with the passes' scan unrolled.
 # All output goes to $OUT/session.log, the command-line fits' logs to
 # $OUT/fit_logs.txt, the test run's to $OUT/quick_tier.log.
 set -o pipefail
@@ -40,6 +48,9 @@ PAIR=data_synthetic/fran_front
 part() {  # part NAME SECONDS COMMAND...: run with a limit, append to $OUT/session.log
     local name=$1 limit=$2 left=$((DEADLINE - SECONDS))
     shift 2
+    if [ -n "${PARTS:-}" ] && [[ " $PARTS " != *" $name "* ]]; then
+        return
+    fi
     if [ "$left" -lt 15 ]; then
         echo "===== $name: skipped, ${left} s left" | tee -a "$OUT/session.log"
         return
@@ -68,16 +79,19 @@ export PAIR OUT
 PIN=""
 command -v taskset > /dev/null && PIN="taskset -c 0,1"
 
-part env 40 bash -c 'date -u; nvidia-smi -L; nvidia-smi --query-gpu=name,clocks.sm,clocks.mem,temperature.gpu --format=csv;
+part env 40 bash -c 'date -u; nvidia-smi -L; nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.mem,temperature.gpu --format=csv;
     nproc; python3 -c "import jax, jaxlib, equinox, optimistix; print(\"jax\", jax.__version__, \"jaxlib\", jaxlib.__version__, \"equinox\", equinox.__version__, \"optimistix\", optimistix.__version__); print(jax.devices(), jax.default_backend())";
     python3 -c "import invsss, invsss.io, jax.numpy as jnp; from invsss.forward import pass_kernels as k; from invsss.estimator.solve import step_ahead; print(invsss.__file__); print(\"kernel on:\", k.kernel_enabled(jnp.zeros((8,8,3))), \"step ahead:\", step_ahead())"'
 
-part gpu_tests 70 python3 -m pytest -q -p no:cacheprovider -m "gpu or not slow" tests/test_pass_kernels.py \
+part gpu_tests 80 python3 -m pytest -v -p no:cacheprovider -m "gpu or not slow" tests/test_pass_kernels.py \
     tests/test_step_ahead.py -rfEs
 
-part fit_1024 110 python3 experiments/bench_fit.py --breakdown synthetic:1024
+part forward 80 python3 experiments/bench_forward.py --sizes 1024 256 --repeats 20 --device gpu \
+    --passes xla pallas pallas+unroll --no-torch
 
-part fit_1024_plain 40 env INVSSS_STEP_AHEAD=0 python3 experiments/bench_fit.py --breakdown synthetic:1024 --cold-only
+part fresh 130 python3 experiments/gpu_fresh_process.py --size 1024 --importtime --json "$OUT/fresh.json"
+
+part fit_1024 90 python3 experiments/bench_fit.py --breakdown synthetic:1024
 
 CACHE=$(mktemp -d /tmp/invsss-cache-XXXX)
 part cli_gpu 50 bash -c 'export INVSSS_CACHE_DIR='"$CACHE"'; cli_fit "gpu cold"; cli_fit "gpu warm"; cli_fit "gpu verified"'
@@ -87,13 +101,12 @@ part cli_cpu2 50 bash -c 'export INVSSS_CACHE_DIR='"$CACHE2"' JAX_PLATFORMS=cpu;
     echo "pinned with: '"${PIN:-nothing, no taskset}"'";
     '"$PIN"' bash -c "cli_fit \"cpu 2 cores cold\"; cli_fit \"cpu 2 cores warm\"; cli_fit \"cpu 2 cores verified\""'
 
-part forward 100 python3 experiments/bench_forward.py --sizes 1024 256 2048 --repeats 20 --device gpu \
-    --passes xla pallas+unroll --no-torch
+part pass_1024 60 python3 experiments/bench_pass_kernel.py --sizes 1024 --repeats 20 --blocks 8x128 4x128
 
 part quick_tier 130 bash -c 'XLA_PYTHON_CLIENT_PREALLOCATE=false python3 -m pytest -q -p no:cacheprovider \
     -n 6 -m "not slow" --continue-on-collection-errors -rfE > "$OUT/quick_tier.log" 2>&1; rc=$?; tail -40 "$OUT/quick_tier.log"; exit $rc'
 
-part pass_1024 60 python3 experiments/bench_pass_kernel.py --sizes 1024 --repeats 20 --blocks 8x128 4x128
+part fit_1024_plain 40 env INVSSS_STEP_AHEAD=0 python3 experiments/bench_fit.py --breakdown synthetic:1024 --cold-only
 
 part fit_1024_unroll 40 env INVSSS_SCAN_UNROLL=1 python3 experiments/bench_fit.py --breakdown synthetic:1024 --cold-only
 
