@@ -146,6 +146,8 @@ def test_a_fit_result_round_trips_with_every_report_key(tmp_path):
                               "mask": {"kind": "made from the pair", "file": "mask_used.png"}}],
                    "held": {"correction": {"value": 0.0, "why": "constant depth"}}},
         "blur": {"sigma_px": [0.32], "stderr_px": [0.036], "depth": 600.0, "slope": 0.6, "resolved": False},
+        "pigment": {"degree": 1, "terms": ["u", "v"], "coefficients": [[0.1], [-0.05]], "stderr": [[0.01], [None]],
+                    "psnr_without": 25.0},
     }
     path = tmp_path / "p.json"
     write_params(path, {**PARAMS, **report})

@@ -43,6 +43,8 @@ def frame_terms(options) -> list[str]:
     out = []
     if options.vignetting:
         out.append("vignetting")
+    if options.pigment:
+        out.append("pigment")
     if options.light_terms:
         out.append("light_terms")
     if options.align != "none":

@@ -184,6 +184,8 @@ def estimate_of(result) -> dict:
         out["mix"] = result.mix
     if result.vignetting is not None:
         out["vignetting"] = np.asarray(result.vignetting["coefficients"])
+    if result.pigment is not None:
+        out["pigment"] = np.asarray(result.pigment["estimate"])
     if result.light_terms is not None:
         out.update(by_unknown(result.light_terms))
     return out

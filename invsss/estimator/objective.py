@@ -37,6 +37,7 @@ from ..forward.stretch import stretch_factors
 from .basis import basis_images
 from .parametrisation import LIGHT_UNKNOWNS, Parametrisation
 from .projection import combine, projected_jacobian, solve_linear
+from .pigment import pigment_field
 from .vignetting import vignetting_field
 
 __all__ = ["Objective"]
@@ -132,12 +133,15 @@ class Objective(eqx.Module):
         images = self.blurred_bases(natural) if blurred is None else blurred
         if any(name in natural for name in _AFTER_BLUR):
             images = tuple(_light_terms(x, p, natural) for x, p in zip(images, self.pairs))
-        if "vignetting" not in natural:
-            return images
-        # The lens shades whatever the scattering delivers; the offset stays flat.
-        return tuple(
-            x * vignetting_field(natural["vignetting"], x.shape[1:3])[None, :, :, None] for x in images
-        )
+        if "vignetting" in natural:
+            # The lens shades whatever the scattering delivers; the offset stays flat.
+            images = tuple(
+                x * vignetting_field(natural["vignetting"], x.shape[1:3])[None, :, :, None] for x in images
+            )
+        if "pigment" in natural:
+            # Each pair's own pigment field, per target channel; the offset stays flat.
+            images = tuple(x * pigment_field(a, x.shape[1:3])[None] for x, a in zip(images, natural["pigment"]))
+        return images
 
     def linear(self, z, blurred: tuple | None = None) -> tuple[dict, tuple, Array, Array, Array]:
         """``(natural, bases, ratios, coef, offset)`` at ``z`` (from the given

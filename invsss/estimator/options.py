@@ -23,6 +23,7 @@ from ..forward.passes import tap_weights as tap_weight_set
 from ..forward.profiles import PROFILE_NAMES
 from ..validation import InvalidInputError
 from .parametrisation import GAUGES, assign_roles, check_fix, resolve_profile
+from .pigment import DEGREES as PIGMENT_DEGREES
 from .option_text import canvas_from_text, fix_from_text, saturation_from_text
 from .robust import check_robust
 from .solve import SOLVERS
@@ -237,6 +238,11 @@ class FitOptions:
         "sizes then share their compiled functions, in this process and in the compilation cache, with the "
         "estimate of a fit at the pair's own size (docs/model.md, section 7)", metavar="HxW",
         parse=canvas_from_text)
+    pigment: int = _option(
+        0, "fit the skin's pigment difference between source and target (a visible and a 940 nm photograph, "
+        "or two colour channels) as a smooth gain field per target channel, a polynomial of this degree over "
+        "the frame: 1 or 2 (0: none); it cannot take a blur's place (params.json's pigment)", type=int,
+        metavar="DEGREE")
     focal_px: float | None = _option(
         None, "the camera's focal length in pixels: the fit's blur width (params.json's blur) is then also "
         "given in mm on the skin; the fit itself does not change", type=float, metavar="PX")
@@ -266,6 +272,9 @@ class FitOptions:
             raise InvalidInputError(f"gauge: expected one of auto, {', '.join(GAUGES)}, got {self.gauge!r}")
         if self.gauge == "auto":
             object.__setattr__(self, "gauge", entry.default_gauge)
+        if isinstance(self.pigment, bool) or self.pigment not in PIGMENT_DEGREES:
+            raise InvalidInputError(
+                f"pigment: expected a degree among {', '.join(map(str, PIGMENT_DEGREES))}, got {self.pigment!r}")
         if self.focal_px is not None:
             focal = self.focal_px
             if isinstance(focal, bool) or not isinstance(focal, numbers.Real) or not np.isfinite(focal) or focal <= 0:

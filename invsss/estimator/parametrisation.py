@@ -112,7 +112,7 @@ def by_unknown(entries: dict) -> dict:
 #: Blocks that are ``ref * z`` with 0 a value like any other (no fall-off, no
 #: shift, no gain): the vignetting coefficients and the light terms but the law
 #: (an albedo in (0, 1), a logit block).
-SCALED_BLOCKS = ("vignetting", *(name for term, name in LIGHT_UNKNOWNS.items() if term != "law"))
+SCALED_BLOCKS = ("vignetting", "pigment", *(name for term, name in LIGHT_UNKNOWNS.items() if term != "law"))
 _SCALARS = ("sss_level", "correction", "maxdd")
 
 

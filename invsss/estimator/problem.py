@@ -31,6 +31,7 @@ from .objective import Objective
 from .options import FitOptions
 from .parametrisation import LIGHT_UNKNOWNS, Parametrisation, assign_roles, logit, resolve_profile
 from .uncertainty import linearise
+from .pigment import num_terms
 from .vignetting import ORDER as VIGNETTING_ORDER
 
 __all__ = ["FitProblem", "build_problem", "evaluate"]
@@ -57,7 +58,8 @@ def _initial_weights(profile_weights, k, channels):
 # Over 80 lines, kept whole: one short block per parameter block in the order of
 # the layout it builds, each reading the ones before it (fixed weights set the
 # variances' start, the light terms follow the buffers).
-def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, light_terms=(), light_fixed=None):
+def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, light_terms=(), light_fixed=None,
+           pigment=0):
     """The parametrisation and the natural starting values of the free blocks."""
     c_src, c_tgt = pairs[0].channels
     variances = fixed.get("variances", profile_v)
@@ -113,6 +115,12 @@ def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, 
         blocks.append(("vignetting", (VIGNETTING_ORDER,)))
         start["vignetting"] = np.zeros(VIGNETTING_ORDER)
         reference["vignetting"] = 1.0
+    if pigment:
+        # One field per pair and target channel: each photograph has its own pigment.
+        shape = (len(pairs), num_terms(pigment), c_tgt)
+        blocks.append(("pigment", shape))
+        start["pigment"] = np.zeros(shape)
+        reference["pigment"] = 1.0
     for i, pair in enumerate(pairs):
         pair.light_buffers.require(light_terms, f"pairs[{i}]." if len(pairs) > 1 else "")
     light_fixed = dict(light_fixed or {})
@@ -306,7 +314,7 @@ class FitProblem:
         self.data, self.notes = on_canvas(self.given, options)
         self.param, self.z_base = _build(
             self.data, self.roles, self.fixed, profile_w, profile_v, self.scales, options.vignetting,
-            options.light_terms, options.light_fixed,
+            options.light_terms, options.light_fixed, options.pigment,
         )
         self.variances = np.asarray(self.fixed.get("variances", profile_v))
         self.channels = self.data[0].channels[1]

@@ -108,6 +108,13 @@ class FitResult(eqx.Module):
         with only the terms in use present; a held term is listed in ``fixed``
         and has a None standard error (:meth:`light_terms_params` gives the
         values as an :class:`invsss.LightTerms`). None without them.
+    pigment : dict or None
+        With ``pigment=n``: the fitted pigment field (:mod:`invsss.estimator.pigment`)
+        as ``{"model", "degree", "terms", "coefficients", "stderr", "estimate",
+        "psnr_without"}``: coefficients per term and target channel (per pair
+        first in a joint fit), ``psnr_without`` the PSNR with the field set to 1
+        and the gains solved again (what the field bought at this blur). None
+        without it.
     blur : dict or None
         The fitted blur's RMS width per axis, in pixels at the skin's median depth
         and slope, per channel, with standard errors and whether the pixels
@@ -158,6 +165,7 @@ class FitResult(eqx.Module):
     highlights: dict | None = None
     light_terms: dict | None = None
     blur: dict | None = None
+    pigment: dict | None = None
 
     def light_terms_params(self):
         """The fitted light-aware terms as an :class:`invsss.LightTerms` (None without them)."""
@@ -206,7 +214,7 @@ class FitResult(eqx.Module):
         ``model``, ``tap_weights``, ``stderr``, ``undetermined``, ``loss``,
         ``psnr``, ``ssim``, ``converged``, ``interrupted``, ``iterations``,
         ``fixed``, ``gauge``, ``gain``, ``offset``, ``sigma``, ``solver``,
-        ``warnings``, ``alignment``, ``vignetting``, ``highlights``, ``light_terms``, ``blur`` and ``estimate`` (every parameter as a number, undetermined
+        ``warnings``, ``alignment``, ``vignetting``, ``highlights``, ``light_terms``, ``blur``, ``pigment`` and ``estimate`` (every parameter as a number, undetermined
         ones included: what produced the fitted image). The loss history is not
         written.
         """
@@ -245,6 +253,8 @@ class FitResult(eqx.Module):
         out["light_terms"] = copy.deepcopy(self.light_terms)
         # The blur's width in pixels, with its standard error: what the pixels measured.
         out["blur"] = copy.deepcopy(self.blur)
+        # The fitted pigment field (fit --pigment), else null.
+        out["pigment"] = copy.deepcopy(self.pigment)
         # The numbers that produced the fitted image, undetermined ones included:
         # what a renderer uses when it needs a value anyway. Always written, so a
         # params file has one shape whatever the data determined.

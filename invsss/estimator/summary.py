@@ -16,6 +16,7 @@ from .blur_width import blur_record, under_a_pixel_warning
 from .canvas import crop
 from .diagnostics import MISALIGNMENT_PX, masked_psnr, masked_ssim, misalignment
 from .parametrisation import LIGHT_UNKNOWNS
+from .pigment import term_names
 from .problem import evaluate
 from .result import FitResult, masked_list
 from .uncertainty import gauss_newton_uncertainty, structural_reasons
@@ -100,6 +101,7 @@ def summarise(problem, path, single, steps, nuisance=None) -> FitResult:
         vignetting=_vignetting_record(natural, unc),
         light_terms=_light_terms_record(natural, unc),
         blur=blur,
+        pigment=_pigment_record(problem, path, natural, unc, single),
     )
 
 
@@ -232,6 +234,35 @@ def _light_terms_record(natural, unc) -> dict | None:
         err = np.asarray(unc.stderr[k], np.float64)
         record["stderr"][term] = masked_list(err, ~np.isfinite(err))
     return record
+
+
+def _pigment_record(problem, path, natural, unc, single) -> dict | None:
+    """The fitted pigment field as params.json writes it (None when not fitted), with
+    the PSNR of the same fit with the field set to 1 (what the field bought)."""
+    if "pigment" not in natural:
+        return None
+    a = np.asarray(natural["pigment"], np.float64)
+    err = np.asarray(unc.stderr["pigment"], np.float64)
+    # The same blur, the field removed and the gains solved again: one more call of
+    # the compiled evaluation, at another point.
+    z = np.array(path.z)  # its own dtype: the compiled evaluation is reused
+    first, stop = path.objective.param.layout()["pigment"]
+    z[first:stop] = 0.0
+    plain = evaluate(path.objective, jnp.asarray(z), np.asarray(False))
+    fitted = [crop(q, shape) for q, shape in zip(plain["predictions"], problem.shapes)]
+    masks = [np.asarray(p.residual_weight) for p in problem.given]
+    psnr_without = mean_psnr(fitted, [np.asarray(p.target) for p in problem.given], masks)
+    squeeze = (lambda x: x[0]) if single else (lambda x: x)
+    degree = problem.options.pigment
+    return {
+        "model": "gain field per target channel: 1 + sum_j a_j phi_j(u, v), u and v from -1 to 1 across the frame",
+        "degree": degree,
+        "terms": term_names(degree),
+        "coefficients": squeeze(a).tolist(),
+        "stderr": masked_list(squeeze(err), ~np.isfinite(squeeze(err))),
+        "estimate": a.tolist(),
+        "psnr_without": float(psnr_without),
+    }
 
 
 def _vignetting_record(natural, unc) -> dict | None:

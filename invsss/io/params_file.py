@@ -137,6 +137,8 @@ class ParamsFile(BaseModel):
     """Fit report: pixels left out as specular highlights (fit --highlights): method, excluded_pixels, fraction; or null."""
     light_terms: Any = None
     """Fit report: the fitted light-aware terms (fit --light-terms; docs/model.md, section 8): shift (mm), grazing, incidence, law (an albedo per source channel), law_strength (0 Lambert, 1 the law; absent means 1), fill (the law's strength on the other lights; absent means 0), stderr, fixed, psnr_plain and psnr_without (dB, measured), fallback; or null."""
+    pigment: Any = None
+    """Fit report: the fitted pigment field (fit --pigment): model, degree, terms, coefficients (per term and target channel; per pair first in a joint fit), stderr, estimate, psnr_without (dB, the field set to 1); or null."""
     blur: Any = None
     """Fit report: the fitted blur's RMS width per axis in pixels at the skin's median depth and slope, per channel: sigma_px, stderr_px (null where undetermined), depth, slope, resolved (every channel at least a pixel); with fit --focal-px also mm_per_px and sigma_mm; or null."""
     warnings: Optional[list[str]] = None

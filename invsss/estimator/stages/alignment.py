@@ -24,6 +24,7 @@ from ..core import Fit, FitCall, estimate_of
 from ..inputs import prepare_pairs
 from ..registration import Warp, align_source, align_target, align_vectors, estimate_warp, match_photometry
 from ..result import FitResult
+from ..pigment import pigment_at
 from ..vignetting import vignetting_at
 
 __all__ = ["ALIGN_RIM_PX", "WarpSensitivity", "aligned"]
@@ -111,7 +112,7 @@ def _resampled(checked, prepared, warps) -> list[ImagePair]:
 def _refined_warps(trial, checked, prepared, warps, options) -> list:
     """Each warp re-estimated against the prediction of a round's fit ``trial``."""
     refined = []
-    for (source, target, depth, mask, _), warp, pair in zip(checked, warps, prepared):
+    for k, ((source, target, depth, mask, _), warp, pair) in enumerate(zip(checked, warps, prepared)):
         # The whole model, light terms included: a prediction without the
         # shift would leave it for the warp to take.
         lit = {} if trial.light_terms is None else {
@@ -133,6 +134,12 @@ def _refined_warps(trial, checked, prepared, warps, options) -> list:
             at = warp.map_points(np.stack([rows.ravel(), cols.ravel()], axis=1))
             shade = vignetting_at(trial.vignetting["coefficients"], at, target.shape[:2])
             prediction = prediction * shade.reshape(mask.shape)[..., None]
+        if trial.pigment is not None:
+            # The pigment field too: it lives on the photograph's frame, as the fall-off does.
+            rows, cols = np.mgrid[0:mask.shape[0], 0:mask.shape[1]]
+            at = warp.map_points(np.stack([rows.ravel(), cols.ravel()], axis=1))
+            shade = pigment_at(np.asarray(trial.pigment["estimate"])[k], at, target.shape[:2])
+            prediction = prediction * shade.reshape(mask.shape + (shade.shape[-1],))
         # The prediction in the target's channels (gain, offset, RGB -> grey mix),
         # matched against the current registration of the target.
         reference = match_photometry(prediction, align_target(target, mask, warp)[0], mask)
