@@ -214,11 +214,27 @@ def child(cache_dir: str, scene_path: str) -> None:
     rec.wrap(cache_module, "_code_fingerprint", "cache: source fingerprint")
     rec.wrap(jit_class, "_file_key", "cache: entry key (incl. fingerprint)")
     keys: list = []  # (function, entry name): a key that changes between processes is a miss
+    key_parts: dict = {}
     file_key = jit_class._file_key
 
-    def noted_key(self, *args):
-        name = file_key(self, *args)
+    def noted_key(self, key, static):
+        name = file_key(self, key, static)
         keys.append((self.fun.__name__, None if name is None else name[:12]))
+        # What the key is made of, each part hashed: which one changed, if a key does.
+        import hashlib
+
+        def digest(value):
+            try:
+                return hashlib.sha256(cache_module._dumps(value, shared=False)).hexdigest()[:8]
+            except Exception as err:  # noqa: BLE001
+                return type(err).__name__
+
+        in_tree, _, _, avals, settings = key
+        key_parts.setdefault(self.fun.__name__, {
+            "source+versions": cache_module._code_fingerprint()[:8], "settings": digest(settings),
+            "settings (text)": repr(settings), "avals": digest(avals), "in_tree": digest(in_tree),
+            "static": digest(static),
+        })
         return name
 
     jit_class._file_key = noted_key
@@ -297,8 +313,8 @@ def child(cache_dir: str, scene_path: str) -> None:
     mark("fit_pair")
     record = {
         "phases": phases, "started_by_import": started_by_import,
-        "device": f"{device.platform}: {device.device_kind}",
-        "stages": rec.seconds, "counts": rec.counts, "keys": sorted(set(keys)), "first_calls": first_calls, "trials": trials,
+        "device": f"{device.platform}: {device.device_kind}", "invsss": os.path.dirname(invsss.__file__),
+        "stages": rec.seconds, "counts": rec.counts, "keys": sorted(set(keys)), "key_parts": key_parts, "first_calls": first_calls, "trials": trials,
         "jax": jax_events, "jax_wall": _union(jax_spans),
         "loss": float(result.loss), "iterations": int(result.iterations),
         "prealloc": os.environ.get("XLA_PYTHON_CLIENT_PREALLOCATE", "default"),
@@ -463,10 +479,14 @@ def main() -> None:
             columns[name] = run_child(cache, scene, env)
             print(f"  {name}: {columns[name]['wall']:.2f} s", flush=True)
         imported = run_child(cache, scene, importtime=True) if args.importtime else None
+    if args.json:  # before the table: a failure there keeps the records
+        with open(args.json, "w") as file:
+            json.dump({**columns, **({"importtime": {k: v for k, v in imported.items() if k != "importtime"}}
+                                     if imported else {})}, file, indent=1)
     first = next(iter(columns.values()))
     print(f"gpu_fresh_process: fit_pair (command-line defaults) of a model-made {args.size} x {args.size} pair, "
           f"fresh processes on one cache folder; {os.cpu_count()} CPUs; JAX device {first['device']}; "
-          f"python {sys.version.split()[0]}; seconds")
+          f"python {sys.version.split()[0]}; invsss from {first['invsss']}; seconds")
     print("\n".join(table(columns)))
     if imported is not None:
         print(f"python -X importtime, one more verified process ({imported['wall']:.2f} s, "
@@ -476,10 +496,6 @@ def main() -> None:
         print("the same imports' self seconds summed by top-level package")
         for own, package in import_self_by_package(imported["importtime"]):
             print(f"  {own:7.3f}  {package}")
-    if args.json:
-        with open(args.json, "w") as file:
-            json.dump({**columns, **({"importtime": {k: v for k, v in imported.items() if k != "importtime"}}
-                                     if imported else {})}, file, indent=1)
 
 
 if __name__ == "__main__":

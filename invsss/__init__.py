@@ -9,6 +9,13 @@ imported the first time one of their names is used (PEP 562), so a script that
 only renders arrays does not pay for them.
 """
 
+# First of all, before JAX is imported (a second or more): in the `invsss` command's
+# own process, a Ctrl-C from here on ends it with one line and status 130 instead of
+# a KeyboardInterrupt traceback. Nothing changes for any other process.
+from .runtime.interrupts import guard_command_line as _guard_command_line
+
+_guard_command_line()
+
 import importlib
 
 from .forward.params import SSSParams

@@ -30,8 +30,9 @@ ALLOWED = {
     "estimator": {"forward", "runtime", "validation"},
     "io": {"forward", "shaders", "validation"},
     "measurement": {"forward", "estimator", "validation"},
-    # ``import invsss`` loads the forward model and nothing else (the rest is lazy).
-    "invsss": {"forward", "validation"},
+    # ``import invsss`` loads the forward model and nothing else (the rest is lazy),
+    # after the command line's Ctrl-C guard (runtime/interrupts.py, standard library only).
+    "invsss": {"forward", "runtime", "validation"},
 }
 #: Layers that may import anything but the command line.
 ABOVE = {"experiments", "scenes"}
@@ -152,7 +153,7 @@ def _plant(copy: Path, module: str, text: str) -> None:
         # A sweep calling the command line.
         ("experiments/sweep.py", "from ..cli import main", "only invsss/__main__.py may import cli/"),
         # ``import invsss`` pulling in the estimator eagerly.
-        ("__init__.py", "from .estimator import fit_pair", "invsss may import only forward, invsss, validation"),
+        ("__init__.py", "from .estimator import fit_pair", "invsss may import only forward, invsss, runtime, validation"),
         # The torch twin using the estimator.
         ("torch/passes.py", "from .. import estimator", "imports invsss.estimator; torch may"),
     ],

@@ -26,12 +26,13 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 import warnings
 
 from .. import __version__
 from ..runtime.determinism import use_deterministic_scheduler
-from ..runtime.interrupts import Interrupted, StopSignals
+from ..runtime.interrupts import Interrupted, StopSignals, command_finished
 from ..validation import InvalidInputError
 from . import export, fit, profile, render, scene, sweep
 
@@ -68,8 +69,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_usage(sys.stderr)
         print("invsss: error: a command is required", file=sys.stderr)
         return 2
+    stop = StopSignals()
     try:
-        with warnings.catch_warnings(), StopSignals() as stop:
+        with warnings.catch_warnings(), stop:
             warnings.showwarning = _show_warning
             # A library's notice of its own future changes is for developers:
             # on a GPU, JAX's "Pallas Triton backend is deprecated" (docs/gpu.md)
@@ -82,8 +84,21 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except Interrupted as interrupt:
         # A signal outside the fit (reading, rendering): nothing to keep.
-        print(f"invsss: interrupted ({interrupt}); nothing written", file=sys.stderr)
-        return interrupt.exit_status
+        return _interrupted(interrupt.signum)
+    except Exception:
+        # Interrupted raised inside a library's import or callback can come out as
+        # another exception (a C extension's failed initialisation is an ImportError):
+        # once it has been raised, whatever ends the command is that signal.
+        if not stop.raised:
+            raise
+        return _interrupted(stop.signum)
+    finally:
+        command_finished()  # a signal from here on: one line, no traceback
+
+
+def _interrupted(signum: int) -> int:
+    print(f"invsss: interrupted ({signal.Signals(signum).name}); nothing written", file=sys.stderr)
+    return 128 + signum
 
 
 def _use_compile_cache(args: argparse.Namespace) -> None:

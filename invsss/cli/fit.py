@@ -9,6 +9,7 @@ to :func:`~invsss.estimator.fit.run_fit`, the entry point the sweeps use too.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
 import os
@@ -17,6 +18,7 @@ import sys
 import tempfile
 import threading
 import time
+import warnings
 
 import numpy as np
 
@@ -26,7 +28,7 @@ from ..io import photo_pair, shared_clipping_level, write_image, write_params
 from ..io.result_dir import ResultDir, ResultWriteError
 from ..forward.pair import ImagePair
 from ..forward.params import DEPTH_UNITS
-from ..validation import InvalidInputError
+from ..validation import InputNotice, InvalidInputError, one_line
 
 import dataclasses
 from ..estimator.fit import run_fit
@@ -106,7 +108,7 @@ def add_parser(subparsers) -> None:
                         "already holds a result is refused unless --overwrite is given")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace the result already in DIR (its files only; other "
-                        "files in DIR are kept)")
+                        "files in DIR, and this fit's inputs among the result's files, are kept)")
     add_no_cache_argument(parser)
     parser.set_defaults(func=run)
 
@@ -204,14 +206,26 @@ def _fit_file_names(count: int) -> list[str]:
 
 
 def run(args: argparse.Namespace, stop: StopSignals) -> int:
+    # The notices about the inputs go to the command line as they come, and into
+    # params.json's warnings with the fit's own (as a sweep's trial records them).
+    with _recording_notices() as notices:
+        return _run(args, stop, notices)
+
+
+def _run(args: argparse.Namespace, stop: StopSignals, notices: list[str]) -> int:
     options = fit_options_from(args)
     count = _check_pair_counts(args)
     # --depth/--distance/--mask checked before the output directory is touched.
     made_mask_names = photo_pair.check_photo_arguments(count, args.depth, args.distance, args.mask)
     names = _fit_file_names(count) + made_mask_names
     # Lock and check the output directory before reading anything, so a rerun
-    # into a finished result or a busy directory is refused at once.
-    with ResultDir(args.out, overwrite=args.overwrite, names=names) as out:
+    # into a finished result or a busy directory is refused at once. The fit's
+    # inputs are never lost: one that is a file of the result it replaces stays
+    # (--mask DIR/mask_used.png --overwrite), one it would write over is refused,
+    # and so is a file of the user's at a name it writes (docs/outputs.md).
+    advice = dict.fromkeys(made_mask_names, "pass it with --mask to use it as the mask")
+    with ResultDir(args.out, overwrite=args.overwrite, names=names, inputs=_input_files(args, options),
+                   advice=advice) as out:
         inputs = photo_pair.photo_inputs(args.source, args.target, args.depth, args.distance, args.mask,
                                          fix=dict(options.fix), depth_scale=args.depth_scale,
                                          linear_codes=args.linear_codes)
@@ -259,7 +273,8 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
                 progress.close()
             for message in result.warnings:
                 print(f"invsss: warning: {message}", file=sys.stderr)
-            written = _write_fit(out, names, result, pairs, inputs, "mm" if args.distance else args.depth_unit)
+            written = _write_fit(out, names, result, pairs, inputs, "mm" if args.distance else args.depth_unit,
+                                 notices)
         if written is None:
             return 1
     if stop.exit_status is not None:
@@ -295,13 +310,44 @@ def _with_file_names(text: str, args: argparse.Namespace, count: int) -> str:
     return text
 
 
+def _input_files(args: argparse.Namespace, options: FitOptions) -> list[tuple[str, str]]:
+    """``(flag, path)`` of every file the fit reads, for :class:`ResultDir` to keep safe."""
+    flags = (*_PAIR_FLAGS, "light", "normal", "key", "fill_light")
+    given = [(f"--{flag.replace('_', '-')}", path) for flag in flags for path in getattr(args, flag, None) or ()]
+    if isinstance(options.profile, (str, os.PathLike)) and os.path.isfile(options.profile):
+        given.append(("--profile", os.fspath(options.profile)))
+    return given
+
+
+@contextlib.contextmanager
+def _recording_notices():
+    """Within the block, each :class:`~invsss.validation.InputNotice` shown is also
+    appended (as one line) to the list this yields."""
+    notices: list[str] = []
+    show = warnings.showwarning
+
+    def recording(message, category, *rest, **keywords):
+        if issubclass(category, InputNotice):
+            notices.append(one_line(message))
+        show(message, category, *rest, **keywords)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = recording
+        yield notices
+
+
 def _write_fit(out: ResultDir, names: list[str], result, pairs, inputs=None,
-               depth_unit: str = "mm") -> list[str] | None:
-    """Commit the fit's files to ``out``; on failure keep the estimate elsewhere and say where."""
+               depth_unit: str = "mm", notices=()) -> list[str] | None:
+    """Commit the fit's files to ``out``; on failure keep the estimate elsewhere and say where.
+
+    ``notices`` (the input notices shown during the run) come first in params.json's
+    ``warnings``, each once.
+    """
     # matplotlib is only needed here; `invsss render` should not pay for importing it.
     from .report import plot_fit_report
 
     content = {**result.to_dict(), "depth_unit": depth_unit}
+    content["warnings"] = list(dict.fromkeys([*notices, *content.get("warnings", ())]))
     if inputs is not None and inputs.record is not None:
         content["inputs"] = inputs.record  # a distance, made masks, held parameters
     writers = {"params.json": lambda path: write_params(path, content)}

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import numbers
 import os
+import warnings
 
 import numpy as np
 
@@ -29,11 +30,12 @@ from .images import finish_pair, load_pair, read_colour_pair
 from .masks import read_mask
 from ..forward.pair import ImagePair
 from .skin_mask import skin_mask_from_pair
-from ..validation import InvalidInputError
+from ..validation import InputNotice, InvalidInputError
 
 __all__ = [
     "HELD_WITH_CONSTANT_DEPTH",
     "MASK_FILE",
+    "PLAUSIBLE_DISTANCE_MM",
     "PhotoInputs",
     "check_distance",
     "check_photo_arguments",
@@ -51,14 +53,21 @@ HELD_WITH_CONSTANT_DEPTH = {"correction": 0.0, "maxdd": 1.0}
 #: The file ``invsss fit`` writes the mask it made into, beside the result.
 MASK_FILE = "mask_used.png"
 
+#: The distances (mm) a face is photographed from; :func:`check_distance` notes one outside.
+PLAUSIBLE_DISTANCE_MM = (100.0, 5000.0)
+
 _HELD_REASON = (
     "constant depth (--distance): no depth slope anywhere, so {name} changes nothing in the "
     "image and the pair cannot determine it; held at {value:g}"
 )
 
 
-def check_distance(distance_mm, name: str = "distance") -> float:
+def check_distance(distance_mm, name: str = "distance", *, notice: bool = True) -> float:
     """``distance_mm`` as a float, or a one-line error unless it is finite and > 0.
+
+    A distance outside :data:`PLAUSIBLE_DISTANCE_MM` (100-5000 mm) is used, with an
+    :class:`~invsss.validation.InputNotice` naming it (unless ``notice`` is False): it
+    is more likely in another unit than a face's distance, and ``sss_level`` scales with it.
 
     Examples
     --------
@@ -68,11 +77,25 @@ def check_distance(distance_mm, name: str = "distance") -> float:
     Traceback (most recent call last):
     ...
     invsss.validation.InvalidInputError: distance: expected the face's distance from the camera in mm, a finite number > 0, got -5.0
+    >>> import warnings
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     check_distance(0.6)
+    0.6
+    >>> print(caught[0].message)
+    distance: 0.6 mm is outside 100-5000 mm, where a face is photographed from; used as given, but the fitted sss_level scales with it (is it in mm?)
     """
     ok = isinstance(distance_mm, numbers.Real) and not isinstance(distance_mm, bool)
     if not ok or not math.isfinite(distance_mm) or distance_mm <= 0:
         raise InvalidInputError(
             f"{name}: expected the face's distance from the camera in mm, a finite number > 0, got {distance_mm!r}"
+        )
+    low, high = PLAUSIBLE_DISTANCE_MM
+    if notice and not low <= distance_mm <= high:
+        warnings.warn(
+            f"{name}: {distance_mm:g} mm is outside {low:g}-{high:g} mm, where a face is photographed from; "
+            "used as given, but the fitted sss_level scales with it (is it in mm?)",
+            InputNotice, stacklevel=2,
         )
     return float(distance_mm)
 
@@ -152,7 +175,7 @@ def load_photo_pair(
             + ("not both" if depth is not None else "got neither")
         )
     if distance_mm is not None:
-        check_distance(distance_mm)
+        check_distance(distance_mm, notice=False)  # constant_depth below notes an odd one
     if depth is not None and mask is not None:
         return load_pair(source, target, depth, mask, depth_scale=depth_scale, linear_codes=linear_codes), False
     source_image, target_image = read_colour_pair(source, target, linear_codes)
@@ -274,5 +297,5 @@ def check_photo_arguments(count: int, depths, distances, masks) -> list[str]:
     if masks and len(masks) != count:
         raise InvalidInputError(f"--mask: expected one per pair ({count}), got {len(masks)}")
     for value in distances:
-        check_distance(value, "--distance")
+        check_distance(value, "--distance", notice=False)  # noted once, where the depth is made
     return [] if masks else [_mask_file(k, count) for k in range(count)]

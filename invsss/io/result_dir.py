@@ -13,6 +13,12 @@ look like one result, and a rerun would silently replace an earlier result.
 * **No silent replacement.** A directory that already holds an invsss result (a
   manifest, or a ``params.json`` from an older invsss) is refused unless
   ``overwrite=True``; the check runs when the directory is opened, before any work.
+* **Nothing of the user's is lost.** A result never writes over a file it did not
+  write: a name the run will write that holds a file which is not part of the result
+  already there (not in its manifest) is refused, ``overwrite`` or not. The run's
+  inputs (``inputs=``) are never removed nor written over: an input among the
+  previous result's files is kept when that result is replaced (it leaves the result
+  and becomes the user's file), and an input at a name the run writes is refused.
 * **Checked up front.** Opening creates the lock file, which proves the
   directory is writable, and refuses result names taken by something that is
   not a regular file (a directory called ``params.json``).
@@ -180,6 +186,20 @@ class ResultDir:
         Who holds the lock, shown to a second run (e.g. the command line).
     option : str
         How the user names the overwrite switch, for messages (``"--overwrite"``).
+    inputs : iterable of (str, path)
+        The run's input files as ``(how the user gave it, path)``, e.g.
+        ``("--mask", "run/mask_used.png")``. One that is a file of the result being
+        replaced is kept (listed in :attr:`kept`); one at a name the run writes is
+        refused when the directory is opened.
+    advice : mapping of str to str, optional
+        For a name the run writes, what to add when a file of the user's is refused
+        there (e.g. ``{"mask_used.png": "pass it with --mask to use it as the mask"}``).
+
+    Attributes
+    ----------
+    kept : list of str
+        Names of the previous result's files that are inputs of this run: the commit
+        leaves them in place and out of the new manifest.
 
     Examples
     --------
@@ -199,12 +219,18 @@ class ResultDir:
         names: Iterable[str] = (),
         description: str = "",
         option: str = "--overwrite",
+        inputs: Iterable[tuple[str, object]] = (),
+        advice: Mapping[str, str] | None = None,
     ):
         self.path = os.fspath(path)
         self.overwrite = overwrite
         self.names = tuple(names)
         self.description = description or " ".join(sys.argv)
         self.option = option
+        self.inputs = tuple((label, os.fspath(given)) for label, given in inputs)
+        self.advice = dict(advice or {})
+        self.kept: list[str] = []
+        self._owned: set[str] = set()
         self._fd: int | None = None
         self._created = False
         self.committed = False
@@ -312,25 +338,62 @@ class ResultDir:
     def _check_contents(self) -> None:
         path = self.path
         state = result_state(path)
-        if state is not None and not self.overwrite:
-            what = {"complete": "a result", "legacy": "a result", "incomplete": "an incomplete result",
-                    "damaged": "a result whose manifest is damaged"}
-            listed = ", ".join(n for n in _result_files(path) if os.path.exists(os.path.join(path, n)))
-            raise InvalidInputError(
-                f"{path}: already holds {what.get(state, 'a result')} ({listed or MANIFEST_NAME}); "
-                f"pass {self.option} to replace it, or choose another output directory"
-            )
+        # The files of the result already here: the only ones a run may remove or replace.
+        self._owned = set(_result_files(path)) if state is not None else set()
+        here = self._inputs_here(self._owned | set(self.names))
         for name in self.names + (MANIFEST_NAME,):
             target = os.path.join(path, name)
             if os.path.lexists(target) and not os.path.isfile(target):
                 raise InvalidInputError(
                     f"{target}: is in the way of the result (not a regular file); move it away"
                 )
+            refusal = self._refusal(name, here)
+            if refusal is not None:
+                raise InvalidInputError(refusal)
+        self.kept = sorted(name for name in here if name not in self.names)
+        if state is not None and not self.overwrite:
+            what = {"complete": "a result", "legacy": "a result", "incomplete": "an incomplete result",
+                    "damaged": "a result whose manifest is damaged"}
+            listed = ", ".join(n for n in _result_files(path) if os.path.exists(os.path.join(path, n)))
+            kept = f" ({', '.join(self.kept)}, an input of this run, would stay)" if self.kept else ""
+            raise InvalidInputError(
+                f"{path}: already holds {what.get(state, 'a result')} ({listed or MANIFEST_NAME}); "
+                f"pass {self.option} to replace it{kept}, or choose another output directory"
+            )
         # Staging folders of a run that was killed mid-commit: nobody else can own
         # them while we hold the lock.
         for name in os.listdir(path):
             if name.startswith(_STAGING_PREFIX):
                 shutil.rmtree(os.path.join(path, name), ignore_errors=True)
+
+    def _inputs_here(self, names: Iterable[str]) -> dict[str, str]:
+        """``{name: how the user gave it}`` for each of ``names`` in the directory that is one
+        of the run's input files (the same file, through any path or link)."""
+        found: dict[str, str] = {}
+        for label, given in self.inputs:
+            for name in sorted(names):
+                target = os.path.join(self.path, name)
+                try:
+                    same = os.path.isfile(given) and os.path.isfile(target) and os.path.samefile(given, target)
+                except OSError:
+                    same = False
+                if same:
+                    found.setdefault(name, label)
+        return found
+
+    def _refusal(self, name: str, inputs_here: Mapping[str, str]) -> str | None:
+        """Why the run may not write file ``name``, in one line, or None: it is one of the
+        run's inputs, or a file of the user's (not part of the result already here)."""
+        target = os.path.join(self.path, name)
+        if name in inputs_here:
+            return (f"{target} ({inputs_here[name]}): an input of this run, and the result writes a file of "
+                    f"that name; copy it out of {self.path} and give the copy")
+        if name != MANIFEST_NAME and name not in self._owned and os.path.isfile(target):
+            advice = self.advice.get(name)
+            return (f"{target}: not a file of an earlier invsss result in {self.path}, and this run writes a "
+                    f"file of that name; move or rename it{f' ({advice})' if advice else ''}, or choose "
+                    "another output directory")
+        return None
 
     # ------------------------------------------------------------------ commit
 
@@ -354,6 +417,13 @@ class ResultDir:
         for name in names:
             if name != os.path.basename(name) or name in (MANIFEST_NAME, _LOCK_NAME):
                 raise ValueError(f"result file name {name!r}: expected a plain file name")
+        # Names not declared when the directory was opened get the same check now.
+        undeclared = [name for name in names if name not in self.names]
+        here = self._inputs_here(undeclared)
+        for name in undeclared:
+            refusal = self._refusal(name, here)
+            if refusal is not None:
+                raise ResultWriteError(refusal)
         staging = os.path.join(self.path, _STAGING_PREFIX + secrets.token_hex(4))
         try:
             os.mkdir(staging)
@@ -377,7 +447,8 @@ class ResultDir:
             **({"info": dict(info)} if info else {}),
         }
         try:
-            old = [n for n in _result_files(self.path) if n not in names]
+            # The previous result's files go, except the inputs of this run among them.
+            old = [n for n in _result_files(self.path) if n not in names and n not in self.kept]
             # From here until the last rename the directory mixes two runs: say so
             # first, and list what is on its way in so a later overwrite can clean up.
             _write_json_atomic(manifest_path, {**manifest, "incoming": names})
@@ -397,6 +468,7 @@ class ResultDir:
         finally:
             shutil.rmtree(staging, ignore_errors=True)
         self.committed = True
+        self._owned = set(names)
         return [os.path.join(self.path, n) for n in names]
 
 

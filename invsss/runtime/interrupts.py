@@ -15,6 +15,16 @@ seen). :class:`StopSignals` handles both signals instead:
   who does not want to wait.
 
 The exit status of an interrupted command is 130 for SIGINT and 143 for SIGTERM.
+
+Before :class:`StopSignals` is installed the command is still importing (JAX and
+its libraries take a second or more) and parsing its arguments; after it, the
+process may wait for a thread on its way out. There a ``KeyboardInterrupt`` would
+end in a traceback, or, raised inside a C extension's initialisation, in an
+unrelated ``ImportError``. :func:`guard_command_line`, called first thing by
+``import invsss`` and acting only in the ``invsss`` command's own process, makes a
+signal there end the process at once with one line and the same exit status.
+Nothing can be done earlier than that: a signal while Python itself starts (its
+``site`` module, the first 0.02-0.1 s) is Python's own affair.
 """
 
 from __future__ import annotations
@@ -25,9 +35,93 @@ import signal
 import sys
 from collections.abc import Callable, Iterator
 
-__all__ = ["Interrupted", "StopSignals"]
+__all__ = ["Interrupted", "StopSignals", "command_finished", "guard_command_line", "is_command_line"]
 
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+#: What the command is doing while :func:`guard_command_line`'s handler is in place.
+_phase = "while starting; nothing written"
+
+
+def is_command_line() -> bool:
+    """Whether this process is the ``invsss`` command: its console script, or
+    ``python -m invsss`` while the package is being imported to run it.
+
+    A pool worker spawned by a sweep, or a script that imports invsss, is not.
+
+    Examples
+    --------
+    >>> is_command_line()  # the test runner
+    False
+    """
+    main = sys.modules.get("__main__")
+    script = getattr(main, "__file__", None) or ""
+    name = os.path.basename(script)
+    if name == "__main__.py":  # a zipped launcher (Windows' invsss.exe)
+        name = os.path.basename(os.path.dirname(script))
+    if name.split(".")[0] in ("invsss", "invsss-script"):
+        return True
+    # python -m invsss: while the module is being found, sys.argv[0] is "-m".
+    if sys.argv[:1] != ["-m"]:
+        return False
+    words = list(getattr(sys, "orig_argv", ()))[1:]
+    for i, word in enumerate(words):
+        if word.startswith("-m"):
+            module = word[2:] or (words[i + 1] if i + 1 < len(words) else "")
+            return module in ("invsss", "invsss.cli")
+    return False
+
+
+def guard_command_line() -> bool:
+    """In the ``invsss`` command's process, end it at SIGINT or SIGTERM with one line
+    (``invsss: interrupted (SIGINT) while starting; nothing written``) and status
+    ``128 + signal number``, until :class:`StopSignals` takes over, and again once it
+    has let go (:func:`command_finished`). Returns whether it did anything: not in
+    any other process, nor where the signal is ignored (a background job).
+
+    Examples
+    --------
+    >>> guard_command_line()  # the test runner is not the command
+    False
+    """
+    installed = False
+    try:
+        if not is_command_line():
+            return False
+        for sig in _SIGNALS:
+            try:
+                if signal.getsignal(sig) is not signal.SIG_IGN:
+                    signal.signal(sig, _quit)
+                    installed = True
+            except (ValueError, OSError):  # not the main thread: leave the signals alone
+                pass
+    except KeyboardInterrupt:  # Ctrl-C while the guard was being put in place
+        if is_command_line():
+            _quit(signal.SIGINT, None)
+        raise
+    return installed
+
+
+def command_finished() -> None:
+    """Say, from here on, that a signal came after the command's work was done."""
+    global _phase
+    _phase = "while exiting"
+
+
+def _quit(signum, frame) -> None:
+    # Nothing to keep yet (or nothing left to do): one line and out. os.write and
+    # os._exit, not print and sys.exit: no exception may reach the code that was
+    # running (an import of a C extension would turn it into an ImportError).
+    try:
+        sys.stdout.flush()
+    except Exception:  # noqa: BLE001 -- a stream in use or closed: its text is lost either way
+        pass
+    line = f"invsss: interrupted ({signal.Signals(signum).name}) {_phase}\n"
+    try:
+        os.write(2, line.encode())
+    except OSError:
+        pass
+    os._exit(128 + signum)
 
 
 class Interrupted(BaseException):
@@ -62,6 +156,8 @@ class StopSignals:
 
     def __init__(self):
         self.signum: int | None = None
+        #: Whether a signal raised :class:`Interrupted` (outside :meth:`deferred`).
+        self.raised = False
         self._deferring = 0
         self._on_first: Callable[[int], None] | None = None
         self._previous: dict = {}
@@ -98,7 +194,7 @@ class StopSignals:
 
     def _handle(self, signum, frame) -> None:
         if not self._deferring:
-            self.signum = signum
+            self.signum, self.raised = signum, True
             raise Interrupted(signum)
         if self.signum is not None:
             # The second signal: the user does not want to wait. os._exit skips
