@@ -28,6 +28,7 @@ from ..io import photo_pair, shared_clipping_level, write_image, write_params
 from ..io.result_dir import ResultDir, ResultWriteError
 from ..forward.pair import ImagePair
 from ..forward.params import DEPTH_UNITS
+from ..estimator.blur_width import blur_line
 from ..validation import InputNotice, InvalidInputError, one_line
 
 import dataclasses
@@ -149,6 +150,10 @@ def fit_options_from(args: argparse.Namespace) -> FitOptions:
         values[field.name] = value if parse is None else parse(value, flag)
     if values.get("saturation") == "auto":
         values["saturation"] = None
+    if values.get("profile") == "auto":
+        # Two photographs at one distance resolve a blur of a pixel or two: one
+        # Gaussian is what they determine (docs/capture.md); --profile asks for more.
+        values["profile"] = "single" if getattr(args, "distance", None) else FitOptions.profile
     try:
         return FitOptions(**values)
     except InvalidInputError as err:
@@ -289,6 +294,8 @@ def _run(args: argparse.Namespace, stop: StopSignals, notices: list[str]) -> int
         f"{'converged' if result.converged else 'NOT converged'} ({result.iterations} iterations); "
         f"wrote {', '.join(written)}"
     )
+    if blur_line(result.blur):
+        print(f"fit: {blur_line(result.blur)}")
     return 0
 
 

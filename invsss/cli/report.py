@@ -32,6 +32,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import LogFormatter, MaxNLocator
 
+from ..estimator.blur_width import blur_line
 from ..estimator.diagnostics import masked_psnr, masked_ssim
 from ..forward.params import PARAM_NAMES
 from ..forward.profiles import sum_of_gaussians
@@ -144,6 +145,8 @@ def _parameter_lines(result) -> list[str]:
     )
     lines.append(f"loss {float(result.loss):.4g}   PSNR {float(result.psnr):.2f} dB   SSIM {float(result.ssim):.4f}")
     lines.append(f"gain {_format_value(result.gain)}   offset {_format_value(result.offset)}")
+    if blur_line(getattr(result, "blur", None)):
+        lines.append(blur_line(result.blur))
     if result.mix is not None:
         lines.append(f"RGB -> grey mix {_format_value(result.mix)}")
     for k, record in enumerate(getattr(result, "alignment", ()) or ()):
