@@ -42,19 +42,21 @@ def test_degree_is_checked_in_one_line():
 
 
 def _colour_pair(field):
-    source, _, depth, mask = _textured_pair(96, 800.0, 4.0)
+    source, _, depth, mask = _textured_pair(64, 800.0, 4.0)
     rgb = np.repeat(source, 3, axis=-1) * np.array([1.0, 0.8, 0.7])
     with jax.enable_x64(True):
         clean = np.asarray(invsss.render(rgb, depth, mask, invsss.SSSParams(800.0, 0.0, 1.0, [1.0], [4.0])))
-        shade = np.asarray(pigment_field(field, (96, 96)))
+        shade = np.asarray(pigment_field(field, (64, 64)))
     target = clean * shade + 0.003 * np.random.default_rng(1).standard_normal(clean.shape)
     return rgb, target, depth, mask
 
 
 def _fit(pair, pigment):
+    # Plain least squares: a robust fit's loss carries its own weights, so two fits'
+    # losses compare only without them.
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return invsss.fit_pair(*pair, profile=SINGLE, fix=FIX, n_starts=1, pigment=pigment)
+        return invsss.fit_pair(*pair, profile=SINGLE, fix=FIX, n_starts=1, pigment=pigment, robust="none")
 
 
 @pytest.mark.slow
