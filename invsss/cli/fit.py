@@ -360,7 +360,8 @@ def _write_fit(out: ResultDir, names: list[str], result, pairs, inputs=None,
     writers = {"params.json": lambda path: write_params(path, content)}
     for name, image in zip(names[1:], result.fitted):
         writers[name] = lambda path, image=image: write_image(path, np.asarray(image, np.float32))
-    writers["report.png"] = lambda path: plot_fit_report(result, pairs, path)
+    mask_notes = None if inputs is None else inputs.mask_notes  # a doubtful mask's line on the figure
+    writers["report.png"] = lambda path: plot_fit_report(result, pairs, path, mask_notes=mask_notes)
     for name, mask in ({} if inputs is None else inputs.made_masks).items():
         writers[name] = lambda path, mask=mask: write_image(path, mask)  # DIR/mask_used.png
     info = {"command": "fit", "converged": bool(result.converged),

@@ -43,6 +43,8 @@ __all__ = ["plot_fit_report"]
 _PANEL_INCHES = 2.9
 #: Resolution of the page (dots per inch), for the layout and the saved image alike.
 _DPI = 110
+#: The colour of a mask note under a source panel (a mask its checks doubt).
+_MASK_NOTE_COLOUR = "#c0392b"
 _TEXT_WIDTH = 84  # characters per line in the parameter box
 
 
@@ -311,8 +313,9 @@ def _residual_limit(residuals) -> float:
     return limit if limit > 0 else 1.0
 
 
-def _draw_pair_rows(fig, grid, pairs, fitted) -> None:
-    """One row per pair in ``grid``'s first rows: source, fitted, target, residual."""
+def _draw_pair_rows(fig, grid, pairs, fitted, mask_notes=None) -> None:
+    """One row per pair in ``grid``'s first rows: source, fitted, target, residual; a
+    pair's mask note (what its checks found) under its source panel, in red."""
     rows = len(pairs)
     residuals, residual_axes = [], []
     for k, (source, target, _depth, mask) in enumerate(pairs):
@@ -326,8 +329,11 @@ def _draw_pair_rows(fig, grid, pairs, fitted) -> None:
         limits = _display_range(target, mask)
         psnr, ssim = masked_psnr(pred, target, mask), masked_ssim(pred, target, mask)
         label = f"pair {k}: " if rows > 1 else ""
-        _show(fig.add_subplot(grid[k, 0]), _display(source, _display_range(source, mask)),
-              f"{label}source", mask)
+        source_ax = fig.add_subplot(grid[k, 0])
+        _show(source_ax, _display(source, _display_range(source, mask)), f"{label}source", mask)
+        if mask_notes and k < len(mask_notes) and mask_notes[k]:
+            source_ax.text(0.0, -0.02, mask_notes[k], transform=source_ax.transAxes, va="top", ha="left",
+                           fontsize=7, color=_MASK_NOTE_COLOUR)
         _show(fig.add_subplot(grid[k, 1]), _display(pred, limits),
               f"fitted  PSNR {psnr:.2f} dB  SSIM {ssim:.3f}", mask)
         _show(fig.add_subplot(grid[k, 2]), _display(target, limits), "target", mask)
@@ -350,7 +356,7 @@ def _draw_pair_rows(fig, grid, pairs, fitted) -> None:
         fig.colorbar(image, cax=ax.inset_axes([1.04, 0.08, 0.05, 0.84]), format="%.2g")
 
 
-def plot_fit_report(result, pairs, path) -> None:
+def plot_fit_report(result, pairs, path, mask_notes=None) -> None:
     """Draw a fit's report page and save it as an image.
 
     Parameters
@@ -362,6 +368,9 @@ def plot_fit_report(result, pairs, path) -> None:
         ``target`` (H, W, C'), ``mask`` (H, W) or None (every pixel).
     path : str or os.PathLike
         Output file; the format follows the extension (``.png``, ``.pdf``, ``.svg``).
+    mask_notes : sequence of (str or None), optional
+        Per pair, a short line on what its mask's checks found
+        (:func:`invsss.io.skin_mask.mask_note`), drawn under its source panel.
 
     Raises
     ------
@@ -384,10 +393,10 @@ def plot_fit_report(result, pairs, path) -> None:
     >>> os.path.getsize(path) > 0
     True
     """
-    _report_figure(result, pairs).savefig(os.fspath(path), dpi=_DPI)
+    _report_figure(result, pairs, mask_notes).savefig(os.fspath(path), dpi=_DPI)
 
 
-def _report_figure(result, pairs) -> Figure:
+def _report_figure(result, pairs, mask_notes=None) -> Figure:
     """The page of :func:`plot_fit_report`, drawn on an Agg canvas, not yet saved."""
     pairs = [
         (p.source, p.target, p.depth, p.mask) if hasattr(p, "source") else tuple(p) for p in pairs
@@ -422,7 +431,7 @@ def _report_figure(result, pairs) -> Figure:
         wspace=0.32, hspace=0.3,
     )
 
-    _draw_pair_rows(fig, grid, pairs, fitted)
+    _draw_pair_rows(fig, grid, pairs, fitted, mask_notes)
 
     # The profile's tick labels and its ylabel sit between the two plots: they get a
     # gap of their own (1.2 in, the image panels' is 0.7 in), clear of the loss plot.

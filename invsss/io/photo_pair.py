@@ -29,7 +29,7 @@ from .depth import read_depth
 from .images import finish_pair, load_pair, read_colour_pair
 from .masks import read_mask
 from ..forward.pair import ImagePair
-from .skin_mask import skin_mask_from_pair
+from .skin_mask import check_skin_mask, make_skin_mask, mask_note
 from ..validation import InputNotice, InvalidInputError
 
 __all__ = [
@@ -126,7 +126,8 @@ def constant_depth_pair(source, target, distance_mm, mask=None) -> ImagePair:
     distance_mm : float > 0
         The face's distance from the camera, mm (along the optical axis).
     mask : array, shape (H, W), optional
-        The skin mask; None makes one from the pair (:func:`invsss.io.skin_mask.skin_mask_from_pair`).
+        The skin mask; None makes one from the pair (:func:`invsss.io.skin_mask.make_skin_mask`,
+        which warns when the mask it made is likely not skin only).
 
     Examples
     --------
@@ -142,26 +143,28 @@ def constant_depth_pair(source, target, distance_mm, mask=None) -> ImagePair:
     """
     source = np.asarray(source)
     if mask is None:
-        mask = skin_mask_from_pair(source, target)
+        mask = make_skin_mask(source, target).mask
     return ImagePair(source, np.asarray(target), constant_depth(np.shape(source), distance_mm), np.asarray(mask))
 
 
 def load_photo_pair(
-    source, target, *, depth=None, distance_mm=None, mask=None, depth_scale: float = 1.0, linear_codes: bool = False
-) -> tuple[ImagePair, bool]:
+    source, target, *, depth=None, distance_mm=None, mask=None, depth_scale: float = 1.0, linear_codes: bool = False,
+    mask_name: str = "the mask made from the pair",
+):
     """Read a pair whose depth may be one distance and whose mask may be missing.
 
     With ``depth`` and ``mask`` both files this is :func:`invsss.load_pair`. Otherwise
     the images are read and decoded as there (sRGB for 8-bit codes unless
     ``linear_codes``; a grey stored as RGB becomes one channel), the depth is
     ``distance_mm`` everywhere, and the mask, if not given, is made from the two
-    images (:func:`~invsss.io.skin_mask.skin_mask_from_pair`).
+    images (:func:`~invsss.io.skin_mask.make_skin_mask`; its notices name it ``mask_name``).
 
     Returns
     -------
     pair : ImagePair
-    mask_made : bool
-        True when the mask was made from the pair.
+    made : MadeMask or None
+        The mask made from the pair, with its rule and checks
+        (:class:`~invsss.io.skin_mask.MadeMask`); None when the mask was given.
 
     Raises
     ------
@@ -177,24 +180,25 @@ def load_photo_pair(
     if distance_mm is not None:
         check_distance(distance_mm, notice=False)  # constant_depth below notes an odd one
     if depth is not None and mask is not None:
-        return load_pair(source, target, depth, mask, depth_scale=depth_scale, linear_codes=linear_codes), False
+        return load_pair(source, target, depth, mask, depth_scale=depth_scale, linear_codes=linear_codes), None
     source_image, target_image = read_colour_pair(source, target, linear_codes)
     depth_map = read_depth(depth, scale=depth_scale) if depth is not None else constant_depth(
         source_image.shape, distance_mm)
-    mask_made = mask is None
-    if mask_made:
+    made = None
+    if mask is None:
         if source_image.shape[:2] != target_image.shape[:2]:
             raise InvalidInputError(
                 f"{os.fspath(target)}: expected the source's size {source_image.shape[:2]}, got "
                 f"{target_image.shape[:2]}"
             )
-        mask_map = skin_mask_from_pair(source_image, target_image)
+        made = make_skin_mask(source_image, target_image, mask_name)
+        mask_map = made.mask
     else:
         mask_map = read_mask(mask)
     names = {"source": os.fspath(source), "target": os.fspath(target),
              "depth": os.fspath(depth) if depth is not None else f"--distance {distance_mm:g}",
              "mask": os.fspath(mask) if mask is not None else "the mask made from the pair"}
-    return finish_pair(source_image, target_image, depth_map, mask_map, names), mask_made
+    return finish_pair(source_image, target_image, depth_map, mask_map, names), made
 
 
 class PhotoInputs:
@@ -213,10 +217,19 @@ class PhotoInputs:
     made_masks : dict
         ``{file name: (H, W) mask}`` of the masks made from the pairs, to write beside
         the result (``mask_used.png``; ``mask_used_0.png``, ... for several pairs).
+    notices : list of str
+        The masks' notices (:func:`~invsss.io.skin_mask.mask_checks`: a mask made with
+        no face found, or covering most of the frame, touching most of its border,
+        mostly failing the skin test), for ``params.json``'s ``warnings``.
+    mask_notes : list of (str or None)
+        Per pair, one short line on what its mask's checks found, for the report figure
+        (:func:`~invsss.io.skin_mask.mask_note`); None where they passed or did not run.
     """
 
-    def __init__(self, pairs, fix, record, made_masks):
+    def __init__(self, pairs, fix, record, made_masks, notices=(), mask_notes=None):
         self.pairs, self.fix, self.record, self.made_masks = pairs, fix, record, made_masks
+        self.notices = list(notices)
+        self.mask_notes = list(mask_notes) if mask_notes is not None else [None] * len(pairs)
 
 
 def photo_inputs(sources, targets, depths, distances, masks, *, fix=None, depth_scale: float = 1.0,
@@ -226,7 +239,11 @@ def photo_inputs(sources, targets, depths, distances, masks, *, fix=None, depth_
 
     ``depths`` and ``distances`` hold one entry per pair between them: either one
     ``--depth`` per pair or one ``--distance`` per pair (or a single ``--distance`` for
-    all). ``masks`` is empty (make each pair's mask) or one per pair.
+    all). ``masks`` is empty (make each pair's mask) or one per pair. A mask made, or a
+    mask given with a distance (a photograph's pair), is checked
+    (:func:`~invsss.io.skin_mask.make_skin_mask`, :func:`~invsss.io.skin_mask.check_skin_mask`):
+    ``inputs.pairs[k].mask`` records the rule and the checks, and the notices are warned
+    and kept in :attr:`PhotoInputs.notices`.
 
     Raises
     ------
@@ -238,22 +255,30 @@ def photo_inputs(sources, targets, depths, distances, masks, *, fix=None, depth_
     fix = dict(fix or {})
     check_photo_arguments(count, depths, distances, masks)
     distances = [float(d) for d in distances] * (count if len(distances) == 1 else 1)
-    pairs, made, pair_records = [], {}, []
+    pairs, made, pair_records, notices, notes = [], {}, [], [], []
     for k in range(count):
-        pair, mask_made = load_photo_pair(
+        name = _mask_file(k, count)
+        pair, made_mask = load_photo_pair(
             sources[k], targets[k], depth=depths[k] if depths else None,
             distance_mm=distances[k] if distances else None, mask=masks[k] if masks else None,
-            depth_scale=depth_scale, linear_codes=linear_codes,
+            depth_scale=depth_scale, linear_codes=linear_codes, mask_name=name,
         )
         pairs.append(pair)
-        name = _mask_file(k, count)
-        if mask_made:
+        if made_mask is not None:
             made[name] = np.asarray(pair.mask, np.float32)
+            mask_record = {"kind": "made from the pair", "file": name,
+                           "function": "invsss.io.skin_mask.make_skin_mask", **made_mask.record()}
+        else:
+            mask_record = {"kind": "file", "file": os.fspath(masks[k])}
+            if distances:  # a photograph's pair with its own mask: is it skin?
+                mask_record.update(check_skin_mask(np.asarray(pair.mask), np.asarray(pair.source),
+                                                   np.asarray(pair.target), os.fspath(masks[k])))
+        notices += mask_record.get("notices", [])
+        notes.append(mask_note(mask_record))
         pair_records.append({
             "depth": ({"kind": "distance", "distance_mm": distances[k]} if distances
                       else {"kind": "file", "file": os.fspath(depths[k]), "scale": depth_scale}),
-            "mask": ({"kind": "made from the pair", "file": name, "method": "invsss.io.skin_mask.skin_mask_from_pair"}
-                     if mask_made else {"kind": "file", "file": os.fspath(masks[k])}),
+            "mask": mask_record,
         })
     if not distances and not made:
         return PhotoInputs(pairs, fix, None, made)
@@ -263,7 +288,7 @@ def photo_inputs(sources, targets, depths, distances, masks, *, fix=None, depth_
             value = float(fix.get(name, default))
             fix[name] = value
             held[name] = {"value": value, "why": _HELD_REASON.format(name=name, value=value)}
-    return PhotoInputs(pairs, fix, {"pairs": pair_records, "held": held}, made)
+    return PhotoInputs(pairs, fix, {"pairs": pair_records, "held": held}, made, notices, notes)
 
 
 def _mask_file(k: int, count: int) -> str:

@@ -310,7 +310,8 @@ def mask_checks(mask, name: str, *, skin_share=None, skin_test: str = "not run")
     'mask.png: covers 100% of the frame (over 75%)'
     """
     m = np.asarray(mask) > 0.5
-    coverage, border = float(m.mean()), border_share(m)
+    coverage, border = round(float(m.mean()), 4), round(border_share(m), 4)
+    skin_share = None if skin_share is None else round(float(skin_share), 4)
     notices = []
     tail = "a blur fitted on it measures the background as much as the skin; look at it, or give --mask"
     if coverage > COVERAGE_LIMIT:
@@ -322,9 +323,8 @@ def mask_checks(mask, name: str, *, skin_share=None, skin_test: str = "not run")
     if skin_share is not None and skin_share < SKIN_SHARE_LIMIT:
         notices.append(f"{name}: only {skin_share:.0%} of it passes the skin test of the face found in the "
                        f"photographs (under {SKIN_SHARE_LIMIT:.0%}); it is mostly not skin, and {tail}")
-    checks = {"coverage": round(coverage, 4), "border": round(border, 4),
-              "skin_share": None if skin_share is None else round(float(skin_share), 4),
-              "skin_test": skin_test, "passed": not notices}
+    checks = {"coverage": coverage, "border": border, "skin_share": skin_share, "skin_test": skin_test,
+              "passed": not notices}
     return checks, notices
 
 
