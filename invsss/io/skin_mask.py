@@ -90,9 +90,10 @@ LOG_FLOOR = 1e-3
 CLOSING_RADIUS_PX = 2
 #: The dark-background rule is used where at least DARK_SHARE of the pixels outside its
 #: mask (3 px away) are darker than DARK_LEVEL times the median on the mask, in both
-#: photographs. The bundled renders have 0.87-1.00 (pt_face_ear_backlit_940 0.87,
-#: leeperrysmith 0.98, the rest 1.00); skimage's astronaut 0.66 (green and red) and 0.79
-#: (colour), Grace Hopper 0.14, the camera man 0.26.
+#: photographs. The bundled path-traced pairs and leeperrysmith have 0.87-1.00
+#: (pt_face_ear_backlit_940 0.87, leeperrysmith 0.98, the rest 1.00; the scans on a dim
+#: surround, fran_front and fran_turned, 0.00 and 0.06); skimage's astronaut 0.66 (green
+#: and red) and 0.79 (colour), Grace Hopper 0.14, the camera man 0.26.
 DARK_LEVEL = 0.02
 DARK_SHARE = 0.8
 #: A mask covering more than this share of the frame is likely more than skin (the
