@@ -142,6 +142,20 @@ def test_the_mask_of_a_portrait_not_tuned_on_is_her_face(kind):
     assert made.notices == ()
 
 
+@pytest.mark.slow  # 1536 x 1536: about 5 s
+def test_a_photograph_larger_than_the_working_size_gets_the_same_face():
+    """Above WORK_SIZE px the skin is outlined on a reduced copy and the mask brought back."""
+    from skimage.transform import rescale
+
+    from invsss.io.face_mask import WORK_SIZE
+
+    photo = rescale(astronaut(), 3, channel_axis=2, order=1)
+    assert max(photo.shape) > WORK_SIZE
+    made = _made(*pair_of(photo, "green, red"))
+    assert made.method == "face" and made.mask.shape == photo.shape[:2]
+    assert iou(made.mask, face_mask(ASTRONAUT_FACE, photo.shape[:2], 3.0)) >= 0.8
+
+
 def test_the_dark_background_rule_on_the_astronaut_is_mostly_not_skin():
     """The mask the issue met (every check fails), checked as a given mask would be."""
     visible, near_infrared = pair_of(astronaut(), "green, red")

@@ -123,6 +123,7 @@ class FaceBox(NamedTuple):
                 + ((cols - self.col - cc * self.width) / (hc * self.width)) ** 2) <= 1.0
 
     def scaled(self, factor: float) -> "FaceBox":
+        """The box on an image ``factor`` times the size."""
         return FaceBox(*(float(v) * factor for v in self))
 
 
@@ -169,7 +170,8 @@ def detect_faces(image) -> list[FaceBox]:
 
     grey = _grey(image)
     if grey.ndim != 2 or not np.all(np.isfinite(grey)):
-        raise InvalidInputError(f"face detection: expected a finite (H, W) or (H, W, C) image, got shape {np.shape(image)}")
+        raise InvalidInputError(
+            f"face detection: expected a finite (H, W) or (H, W, C) image, got shape {np.shape(image)}")
     shown = linear_to_srgb(np.clip(_unit(grey), 0.0, 1.0))
     factor = min(1.0, DETECTION_SIZE / max(shown.shape))
     if factor < 1.0:
@@ -183,9 +185,21 @@ def detect_faces(image) -> list[FaceBox]:
 
 
 def find_face(visible, near_infrared) -> FaceBox | None:
-    """The face the photographs show: the median of the largest detection's group
-    (module text, step 1) in the visible photograph, or in the near-infrared one when
-    the visible shows none; None when neither shows a frontal face."""
+    """The face the photographs show (module text, step 1).
+
+    Parameters
+    ----------
+    visible, near_infrared : array, shape (H, W) or (H, W, C)
+        The two photographs, linear, on one pixel grid.
+
+    Returns
+    -------
+    FaceBox or None
+        The median of the largest detection's group in the visible photograph, or in
+        the near-infrared one when the visible shows none; detections narrower than
+        :data:`MIN_FACE_FRACTION` of the frame's shorter side left out. None when
+        neither photograph shows a frontal face.
+    """
     least = MIN_FACE_FRACTION * min(np.shape(visible)[:2])
     boxes = [b for b in detect_faces(visible) if b.width >= least]
     boxes = boxes or [b for b in detect_faces(near_infrared) if b.width >= least]
@@ -199,7 +213,22 @@ def find_face(visible, near_infrared) -> FaceBox | None:
 
 
 def pair_features(visible, near_infrared, texture_px: float) -> tuple[np.ndarray, list[str]]:
-    """The skin model's features per pixel, (H, W, K), and their names (module text, step 2)."""
+    """The skin model's features per pixel (module text, step 2).
+
+    Parameters
+    ----------
+    visible, near_infrared : array, shape (H, W) or (H, W, C)
+        The two photographs, linear, on one pixel grid.
+    texture_px : float
+        The texture's scale and the features' smoothing, px.
+
+    Returns
+    -------
+    features : numpy.ndarray, shape (H, W, K)
+    names : list of str
+        K names: level, band ratio, each colour photograph's red/green and
+        blue/green, texture.
+    """
     from scipy.ndimage import gaussian_filter
 
     vis, nir = _unit(np.asarray(visible, np.float64)), _unit(np.asarray(near_infrared, np.float64))
@@ -287,8 +316,21 @@ def _skin_distance(visible, near_infrared, face: FaceBox):
 
 
 def skin_test(visible, near_infrared, face: FaceBox) -> np.ndarray:
-    """The pixels that pass the skin test of ``face`` (module text, step 2; ``d2`` at most
-    :attr:`SkinModel.limit`), a boolean (H, W) map at the photographs' size."""
+    """The pixels that pass the skin test of ``face`` (module text, step 2).
+
+    Parameters
+    ----------
+    visible, near_infrared : array, shape (H, W) or (H, W, C)
+        The two photographs, linear, on one pixel grid.
+    face : FaceBox
+        From :func:`find_face`.
+
+    Returns
+    -------
+    numpy.ndarray, shape (H, W), bool
+        True where the squared distance to the face's skin model is at most its
+        :attr:`SkinModel.limit`.
+    """
     from skimage.transform import resize
 
     factor, _box, _features, model, d2 = _skin_distance(visible, near_infrared, face)

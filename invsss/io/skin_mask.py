@@ -405,7 +405,8 @@ def make_skin_mask(visible, near_infrared, name: str = "the mask made from the p
         raise InvalidInputError("skin mask: no face found and no pixel bright in both photographs; give --mask")
     checks, notices = mask_checks(bright, name, skin_test="not run: no face found")
     notices.insert(0, f"{name}: no face found in the photographs and their background is not dark, so it is "
-                      "the region bright in both, which on a photograph takes in background; look at it, or give --mask")
+                      "the region bright in both, which on a photograph takes in background; look at it, "
+                      "or give --mask")
     checks["passed"] = False
     return _made(bright, "no face found", None, checks, notices)
 
