@@ -298,3 +298,14 @@ def test_the_report_draws_the_mask_note_under_the_source():
     assert note in texts
     plain = [t.get_text() for ax in _report_figure(fit, [(source, target, depth, mask)]).axes for t in ax.texts]
     assert not any(t.startswith("mask:") for t in plain)
+
+
+@pytest.mark.parametrize("visible, near_infrared, expected", [
+    (np.ones((20, 20)), np.ones((20, 22)), "near-infrared photograph: expected the visible photograph's size"),
+    (np.zeros((20, 20)), np.ones((20, 20)), "visible photograph: is black"),
+    (np.full((20, 20), np.nan), np.ones((20, 20)), "visible photograph: holds NaN"),
+])
+def test_bad_photographs_are_one_line_errors(visible, near_infrared, expected):
+    with pytest.raises(invsss.InvalidInputError, match=expected) as caught:
+        make_skin_mask(visible, near_infrared)
+    assert "\n" not in str(caught.value)

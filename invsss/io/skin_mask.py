@@ -155,6 +155,14 @@ def _inner_level(grey: np.ndarray, interior: np.ndarray) -> np.ndarray:
     return mean[rows, cols]
 
 
+def _check_one_grid(a: np.ndarray, b: np.ndarray) -> None:
+    if a.shape != b.shape:
+        raise InvalidInputError(
+            f"near-infrared photograph: expected the visible photograph's size {a.shape}, got {b.shape} "
+            "(the pair must come from one camera, one pixel grid)"
+        )
+
+
 def skin_mask_from_pair(visible, near_infrared) -> np.ndarray:
     """A 0/1 skin mask of the face that both photographs show (see the module text).
 
@@ -188,11 +196,7 @@ def skin_mask_from_pair(visible, near_infrared) -> np.ndarray:
     from skimage.morphology import dilation, disk, erosion
 
     a, b = _grey(visible, "visible photograph"), _grey(near_infrared, "near-infrared photograph")
-    if a.shape != b.shape:
-        raise InvalidInputError(
-            f"near-infrared photograph: expected the visible photograph's size {a.shape}, got {b.shape} "
-            "(the pair must come from one camera, one pixel grid)"
-        )
+    _check_one_grid(a, b)
     # On log brightness: a face half in shadow is still far brighter than the background,
     # while on a linear scale Otsu splits its lit side from its shaded one.
     log_a, log_b = np.log(a + LOG_FLOOR), np.log(b + LOG_FLOOR)
@@ -378,14 +382,11 @@ def make_skin_mask(visible, near_infrared, name: str = "the mask made from the p
     """
     from .face_mask import face_skin_mask, find_face
 
-    _grey(visible, "visible photograph")
-    _grey(near_infrared, "near-infrared photograph")
+    _check_one_grid(_grey(visible, "visible photograph"), _grey(near_infrared, "near-infrared photograph"))
     try:
         bright = skin_mask_from_pair(visible, near_infrared) > 0.5
-    except InvalidInputError as err:
-        if "expected the visible photograph's size" in str(err):
-            raise
-        bright = None  # nothing bright in both: the face may still be found
+    except InvalidInputError:
+        bright = None  # nothing bright in both (the images themselves were checked above)
     if bright is not None and has_dark_background(bright, visible, near_infrared):
         checks, notices = mask_checks(bright, name, skin_test="not run: a dark background")
         return _made(bright, "dark background", None, checks, notices)
