@@ -194,7 +194,7 @@ def convert_params(params: SSSParams, from_unit: str, to_unit: str) -> SSSParams
     Examples
     --------
     >>> p = convert_params(SSSParams(600.0, 800.0, 0.5, [1.0], [4.0]), "mm", "cm")
-    >>> float(p.sss_level), float(p.correction), round(float(p.maxdd), 6), np.round(p.variances, 6).tolist()
+    >>> float(p.sss_level), float(p.correction), round(float(p.maxdd), 6), [round(float(v), 6) for v in p.variances]
     (600.0, 800.0, 0.05, [0.04])
     """
     k = DEPTH_UNITS[check_depth_unit(from_unit, "from_unit")] / DEPTH_UNITS[check_depth_unit(to_unit, "to_unit")]
