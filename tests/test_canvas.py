@@ -95,7 +95,10 @@ def test_pairs_of_two_sizes_on_one_canvas_fit_as_alone_and_compile_the_step_once
     assert alone.count() == 2  # the counter sees compilations: one per size
     for fit, own, pair in ((a, a_alone, first), (b, b_alone, second)):
         assert np.shape(fit.fitted[0]) == np.shape(pair[1])
-        assert not fit.warnings
+        # These small pairs blur by 0.8 px, which the fit reports as unresolved, on a canvas
+        # as alone; nothing else is to be said of them.
+        assert [w for w in fit.warnings if not w.startswith("blur:")] == []
+        assert fit.warnings == own.warnings
         for name in ("sss_level", "correction", "maxdd"):
             assert float(getattr(fit.params, name)) == pytest.approx(float(getattr(own.params, name)), rel=1e-6)
         np.testing.assert_allclose(fit.fitted[0], own.fitted[0], rtol=1e-6, atol=1e-9)

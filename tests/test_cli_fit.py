@@ -109,8 +109,10 @@ def test_fix_holds_the_value_and_reports_it(single_fit):
 @pytest.mark.slow
 def test_fit_prints_summary_and_progress(single_fit):
     summary = single_fit["stdout"].strip().splitlines()
-    assert len(summary) == 1 and summary[0].startswith("fit: loss ")
+    assert len(summary) == 2 and summary[0].startswith("fit: loss ")
     assert "params.json" in summary[0] and "report.png" in summary[0]
+    # Then the blur's width, what the pixels measured (invsss.estimator.blur_width).
+    assert summary[1].startswith("fit: blur ") and " px RMS per axis at depth " in summary[1]
     # stderr is not a terminal here: plain progress lines, no carriage returns.
     lines = single_fit["stderr"].splitlines()
     assert "\r" not in single_fit["stderr"]

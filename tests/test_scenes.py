@@ -402,7 +402,14 @@ EXAMPLES = os.path.join(os.path.dirname(__file__), "..", "experiments", "scenes"
 @pytest.mark.parametrize("name", sorted(f for f in os.listdir(EXAMPLES) if f.endswith(".toml")))
 def test_example_scenes_render(name):
     config = load_config(os.path.join(EXAMPLES, name)).with_overrides(width=16, spp=2)
-    result = render_scene(config)
+    try:
+        result = render_scene(config)
+    except invsss.InvalidInputError as err:
+        if "libLLVM" not in str(err):
+            raise
+        # An LLVM variant on a machine whose libLLVM aborts on Mitsuba's kernels
+        # (Debian's libllvm15, which lavapipe brings); .ci/run installs libllvm19.
+        pytest.skip(str(err))
     assert result.mask.sum() >= 64  # the object fills a good part of the view
     assert result.info["mesh"] is None or len(result.info["mesh"]["sha256"]) == 64
     # Depth in mm: the camera is 0.5-0.8 m from the object.
