@@ -87,6 +87,13 @@ from .executable_entries import (
     write_atomic,
 )
 
+#: Held while this module compiles or serialises an executable. XLA's CPU client
+#: segfaulted when one thread serialised an executable while another compiled (the
+#: fit compiles its solver step in a background thread while the start scan's
+#: function is stored): three fresh-clone CI runs of the slow tier, 2026-11-27,
+#: and twice in one process running half of it. Serialising takes milliseconds.
+_XLA_CPU = threading.RLock()
+
 __all__ = ["MAX_EXECUTABLE_BYTES", "StaleStatics", "persistent_jit"]
 
 #: Bound on the ``executables`` folder's size. A 224 x 224 fit's three entries
@@ -447,7 +454,7 @@ class persistent_jit:
         # loaded from its cache serialises incompletely on a CPU (the next
         # process finds functions missing). So JAX is kept from storing these
         # compilations, and then never has one of them to hand back.
-        with _never_stored():
+        with _never_stored(), _XLA_CPU:
             compiled = lowered.compile()
         return (compiled, *captured[-1])
 
@@ -460,7 +467,8 @@ class persistent_jit:
         if getattr(getattr(compiled._executable, "_unloaded_executable", None), "host_callbacks", True):
             return
         try:
-            executable, in_tree, flat_tree = serialize_executable.serialize(compiled)
+            with _XLA_CPU:
+                executable, in_tree, flat_tree = serialize_executable.serialize(compiled)
             outline = jax.tree_util.tree_unflatten(out_tree, [_Slot() for _ in range(out_tree.num_leaves)])
             data = _dumps({"executable": executable, "in_tree": in_tree, "out_tree": flat_tree,
                            "outline": outline, "out_static": out_static})
