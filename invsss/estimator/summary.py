@@ -56,8 +56,9 @@ def summarise(problem, path, single, steps, nuisance=None) -> FitResult:
     unc, stderr, undetermined = _uncertainty(problem, path, final, natural, nuisance, messages)
     blur = blur_record(problem.model, natural, problem.scales.depth, problem.scales.slope, unc,
                        problem.options.focal_px)
-    if under_a_pixel_warning(blur):
-        messages.append(under_a_pixel_warning(blur))
+    unresolved = under_a_pixel_warning(blur)
+    if unresolved:
+        messages.append(unresolved)
     if path.rival_basins is not None:
         # Where the path's own messages end, as before the uncertainty's reasons.
         messages.insert(len(problem.notes) + len(path.messages),

@@ -264,10 +264,10 @@ def unmeasured_distances(extras: dict) -> dict[str, str]:
     for entry in extras.get("undetermined") or ():
         if isinstance(entry, str) and entry.startswith("variances"):
             out[entry] = "not determined by the fit (no standard error)"
-    held = (extras.get("inputs") or {}).get("held") if isinstance(extras.get("inputs"), dict) else None
-    for entry in held or ():
-        name = entry if isinstance(entry, str) else (entry.get("name") if isinstance(entry, dict) else None)
-        if isinstance(name, str) and name.startswith("variances") and name not in out:
+    inputs = extras.get("inputs")
+    # inputs.held maps each held parameter's name to its value and reason.
+    for name in (inputs.get("held") or {}) if isinstance(inputs, dict) else ():
+        if name.startswith("variances") and name not in out:
             out[name] = "held because the inputs cannot determine it"
     return out
 
