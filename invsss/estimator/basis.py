@@ -34,9 +34,9 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ..forward.models import get_model
+from ..forward.pair import ImagePair
 from ..forward.params import SSSParams
 from ..forward.screen_space import LAYOUT_RENDERERS, sog_layers
-from ..forward.pair import ImagePair
 
 __all__ = ["basis_images", "model_source"]
 
@@ -49,7 +49,7 @@ def model_source(pair: ImagePair, natural: dict) -> Float[Array, "H W Cb"]:
 
 
 def basis_images(
-    pair: ImagePair, natural: dict, model: str, tap_weights: Float[Array, "7"], linear_weights: bool
+    pair: ImagePair, natural: dict, model: str, tap_weights: Float[Array, " 7"], linear_weights: bool
 ) -> Float[Array, "nb H W Cb"]:
     """The basis images of one pair for the natural parameter values ``natural``.
 

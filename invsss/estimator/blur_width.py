@@ -121,7 +121,7 @@ def under_a_pixel_warning(record: dict) -> str | None:
     --------
     >>> print(under_a_pixel_warning({"sigma_px": [0.32], "resolved": False, "depth": 600.0}))
     blur: 0.32 px (RMS per axis at the skin's median depth 600) is under a pixel: the pixels do not resolve it, so its size and shape are not a measurement; photograph more pixels per mm of skin (a closer or longer lens)
-    """
+    """  # noqa: E501
     if record["resolved"]:
         return None
     widths = "/".join(f"{w:.2g}" for w in record["sigma_px"])

@@ -32,8 +32,8 @@ from __future__ import annotations
 import jax
 import numpy as np
 
-from ..validation import InvalidInputError
 from ..forward.pair import ImagePair
+from ..validation import InvalidInputError
 
 __all__ = ["frame_terms", "unused_note", "pad_pair", "crop", "on_canvas"]
 

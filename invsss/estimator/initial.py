@@ -95,7 +95,7 @@ def _with(param, z_base, **blocks):
     """``z_base`` with the named scalar (or uniformly filled) blocks replaced."""
     parts = param.split(np.asarray(z_base, np.float64))
     out = []
-    for name, shape in param.blocks:
+    for name, _shape in param.blocks:
         u = np.array(parts[name], dtype=np.float64)
         if name in blocks:
             u[...] = blocks[name]

@@ -36,8 +36,8 @@ from ..forward.light_terms import (
 from ..forward.stretch import stretch_factors
 from .basis import basis_images
 from .parametrisation import LIGHT_UNKNOWNS, Parametrisation
-from .projection import combine, projected_jacobian, solve_linear
 from .pigment import pigment_field
+from .projection import combine, projected_jacobian, solve_linear
 from .vignetting import vignetting_field
 
 __all__ = ["Objective"]

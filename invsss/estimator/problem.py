@@ -20,9 +20,9 @@ try:
 except ImportError:  # a JAX from before jax.extend.core had it
     from jax.core import jaxpr_as_fun
 
-from ..runtime.executable_cache import persistent_jit
 from ..forward.models import get_model
 from ..forward.params import PARAM_NAMES
+from ..runtime.executable_cache import persistent_jit
 from ..validation import InvalidInputError
 from .canvas import on_canvas
 from .initial import blur_reference, choose_starts, data_scales
@@ -30,8 +30,8 @@ from .inputs import prepare_pairs
 from .objective import Objective
 from .options import FitOptions
 from .parametrisation import LIGHT_UNKNOWNS, Parametrisation, assign_roles, logit, resolve_profile
-from .uncertainty import linearise
 from .pigment import num_terms
+from .uncertainty import linearise
 from .vignetting import ORDER as VIGNETTING_ORDER
 
 __all__ = ["FitProblem", "build_problem", "evaluate"]

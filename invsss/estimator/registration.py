@@ -90,7 +90,7 @@ class Warp:
         c = np.asarray(self.centre)
         return (points - c - np.asarray(self.params[:2])) @ np.linalg.inv(self.matrix()).T + c
 
-    def recentred(self, centre) -> "Warp":
+    def recentred(self, centre) -> Warp:
         """The same map written about another ``centre`` (row, col).
 
         A camera rolls and zooms about its principal point, not about the skin
@@ -123,7 +123,7 @@ class Warp:
 
 
     @classmethod
-    def from_dict(cls, record: dict) -> "Warp":
+    def from_dict(cls, record: dict) -> Warp:
         """The warp written by :meth:`to_dict` (a params.json ``alignment`` entry)."""
         kind, shift = record["kind"], list(record["shift_px"])
         if kind == "translation":
@@ -252,7 +252,8 @@ def estimate_warp(moving, reference, mask, kind: str = "similarity", start: Warp
         p[:2] = _phase_shift(moving, reference, weight)
     with jax.enable_x64(True):
         for sigma in _LEVELS:
-            blur = (lambda im: ndimage.gaussian_filter(im, (sigma, sigma, 0))) if sigma else (lambda im: im)
+            # The blur is applied at once, within this iteration (B023 looks for a late call).
+            blur = (lambda im: ndimage.gaussian_filter(im, (sigma, sigma, 0))) if sigma else (lambda im: im)  # noqa: B023
             p = _solve(kind, blur(moving), blur(reference), weight, centre, p)
     return Warp(kind, tuple(float(v) for v in p), centre)
 

@@ -214,7 +214,8 @@ class FitResult(eqx.Module):
         ``model``, ``tap_weights``, ``stderr``, ``undetermined``, ``loss``,
         ``psnr``, ``ssim``, ``converged``, ``interrupted``, ``iterations``,
         ``fixed``, ``gauge``, ``gain``, ``offset``, ``sigma``, ``solver``,
-        ``warnings``, ``alignment``, ``vignetting``, ``highlights``, ``light_terms``, ``blur``, ``pigment`` and ``estimate`` (every parameter as a number, undetermined
+        ``warnings``, ``alignment``, ``vignetting``, ``highlights``, ``light_terms``,
+        ``blur``, ``pigment`` and ``estimate`` (every parameter as a number, undetermined
         ones included: what produced the fitted image). The loss history is not
         written.
         """

@@ -175,8 +175,9 @@ def _goodness(problem, final, single, messages):
 #: A fit warns when a handful of pixels (this share of the mask, at least one)
 #: carries more than :data:`CONCENTRATED_SHARE` of the squared residual. Under
 #: noise alone the worst 0.1 % of Gaussian residuals carry about 1.3 % of it; on
-#: the seven bundled pairs' plain fits it was 0.6-2.2 % (measured 2026-11-26). A wrong buffer pixel that a term amplifies (a
-#: normal facing away from the camera) put 90 % of the loss on ten pixels.
+#: the seven bundled pairs' plain fits it was 0.6-2.2 % (measured 2026-11-26). A wrong
+#: buffer pixel that a term amplifies (a normal facing away from the camera) put 90 % of
+#: the loss on ten pixels.
 CONCENTRATED_PIXELS = 0.001
 CONCENTRATED_SHARE = 0.25
 #: ... unless the pair's PSNR (as the fit reports it) is at least this (dB): a fit

@@ -283,7 +283,10 @@ def gauss_newton_uncertainty(
         # Sensitivity along null directions, relative to the output's own gradient.
         along = np.abs(g @ null_dirs) if null_dirs.size else np.zeros((g.shape[0], 0))
         size = np.linalg.norm(g / d, axis=1)
-        on_null = np.any(along > 1e-6 * np.maximum(size, 1e-300)[:, None], axis=1) if along.size else np.zeros(g.shape[0], bool)
+        if along.size:
+            on_null = np.any(along > 1e-6 * np.maximum(size, 1e-300)[:, None], axis=1)
+        else:
+            on_null = np.zeros(g.shape[0], bool)
         if name == "weights":
             vague = std > WEIGHT_VAGUE
         elif name == "correction":

@@ -45,7 +45,8 @@ The rules, each with the HDRP source it was read from (Unity-Technologies/Graphi
    channel and a pixel that gathered nothing becomes 0. ``S = 1 / d`` is clamped to
    ``2^24`` (``UpdateKernel``), so ``d`` is at least ``2^-24`` mm.
 6. **Max quality reads far samples from a downsampled image** (the current
-   sources, under ``Packages/``; the earlier ones have no downsampling: ``USE_DOWNSAMPLE`` in ``SubsurfaceScattering.compute``'s ``LoadSample``,
+   sources, under ``Packages/``; the earlier ones have no downsampling: ``USE_DOWNSAMPLE``
+   in ``SubsurfaceScattering.compute``'s ``LoadSample``,
    ``RandomDownsample.compute``, ``DefaultSssDownsampleSteps``): the pass runs in
    tiles of 16 x 16 pixels, each of which first copies its pixels and a border of
    2 (20 x 20) at full resolution into a cache; a sample inside its tile's cache
@@ -71,9 +72,9 @@ import numbers
 
 import numpy as np
 
+from ..validation import InvalidInputError, check_depth, check_image, check_mask, number_array
 from .burley_screen_space import unit_radii
 from .pair import fill_background_depth
-from ..validation import InvalidInputError, check_depth, check_image, check_mask, number_array
 
 __all__ = [
     "QUALITY_LEVELS",

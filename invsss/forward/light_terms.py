@@ -93,9 +93,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ..validation import InvalidInputError, is_concrete
 from .arrays import float_array
 from .stretch import stretch_factors
-from ..validation import InvalidInputError, is_concrete
 
 __all__ = [
     "LIGHT_TERM_NAMES",
@@ -316,7 +316,7 @@ class LightBuffers(eqx.Module):
     key: Float[Array, "H W C"] | None = None
     fill_light: Float[Array, "H W 3"] | None = None
 
-    def checked(self, shape, mask, prefix: str = "light_buffers.", channels: int | None = None) -> "LightBuffers":
+    def checked(self, shape, mask, prefix: str = "light_buffers.", channels: int | None = None) -> LightBuffers:
         """Validated, normalised float64 NumPy copies for an image of ``shape`` (H, W).
 
         ``channels`` is the source's channel count, which the key buffer must

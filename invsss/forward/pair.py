@@ -99,7 +99,7 @@ class ImagePair(eqx.Module):
         count = lambda x: int(np.shape(x)[-1]) if np.ndim(x) == 3 else 1  # noqa: E731
         return count(self.source), count(self.target)
 
-    def as_float64(self) -> "ImagePair":
+    def as_float64(self) -> ImagePair:
         """The same pair as JAX float64 arrays with a channel axis on source and target.
 
         Call it under ``jax.enable_x64``; outside it JAX keeps float32.

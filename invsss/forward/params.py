@@ -3,16 +3,15 @@
 from __future__ import annotations
 
 import functools
-
 import warnings
 
 import equinox as eqx
 import numpy as np
 from jaxtyping import Array, Float
 
+from ..validation import InputNotice, InvalidInputError, is_concrete, number_array
 from .arrays import float_array
 from .profiles import SumOfGaussians, check_profile_arrays
-from ..validation import InputNotice, InvalidInputError, is_concrete, number_array
 
 __all__ = [
     "PARAM_NAMES",
@@ -73,7 +72,7 @@ class SSSParams(eqx.Module):
     sss_level: Float[Array, ""] = eqx.field(converter=functools.partial(float_array, name="sss_level"))
     correction: Float[Array, ""] = eqx.field(converter=functools.partial(float_array, name="correction"))
     maxdd: Float[Array, ""] = eqx.field(converter=functools.partial(float_array, name="maxdd"))
-    weights: Float[Array, "K *C"] = eqx.field(converter=functools.partial(float_array, name="weights"))
+    weights: Float[Array, " K *C"] = eqx.field(converter=functools.partial(float_array, name="weights"))
     variances: Float[Array, " K"] = eqx.field(converter=functools.partial(float_array, name="variances"))
 
     def __repr__(self) -> str:
@@ -98,7 +97,7 @@ class SSSParams(eqx.Module):
         return SumOfGaussians(self.weights, self.variances)
 
     @classmethod
-    def from_dict(cls, d: dict, source: str = "params") -> "SSSParams":
+    def from_dict(cls, d: dict, source: str = "params") -> SSSParams:
         """Build from a mapping with the keys of a params JSON file.
 
         Only the five parameter keys are read; other keys are ignored here.

@@ -63,7 +63,7 @@ def gaussian(variance, r):
 
 
 def sum_of_gaussians(
-    r: Float[Array, "*N"], weights: Float[Array, "K *C"], variances: Float[Array, " K"]
+    r: Float[Array, "*N"], weights: Float[Array, " K *C"], variances: Float[Array, " K"]
 ) -> Float[Array, "*N *C"]:
     """``R(r) = sum_i w_i G(v_i, r)`` (thesis eq. 4.2, d'Eon & Luebke 2007).
 
@@ -349,7 +349,7 @@ def check_profile_arrays(
     Traceback (most recent call last):
     ...
     invsss.validation.InvalidInputError: params.json: weights must have shape (3,) or (3, C) to match the 3 variances, got 2 weights of shape (2,)
-    """
+    """  # noqa: E501
     w_shape, v_shape = tuple(np.shape(weights)), tuple(np.shape(variances))
     if len(v_shape) != 1 or v_shape[0] == 0:
         raise InvalidInputError(f"{name}: variances must be a non-empty list, got shape {v_shape}")
@@ -396,7 +396,7 @@ class SumOfGaussians(eqx.Module):
     [1.0, 1.0, 1.0]
     """
 
-    weights: Float[Array, "K *C"] = eqx.field(converter=float_array)
+    weights: Float[Array, " K *C"] = eqx.field(converter=float_array)
     variances: Float[Array, " K"] = eqx.field(converter=float_array)
     source: str = eqx.field(static=True, default="")
 
@@ -417,7 +417,7 @@ class SumOfGaussians(eqx.Module):
         """Closed-form integral over the plane: the sum of the weights (per channel)."""
         return jnp.sum(self.weights, axis=0)
 
-    def sorted(self) -> "SumOfGaussians":
+    def sorted(self) -> SumOfGaussians:
         """The same profile with the Gaussians in increasing variance."""
         order = jnp.argsort(self.variances)
         return SumOfGaussians(self.weights[order], self.variances[order], self.source)
@@ -431,7 +431,7 @@ class SumOfGaussians(eqx.Module):
         }
 
     @classmethod
-    def from_dict(cls, d, source: str = "profile") -> "SumOfGaussians":
+    def from_dict(cls, d, source: str = "profile") -> SumOfGaussians:
         """Build from the JSON profile format, checking every value.
 
         ``source`` names the input in error messages (e.g. the file path). An optional

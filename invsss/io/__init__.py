@@ -15,9 +15,9 @@ from .colour import linear_to_srgb, srgb_to_linear
 from .depth import read_depth
 from .images import clipping_level, load_pair, read_image, shared_clipping_level
 from .masks import read_mask
+from .params_file import PARAMS_KEYS, PARAMS_OPTIONAL_KEYS, read_params, write_params
 from .rasters import IMAGE_EXTENSIONS, image_extension
 from .writing import write_image, write_text_atomic
-from .params_file import PARAMS_KEYS, PARAMS_OPTIONAL_KEYS, read_params, write_params
 
 __all__ = [
     "IMAGE_EXTENSIONS",

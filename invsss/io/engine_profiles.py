@@ -391,7 +391,7 @@ def engine_asset(params, extras: dict, format: str, *, source: str = "params", m
     Traceback (most recent call last):
     ...
     invsss.validation.InvalidInputError: params: Burley's d (variances) was held at 1, 0.5, 0.25 mm by the fit (gauge variances), not measured; refit with --model burley and no --gauge (its default measures d), or give --accept-assumed to write it marked as assumed
-    """
+    """  # noqa: E501
     from ..forward.params import DEPTH_UNITS
 
     recorded = extras.get("depth_unit")

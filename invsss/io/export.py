@@ -36,9 +36,6 @@ from collections.abc import Mapping
 import jax
 import numpy as np
 
-from . import read_params
-from .shader_export import shader_files, write_shader
-from .writing import write_texts_atomic
 from ..forward.light_terms import AFTER_BLUR, LAW_TRUST, LIGHT_TERM_FIELDS, LightTerms
 from ..forward.models import get_model, resolve_tap_weights
 from ..forward.params import SSSParams
@@ -46,6 +43,9 @@ from ..forward.passes import TAP_OFFSETS, tap_spread
 from ..forward.passes import tap_weights as tap_weight_set
 from ..forward.screen_space import separable_kernel
 from ..validation import InvalidInputError, did_you_mean
+from . import read_params
+from .shader_export import shader_files, write_shader
+from .writing import write_texts_atomic
 
 __all__ = ["EXPORT_FORMATS", "shader_constants", "to_hlsl", "to_json", "export_params", "write_shader",
            "shader_files", "scale_to_resolution"]

@@ -122,7 +122,7 @@ class FaceBox(NamedTuple):
         return (((rows - self.row - cr * self.height) / (hr * self.height)) ** 2
                 + ((cols - self.col - cc * self.width) / (hc * self.width)) ** 2) <= 1.0
 
-    def scaled(self, factor: float) -> "FaceBox":
+    def scaled(self, factor: float) -> FaceBox:
         """The box on an image ``factor`` times the size."""
         return FaceBox(*(float(v) * factor for v in self))
 

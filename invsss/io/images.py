@@ -235,7 +235,8 @@ def clipping_level(path) -> float | None:
     >>> folder = tempfile.mkdtemp()
     >>> invsss.write_image(os.path.join(folder, "photo.png"), np.full((4, 4), 0.5, np.float32))
     >>> invsss.write_image(os.path.join(folder, "render.exr"), np.full((4, 4), 0.5, np.float32))
-    >>> invsss.clipping_level(os.path.join(folder, "photo.png")), invsss.clipping_level(os.path.join(folder, "render.exr"))
+    >>> photo, render = os.path.join(folder, "photo.png"), os.path.join(folder, "render.exr")
+    >>> invsss.clipping_level(photo), invsss.clipping_level(render)
     (1.0, None)
     """
     name, ext = checked_path(path, "image")

@@ -21,16 +21,16 @@ import os
 import warnings
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Annotated, Any, Literal, Optional, Union
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from ..forward.params import DEPTH_UNITS, PARAM_NAMES, SSSParams, entry_name
 from ..forward.passes import TAP_WEIGHTS
-from .result_dir import MANIFEST_NAME, result_state
 from ..forward.screen_space import MODELS
 from ..validation import InputNotice, InvalidInputError, did_you_mean, number_array, one_line
+from .result_dir import MANIFEST_NAME, result_state
 from .writing import write_text_atomic
 
 __all__ = [
@@ -51,7 +51,7 @@ SCHEMA_VERSION = 2
 PARAMS_KEYS = PARAM_NAMES
 
 _Number = float  # strict: a JSON number; booleans and strings are refused
-_MaybeNumber = Optional[_Number]  # null: a value the fit did not determine
+_MaybeNumber = _Number | None  # null: a value the fit did not determine
 
 
 class Estimate(BaseModel):
@@ -62,7 +62,7 @@ class Estimate(BaseModel):
     sss_level: _Number
     correction: _Number
     maxdd: _Number
-    weights: Union[list[_Number], list[list[_Number]]]
+    weights: list[_Number] | list[list[_Number]]
     variances: list[_Number]
 
 
@@ -81,41 +81,41 @@ class ParamsFile(BaseModel):
     """c >= 0: how strongly a depth slope narrows the blur."""
     maxdd: _MaybeNumber
     """delta > 0: the depth slope above which the correction stops growing."""
-    weights: Union[list[_MaybeNumber], list[list[_MaybeNumber]]]
+    weights: list[_MaybeNumber] | list[list[_MaybeNumber]]
     """Gaussian weights, one per Gaussian (K) or one per Gaussian and channel (K x C)."""
     variances: list[_MaybeNumber]
     """Gaussian variances in scene units squared, one per Gaussian (K)."""
-    depth_unit: Optional[Literal[tuple(DEPTH_UNITS)]] = None  # type: ignore[valid-type]
+    depth_unit: Literal[tuple(DEPTH_UNITS)] | None = None  # type: ignore[valid-type]
     """Unit of the depth the parameters refer to: mm, cm or m (schema 2; absent: mm)."""
-    model: Optional[Literal[MODELS]] = None  # type: ignore[valid-type]
+    model: Literal[MODELS] | None = None  # type: ignore[valid-type]
     """Screen-space model to render with (default sog)."""
-    tap_weights: Union[
-        Literal[tuple(TAP_WEIGHTS)],  # type: ignore[valid-type]
-        Annotated[list[_Number], Field(min_length=7, max_length=7)],
-        None,
-    ] = None
+    tap_weights: (
+        Literal[tuple(TAP_WEIGHTS)]  # type: ignore[valid-type]
+        | Annotated[list[_Number], Field(min_length=7, max_length=7)]
+        | None
+    ) = None
     """7-tap weight set: a name or 7 numbers (default: the model's own)."""
-    estimate: Optional[Estimate] = None
+    estimate: Estimate | None = None
     """A fit's point estimate; fills the null entries above when rendering."""
     stderr: Any = None
     """Fit report: standard errors of the parameters (null where undetermined)."""
-    undetermined: Optional[list[str]] = None
+    undetermined: list[str] | None = None
     """Fit report: the entries the data did not determine (``weights[2]``, ...)."""
-    loss: Optional[_Number] = None
+    loss: _Number | None = None
     """Fit report: final value of the objective."""
-    psnr: Optional[_Number] = None
+    psnr: _Number | None = None
     """Fit report: PSNR of the fitted prediction against the target, dB."""
-    ssim: Optional[_Number] = None
+    ssim: _Number | None = None
     """Fit report: SSIM of the fitted prediction against the target."""
-    converged: Optional[bool] = None
+    converged: bool | None = None
     """Fit report: whether the solver met its tolerance."""
-    interrupted: Optional[bool] = None
+    interrupted: bool | None = None
     """Fit report: true when the fit was stopped before it finished (e.g. Ctrl-C)."""
-    iterations: Optional[int] = None
+    iterations: int | None = None
     """Fit report: solver iterations used."""
     fixed: Any = None
     """Fit report: the parameters held fixed and their values."""
-    gauge: Optional[str] = None
+    gauge: str | None = None
     """Fit report: which side of the sss_level/variance-scale degeneracy was fixed."""
     channels_mix: Any = None
     """Fit report: RGB -> grey mix fitted for a grey target of an RGB source."""
@@ -125,26 +125,26 @@ class ParamsFile(BaseModel):
     """Fit report: per-channel offset fitted between prediction and target."""
     profile: Any = None
     """Fit report: the profile the fit started from (a name or a file)."""
-    sigma: Optional[_Number] = None
+    sigma: _Number | None = None
     """Fit report: estimated noise level of the target."""
-    solver: Optional[str] = None
+    solver: str | None = None
     """Fit report: the nonlinear solver used."""
     alignment: Any = None
     """Fit report: per pair, the warp that registered the target onto the source (fit --align), or null."""
     vignetting: Any = None
-    """Fit report: the camera's fitted radial fall-off (fit --vignetting): model, coefficients, stderr, corner_gain; or null."""
+    """Fit report: the camera's fitted radial fall-off (fit --vignetting): model, coefficients, stderr, corner_gain; or null."""  # noqa: E501
     highlights: Any = None
-    """Fit report: pixels left out as specular highlights (fit --highlights): method, excluded_pixels, fraction; or null."""
+    """Fit report: pixels left out as specular highlights (fit --highlights): method, excluded_pixels, fraction; or null."""  # noqa: E501
     light_terms: Any = None
-    """Fit report: the fitted light-aware terms (fit --light-terms; docs/model.md, section 8): shift (mm), grazing, incidence, law (an albedo per source channel), law_strength (0 Lambert, 1 the law; absent means 1), fill (the law's strength on the other lights; absent means 0), stderr, fixed, psnr_plain and psnr_without (dB, measured), fallback; or null."""
+    """Fit report: the fitted light-aware terms (fit --light-terms; docs/model.md, section 8): shift (mm), grazing, incidence, law (an albedo per source channel), law_strength (0 Lambert, 1 the law; absent means 1), fill (the law's strength on the other lights; absent means 0), stderr, fixed, psnr_plain and psnr_without (dB, measured), fallback; or null."""  # noqa: E501
     pigment: Any = None
-    """Fit report: the fitted pigment field (fit --pigment): model, degree, terms, coefficients (per term and target channel; per pair first in a joint fit), stderr, estimate, psnr_without (dB, the field set to 1); or null."""
+    """Fit report: the fitted pigment field (fit --pigment): model, degree, terms, coefficients (per term and target channel; per pair first in a joint fit), stderr, estimate, psnr_without (dB, the field set to 1); or null."""  # noqa: E501
     blur: Any = None
-    """Fit report: the fitted blur's RMS width per axis in pixels at the skin's median depth and slope, per channel: sigma_px, stderr_px (null where undetermined), depth, slope, resolved (every channel at least a pixel); with fit --focal-px also mm_per_px and sigma_mm; or null."""
-    warnings: Optional[list[str]] = None
+    """Fit report: the fitted blur's RMS width per axis in pixels at the skin's median depth and slope, per channel: sigma_px, stderr_px (null where undetermined), depth, slope, resolved (every channel at least a pixel); with fit --focal-px also mm_per_px and sigma_mm; or null."""  # noqa: E501
+    warnings: list[str] | None = None
     """Fit report: warnings the fit raised."""
     inputs: Any = None
-    """Fit report: how each pair's depth and mask were obtained when not both given as files (fit --distance, a mask made from the pair), and held: the parameters the inputs cannot determine, each with its value and why; or null."""
+    """Fit report: how each pair's depth and mask were obtained when not both given as files (fit --distance, a mask made from the pair), and held: the parameters the inputs cannot determine, each with its value and why; or null."""  # noqa: E501
 
 
 #: Keys a params JSON file may have besides :data:`PARAMS_KEYS`: the schema

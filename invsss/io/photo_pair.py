@@ -25,12 +25,12 @@ import warnings
 
 import numpy as np
 
+from ..forward.pair import ImagePair
+from ..validation import InputNotice, InvalidInputError
 from .depth import read_depth
 from .images import finish_pair, load_pair, read_colour_pair
 from .masks import read_mask
-from ..forward.pair import ImagePair
 from .skin_mask import check_skin_mask, make_skin_mask, mask_note
-from ..validation import InputNotice, InvalidInputError
 
 __all__ = [
     "HELD_WITH_CONSTANT_DEPTH",
@@ -84,7 +84,7 @@ def check_distance(distance_mm, name: str = "distance", *, notice: bool = True) 
     0.6
     >>> print(caught[0].message)
     distance: 0.6 mm is outside 100-5000 mm, where a face is photographed from; used as given, but the fitted sss_level scales with it (is it in mm?)
-    """
+    """  # noqa: E501
     ok = isinstance(distance_mm, numbers.Real) and not isinstance(distance_mm, bool)
     if not ok or not math.isfinite(distance_mm) or distance_mm <= 0:
         raise InvalidInputError(
@@ -309,7 +309,7 @@ def check_photo_arguments(count: int, depths, distances, masks) -> list[str]:
     Traceback (most recent call last):
     ...
     invsss.validation.InvalidInputError: --depth, --distance: give one or the other (a depth map, or one distance), not both
-    """
+    """  # noqa: E501
     if depths and distances:
         raise InvalidInputError("--depth, --distance: give one or the other (a depth map, or one distance), not both")
     if not depths and not distances:
@@ -318,7 +318,9 @@ def check_photo_arguments(count: int, depths, distances, masks) -> list[str]:
     if depths and len(depths) != count:
         raise InvalidInputError(f"--depth: expected one per pair ({count}), got {len(depths)}")
     if distances and len(distances) not in (1, count):
-        raise InvalidInputError(f"--distance: expected one for all pairs or one per pair ({count}), got {len(distances)}")
+        raise InvalidInputError(
+            f"--distance: expected one for all pairs or one per pair ({count}), got {len(distances)}"
+        )
     if masks and len(masks) != count:
         raise InvalidInputError(f"--mask: expected one per pair ({count}), got {len(masks)}")
     for value in distances:

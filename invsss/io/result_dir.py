@@ -237,7 +237,7 @@ class ResultDir:
 
     # ------------------------------------------------------------ open / close
 
-    def __enter__(self) -> "ResultDir":
+    def __enter__(self) -> ResultDir:
         self.open()
         return self
 

@@ -150,7 +150,8 @@ def _inner_level(grey: np.ndarray, interior: np.ndarray) -> np.ndarray:
     from scipy.ndimage import distance_transform_edt, uniform_filter
 
     weight = interior.astype(np.float64)
-    mean = uniform_filter(grey * weight, 3, mode="nearest") / np.maximum(uniform_filter(weight, 3, mode="nearest"), 1e-12)
+    covered = np.maximum(uniform_filter(weight, 3, mode="nearest"), 1e-12)
+    mean = uniform_filter(grey * weight, 3, mode="nearest") / covered
     rows, cols = distance_transform_edt(~interior, return_distances=False, return_indices=True)
     return mean[rows, cols]
 

@@ -43,8 +43,8 @@ from __future__ import annotations
 import equinox as eqx
 import numpy as np
 
-from .profile_fit import ProfileFit, fit_sum_of_gaussians
 from ..validation import InvalidInputError, check_image
+from .profile_fit import ProfileFit, fit_sum_of_gaussians
 
 __all__ = ["DIRECTIONS", "AVERAGINGS", "MeasuredProfile", "measure_profile", "column_average_gain"]
 

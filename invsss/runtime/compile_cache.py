@@ -297,12 +297,12 @@ def enable_compile_cache(
         import filelock  # noqa: F401
     except ImportError:
         warnings.warn("compilation cache: needs the filelock package to share its directory safely "
-                      "(pip install filelock); not caching")
+                      "(pip install filelock); not caching", stacklevel=2)
         return None
     try:
         make_private_folder(path)
     except OSError as err:
-        warnings.warn(f"compilation cache {path}: cannot create it ({err.strerror}); not caching")
+        warnings.warn(f"compilation cache {path}: cannot create it ({err.strerror}); not caching", stacklevel=2)
         return None
     problem = private_folder_problem(path)
     if problem is not None:

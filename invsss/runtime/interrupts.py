@@ -162,7 +162,7 @@ class StopSignals:
         self._on_first: Callable[[int], None] | None = None
         self._previous: dict = {}
 
-    def __enter__(self) -> "StopSignals":
+    def __enter__(self) -> StopSignals:
         for sig in _SIGNALS:
             self._previous[sig] = signal.signal(sig, self._handle)
         return self
@@ -182,7 +182,7 @@ class StopSignals:
         return None if self.signum is None else 128 + self.signum
 
     @contextlib.contextmanager
-    def deferred(self, on_first: Callable[[int], None] | None = None) -> Iterator["StopSignals"]:
+    def deferred(self, on_first: Callable[[int], None] | None = None) -> Iterator[StopSignals]:
         """Record the first signal instead of raising; ``on_first(signum)`` is told of it."""
         self._deferring += 1
         previous, self._on_first = self._on_first, on_first

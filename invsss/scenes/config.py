@@ -37,7 +37,7 @@ from __future__ import annotations
 import math
 import os
 import tomllib
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
@@ -70,8 +70,11 @@ Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Vec2 = Annotated[list[float], Field(min_length=2, max_length=2)]
 Positive = Annotated[float, Field(gt=0)]
 # A light's power: one number (grey) or one per RGB channel.
-Colour = Union[Annotated[float, Field(ge=0)], Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=3, max_length=3)]]
-Coefficient = Union[Positive, Annotated[list[Positive], Field(min_length=3, max_length=3)]]
+Colour = (
+    Annotated[float, Field(ge=0)]
+    | Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=3, max_length=3)]
+)
+Coefficient = Positive | Annotated[list[Positive], Field(min_length=3, max_length=3)]
 
 
 class _Strict(BaseModel):
@@ -182,7 +185,8 @@ class SceneObject(_Strict):
         if face_keys and self.primitive != "face":
             raise ValueError(f'{", ".join(face_keys)}: only for primitive "face"')
         if self.bumps > 0 and self.primitive in ("slab", "sphere"):
-            raise ValueError('bumps: only for a mesh or primitive "face" (Mitsuba\'s slab and sphere have their own normals)')
+            raise ValueError('bumps: only for a mesh or primitive "face" '
+                             "(Mitsuba's slab and sphere have their own normals)")
         if self.face_normals and (self.primitive in ("slab", "sphere") or self.bumps > 0):
             raise ValueError('face_normals: only for a mesh or primitive "face" without bumps '
                              "(the bumps tilt the vertex normals that face normals ignore)")
@@ -299,7 +303,7 @@ class DirectionalLight(_Strict):
     irradiance: Colour
 
 
-Light = Annotated[Union[PointLight, SpotLight, AreaLight, DirectionalLight], Field(discriminator="type")]
+Light = Annotated[PointLight | SpotLight | AreaLight | DirectionalLight, Field(discriminator="type")]
 
 
 class Occluder(_Strict):
@@ -414,7 +418,7 @@ class SceneConfig(_Strict):
 
     def with_overrides(self, *, width: int | None = None, height: int | None = None,
                        spp: int | None = None, seed: int | None = None,
-                       name: str = "overrides") -> "SceneConfig":
+                       name: str = "overrides") -> SceneConfig:
         """A copy with another resolution, spp or seed, checked like the file.
 
         Giving only one of ``width``, ``height`` keeps the aspect ratio. The view
@@ -451,7 +455,7 @@ class SceneConfig(_Strict):
             content["seed"] = seed
         return parse_config(content, name)
 
-    def with_warp(self, warp) -> "SceneConfig":
+    def with_warp(self, warp) -> SceneConfig:
         """The scene seen by the camera that puts this config's render where ``warp`` maps it.
 
         ``warp`` is a fit's registration (an :class:`invsss.estimator.registration.Warp`, or a
@@ -520,7 +524,7 @@ def load_config(path) -> SceneConfig:
     Traceback (most recent call last):
     ...
     invsss.validation.InvalidInputError: ...scene.toml: sppp: unknown key, did you mean 'spp'? (valid: variant, spp, seed, max_depth, geometry_spp, object, camera, lights, occluders, medium)
-    """
+    """  # noqa: E501
     name = os.fspath(path)
     try:
         with open(name, "rb") as f:

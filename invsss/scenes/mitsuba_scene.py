@@ -125,7 +125,8 @@ def bumped_normals(vertices, normals, degrees: float) -> np.ndarray:
     n = np.asarray(normals, np.float64)
     n = n / np.linalg.norm(n, axis=1, keepdims=True)
     k = 2.0 * np.pi / BUMP_WAVELENGTH_MM
-    g = np.stack([np.sin(k * p[:, 1] + 1.0), np.sin(k * p[:, 2] + 2.0), np.sin(k * p[:, 0] + 3.0)], axis=1) / np.sqrt(3.0)
+    g = np.stack([np.sin(k * p[:, 1] + 1.0), np.sin(k * p[:, 2] + 2.0), np.sin(k * p[:, 0] + 3.0)], axis=1)
+    g = g / np.sqrt(3.0)
     tangent = g - n * np.sum(g * n, axis=1, keepdims=True)  # |tangent| <= |g| <= 1
     tilted = n + np.tan(np.radians(degrees)) * tangent
     return tilted / np.linalg.norm(tilted, axis=1, keepdims=True)
@@ -177,7 +178,7 @@ def load_mesh_ply(mesh_path: str, folder: str, *, bumps: float = 0.0, mm_per_uni
     Traceback (most recent call last):
     ...
     invsss.validation.InvalidInputError: object.mesh: ...tri.ply is not closed; the medium needs a surface that encloses a volume (close its holes first)
-    """
+    """  # noqa: E501
     try:
         import trimesh
     except ImportError:

@@ -43,8 +43,8 @@ from collections.abc import Callable
 import numpy as np
 
 from .. import __version__
-from ..io import write_image, write_text_atomic
 from ..forward.profiles import jensen_dipole_total
+from ..io import write_image, write_text_atomic
 from ..io.result_dir import ResultDir
 from .calibration import CALIBRATION_PIXELS, CALIBRATION_SPP, slab_albedo
 from .config import SceneConfig
@@ -240,8 +240,10 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         # volpath's sampling of a chromatic medium follows one channel per path and
         # leaves the others (here the far-reaching red) with heavy fireflies.
         media = _grey_media(coefficients)
+        # timed() calls its function at once, so the lambdas here and in the loops below
+        # read the loop variables of their own iteration (B023 warns of a later call).
         calibrated = [timed(f"calibration {c + 1}/{len(media)}", lambda: slab_albedo(
-            mi, medium, max_depth=config.max_depth, seed=seeds["calibration"]))
+            mi, medium, max_depth=config.max_depth, seed=seeds["calibration"]))  # noqa: B023
             for c, medium in enumerate(media)]
         albedo = np.concatenate([value for value, _ in calibrated])
         albedo_error = np.concatenate([error for _, error in calibrated])
@@ -278,12 +280,12 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
             parts = []
             for c, (target_scene, specular_scene) in enumerate(scenes):
                 full = timed(f"target half {k + 1}, channel {c + 1}/{len(media)}", lambda: _channels(
-                    mi.render(target_scene, spp=half_spp, seed=seeds["target_halves"][k]), channels))
+                    mi.render(target_scene, spp=half_spp, seed=seeds["target_halves"][k]), channels))  # noqa: B023
                 if coefficients["boundary"] == "index-matched":
                     mirror = 0.0  # a null surface reflects nothing
                 else:
                     mirror = timed(f"specular half {k + 1}, channel {c + 1}/{len(media)}", lambda: _channels(
-                        mi.render(specular_scene, spp=half_spp, seed=seeds["specular_halves"][k]), channels))
+                        mi.render(specular_scene, spp=half_spp, seed=seeds["specular_halves"][k]), channels))  # noqa: B023
                 parts.append(full - mirror)
             # One grey medium: all channels at once; one per channel: channel c from render c.
             halves.append(parts[0] if len(parts) == 1 else np.stack([p[..., c] for c, p in enumerate(parts)], -1))
@@ -497,6 +499,6 @@ def write_scene(result: SceneRender, out, *, overwrite: bool = False) -> list[st
     >>> folder = os.path.join(tempfile.mkdtemp(), "pair")
     >>> [os.path.basename(p) for p in write_scene(render_scene(config), folder)]  # one light: no fill_light.exr
     ['source.exr', 'target.exr', 'depth.exr', 'mask.png', 'normal.exr', 'coverage.exr', 'light.exr', 'key.exr', 'scene.json']
-    """
+    """  # noqa: E501
     with ResultDir(os.fspath(out), overwrite=overwrite, names=SCENE_FILES, option="overwrite=True") as folder:
         return folder.commit(scene_writers(result), {"command": "scene"})

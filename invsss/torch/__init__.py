@@ -105,6 +105,7 @@ __all__ = [
     "render_sog",
     "render_thesis",
     "render_separable",
+    "render_burley",
     "sog_layers",
     "separable_kernel",
 ]

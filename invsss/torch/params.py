@@ -62,12 +62,12 @@ class SSSParams:
     def num_gaussians(self) -> int:
         return int(self.variances.shape[-1])
 
-    def to(self, dtype=None, device=None) -> "SSSParams":
+    def to(self, dtype=None, device=None) -> SSSParams:
         """A copy with every field converted (differentiably) to ``dtype``/``device``."""
         return SSSParams(**{k: getattr(self, k).to(dtype=dtype, device=device) for k in PARAM_NAMES})
 
     @classmethod
-    def from_dict(cls, d: dict, source: str = "params") -> "SSSParams":
+    def from_dict(cls, d: dict, source: str = "params") -> SSSParams:
         """Build from a params mapping (e.g. ``invsss.SSSParams.to_dict()`` or a JSON file)."""
         # check() covers the shapes and the constraints.
         params = cls(**parameter_arrays(d, source))

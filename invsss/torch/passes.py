@@ -34,7 +34,10 @@ def tap_weights(spec="jimenez", dtype=None, device=None) -> torch.Tensor:
             )
         spec = TAP_WEIGHTS[spec]
     dtype = dtype or torch.get_default_dtype()
-    w = spec.to(dtype=dtype, device=device) if torch.is_tensor(spec) else torch.as_tensor(spec, dtype=dtype, device=device)
+    if torch.is_tensor(spec):
+        w = spec.to(dtype=dtype, device=device)
+    else:
+        w = torch.as_tensor(spec, dtype=dtype, device=device)
     if tuple(w.shape) != (7,):
         raise ValueError(f"tap_weights: expected 7 numbers, got shape {tuple(w.shape)}")
     return w

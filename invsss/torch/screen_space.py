@@ -11,8 +11,8 @@ import numpy as np
 import torch
 
 from ..forward.models import MODEL_NAMES, get_model, resolve_tap_weights
-from ..forward.pass_plan import pass_plan
 from ..forward.pair import fill_background_depth
+from ..forward.pass_plan import pass_plan
 from ..validation import InvalidInputError, check_depth, check_image, check_mask
 from .burley_screen_space import render_burley
 from .params import SSSParams
@@ -111,7 +111,10 @@ def separable_kernel(weights, variances, taps: int = 17, strength=1.0):
     kernel = kernel / kernel.sum(dim=0)
     identity = torch.zeros(taps, 1, dtype=dtype, device=device)
     identity[taps // 2] = 1.0
-    strength = strength.to(dtype) if torch.is_tensor(strength) else torch.as_tensor(strength, dtype=dtype, device=device)
+    if torch.is_tensor(strength):
+        strength = strength.to(dtype)
+    else:
+        strength = torch.as_tensor(strength, dtype=dtype, device=device)
     return offsets, strength * kernel + (1.0 - strength) * identity
 
 
