@@ -77,7 +77,7 @@ def data_scales(pairs) -> DataScales:
     for p in pairs:
         keep = np.asarray(p.mask) > 0
         depths.append(np.asarray(p.depth)[keep])
-        sx, sy = depth_slopes(np.asarray(p.depth, np.float64))
+        sx, sy = depth_slopes(np.asarray(p.depth, np.float64))  # type: ignore[arg-type]  # JAX takes NumPy arrays
         slopes_x.append(np.asarray(sx)[keep])
         slopes_y.append(np.asarray(sy)[keep])
     size = min(min(p.depth.shape) for p in pairs)
@@ -152,7 +152,7 @@ def choose_starts(losses, param, scales: DataScales, blur_at_zero: float | None,
     # fits end at the same estimates as with the whole grid. Each axis is one
     # call of ``losses`` for all the starts together.
     middle = len(d_axis) // 2
-    d_middle = {} if d_axis[0] is None else {"maxdd": d_axis[middle]}
+    d_middle: dict = {} if d_axis[0] is None else {"maxdd": d_axis[middle]}
     by_correction = [
         [_with(param, z, **({} if c is None else {"correction": c}), **d_middle) for c in c_axis] for z in starts
     ]

@@ -78,13 +78,13 @@ def prepare_pairs(pairs) -> tuple[ImagePair, ...]:
     """Validate a sequence of pairs; all must have the same channel layout."""
     if isinstance(pairs, (str, bytes)) or not hasattr(pairs, "__len__") or len(pairs) == 0:
         raise InvalidInputError("pairs: expected a non-empty sequence of (source, target, depth, mask)")
-    out = []
+    prepared = []
     for i, p in enumerate(pairs):
         source, target, depth, mask, fit_weight, normal, light, key, fill_light, checked = _unpack(p, i)
-        out.append(prepare_pair(source, target, depth, mask, fit_weight=fit_weight, normal=normal, light=light,
-                                key=key, fill_light=fill_light, name=f"pairs[{i}]." if len(pairs) > 1 else "",
-                                inputs_noted=checked))
-    out = tuple(out)
+        prepared.append(prepare_pair(source, target, depth, mask, fit_weight=fit_weight, normal=normal, light=light,
+                                     key=key, fill_light=fill_light, name=f"pairs[{i}]." if len(pairs) > 1 else "",
+                                     inputs_noted=checked))
+    out = tuple(prepared)
     layouts = {p.channels for p in out}
     if len(layouts) > 1:
         raise InvalidInputError(

@@ -19,6 +19,8 @@ the (robustly weighted) mean squared error on the mask in the target's units.
 
 from __future__ import annotations
 
+from typing import Any
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -227,7 +229,7 @@ class Objective(eqx.Module):
             blurred = tuple(jnp.einsum("ihwc,c->ihw", x, natural["mix"])[..., None] for x in channels)
         else:
             blurred = self.blurred_bases(natural)
-        columns = [[None] * z.size for _ in self.pairs]
+        columns: list[list[Any]] = [[None] * z.size for _ in self.pairs]
         differenced = [j for name, (first, stop) in blocks.items() if name in _BLURRED_BY for j in range(first, stop)]
         if differenced:
 

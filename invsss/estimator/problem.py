@@ -18,7 +18,7 @@ import numpy as np
 try:
     from jax.extend.core import jaxpr_as_fun
 except ImportError:  # a JAX from before jax.extend.core had it
-    from jax.core import jaxpr_as_fun
+    from jax.core import jaxpr_as_fun  # type: ignore[attr-defined,no-redef]  # only an older JAX has it here
 
 from ..forward.models import get_model
 from ..forward.params import PARAM_NAMES

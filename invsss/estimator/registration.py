@@ -35,6 +35,7 @@ source moved sss_level by +0.5 % and correction by -3 %.
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -113,7 +114,7 @@ class Warp:
     def to_dict(self) -> dict:
         """JSON-ready: the kind, the shift (px), rotation (deg), scale and the 2x3 matrix."""
         a = self.matrix()
-        out = {"kind": self.kind, "shift_px": [float(v) for v in self.params[:2]],
+        out: dict[str, Any] = {"kind": self.kind, "shift_px": [float(v) for v in self.params[:2]],
                "centre_px": [float(v) for v in self.centre]}
         if self.kind == "similarity":
             out["rotation_deg"] = float(np.degrees(self.params[2]))

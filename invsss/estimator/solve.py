@@ -241,7 +241,7 @@ def _current_loss(state):
 
 
 _OPTIONS: dict = {}
-_TAGS = frozenset()
+_TAGS: frozenset = frozenset()
 
 
 @persistent_jit
@@ -463,10 +463,12 @@ def _iterate(solver, fn, z, max_steps, on_step, stop, arrived, noise_tolerance, 
     if state is None:
         state = init(solver, fn, z)
     ahead = step_ahead()
-    history, accepted = [], []
+    history: list = []
+    accepted: list = []
     converged, failure, interrupted = False, "", False
     pending = step(solver, fn, z, state, noise_tolerance) if max_steps > 0 else None
     for i in range(max_steps):
+        assert pending is not None  # set before the loop whenever max_steps > 0, and below
         z, state, loss, dof, done, ok = pending
         more = i + 1 < max_steps
         if ahead and more:

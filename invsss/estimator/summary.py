@@ -73,7 +73,7 @@ def summarise(problem, path, single, steps, nuisance=None) -> FitResult:
 
     squeeze = (lambda a: a[0]) if single else (lambda a: a)
     return FitResult(
-        params=None,
+        params=None,  # type: ignore[arg-type]  # filled in by estimator.core (dataclasses.replace)
         values={k: np.asarray(natural[k], np.float64) for k in PARAM_NAMES},
         stderr=stderr,
         undetermined=tuple(undetermined),

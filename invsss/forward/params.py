@@ -104,7 +104,7 @@ class SSSParams(eqx.Module):
         :func:`invsss.read_params` is the place that rejects unknown keys in a
         params file.
         """
-        params = cls(**parameter_arrays(d, source))
+        params = cls(**parameter_arrays(d, source))  # type: ignore[arg-type]  # the fields' converters take array-likes
         params.check(source)
         return params
 
@@ -199,8 +199,8 @@ def convert_params(params: SSSParams, from_unit: str, to_unit: str) -> SSSParams
     k = DEPTH_UNITS[check_depth_unit(from_unit, "from_unit")] / DEPTH_UNITS[check_depth_unit(to_unit, "to_unit")]
     if k == 1.0:
         return params
-    return SSSParams(params.sss_level, params.correction, np.asarray(params.maxdd, np.float64) * k,
-                     params.weights, np.asarray(params.variances, np.float64) * k * k)
+    maxdd, variances = np.asarray(params.maxdd, np.float64) * k, np.asarray(params.variances, np.float64) * k * k
+    return SSSParams(params.sss_level, params.correction, maxdd, params.weights, variances)  # type: ignore[arg-type]  # the fields' converters take array-likes
 
 
 #: The distances from a camera to a face that depth in mm is expected to show.

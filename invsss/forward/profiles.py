@@ -19,7 +19,9 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping
 from types import MappingProxyType
+from typing import Any
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -296,7 +298,7 @@ DEON_SKIN_RGB = MappingProxyType(
 # Jensen, Marschner, Levoy & Hanrahan 2001, "A Practical Model for Subsurface Light
 # Transport", Figure 5: measured skin1, per mm, (red, green, blue); the thesis's
 # Figure 3.6 plots the dipole with these values.
-JENSEN_SKIN1 = MappingProxyType(
+JENSEN_SKIN1: Mapping[str, Any] = MappingProxyType(
     {
         "sigma_s_prime": (0.74, 0.88, 1.01),
         "sigma_a": (0.032, 0.17, 0.48),
@@ -453,7 +455,7 @@ class SumOfGaussians(eqx.Module):
         label = d.get("source", "") or ""
         if not isinstance(label, str):
             raise InvalidInputError(f"{source}: source must be a string")
-        profile = cls(weights, variances, label)
+        profile = cls(weights, variances, label)  # type: ignore[arg-type]  # the fields' converters take array-likes
         profile.check(source)
         return profile
 

@@ -35,6 +35,8 @@ Both readings return Burley's ``d`` per channel in mm, as the engine renders it.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from ..validation import InvalidInputError
@@ -48,7 +50,7 @@ _HDRP_MIN_WORLD_SCALE = 0.001
 
 #: Unreal's clamps on the fields, as (low, high): the editor's ``ClampMin``/``ClampMax``
 #: and, for colour and albedo, the texture builder's ``Bias`` floor of 0.009 after them.
-UNREAL_LIMITS = {
+UNREAL_LIMITS: dict[str, Any] = {
     "MeanFreePathDistance": (0.1, 50.0),  # cm, editor
     "MeanFreePathColor": (0.001, 1.0),  # editor
     "SurfaceAlbedo": (0.01, 1.0),  # editor

@@ -201,8 +201,8 @@ def _light_constants(light_terms) -> dict:
     # A params file from before the strength existed applied the law in full.
     strength = float(np.asarray(given.get("law_strength", 1.0), np.float64))
     fill = float(np.asarray(given.get("fill", 0.0), np.float64))
-    LightTerms(shift, grazing, incidence, law, strength, fill).check()
-    out = {}
+    LightTerms(shift, grazing, incidence, law, strength, fill).check()  # type: ignore[arg-type]  # the fields' converters take array-likes
+    out: dict = {}
     if law is None or any(term in given for term in AFTER_BLUR):
         out.update(lightShift=shift, grazingGain=grazing, incidenceGain=incidence)
     if law is not None:
@@ -340,9 +340,9 @@ def _separable_constants(weights, variances, taps, strength) -> dict:
             f"params: weights must have 1 or 3 columns (channels) to export, got shape {weights.shape}"
         )
     with jax.enable_x64(True):
-        offsets, kernel = separable_kernel(weights, variances, taps, float(strength))
-        offsets = np.asarray(offsets, dtype=np.float64)
-        kernel = np.asarray(kernel, dtype=np.float64)
+        jax_offsets, jax_kernel = separable_kernel(weights, variances, taps, float(strength))
+        offsets = np.asarray(jax_offsets, dtype=np.float64)
+        kernel = np.asarray(jax_kernel, dtype=np.float64)
     kernel_rgb = np.broadcast_to(kernel, (taps, 3))
     # iryoku/separable-sss's float4 kernel: rgb weight, a offset, centre tap first
     # and then the others in increasing order.

@@ -77,7 +77,7 @@ def _decode_colour(raster: Raster, linear: bool = False) -> tuple[np.ndarray, st
         encoding = "srgb" if bits == 8 else 1.0
     if linear:
         encoding = 1.0
-    decoded = srgb_to_linear(c) if encoding == "srgb" else c**encoding
+    decoded = srgb_to_linear(c) if isinstance(encoding, str) else c**encoding  # a str is "srgb"
     return decoded.astype(np.float32), encoding, assumed
 
 
@@ -272,8 +272,9 @@ def shared_clipping_level(paths) -> float | None:
     """
     levels = {os.fspath(path): clipping_level(path) for path in paths}
     floats = [name for name, level in levels.items() if level is None]
+    known = [level for level in levels.values() if level is not None]
     if not floats:
-        return min(levels.values()) if levels else None
+        return min(known) if known else None
     if len(floats) < len(levels):
         warnings.warn(
             f"saturation auto: no clipping level set, as a float target ({', '.join(floats)}) may hold values "

@@ -21,7 +21,7 @@ import os
 import warnings
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -32,6 +32,9 @@ from ..forward.screen_space import MODELS
 from ..validation import InputNotice, InvalidInputError, did_you_mean, number_array, one_line
 from .result_dir import MANIFEST_NAME, result_state
 from .writing import write_text_atomic
+
+if TYPE_CHECKING:
+    from pydantic_core import ErrorDetails
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -212,9 +215,9 @@ def _without_nulls(value):
     return 0.0 if value is None else value
 
 
-def _message(error: dict, content: Mapping, name: str) -> str:
+def _message(error: ErrorDetails, content: Mapping, name: str) -> str:
     """One line for pydantic's first error, naming the key and the value as written."""
-    key = error["loc"][0]
+    key = str(error["loc"][0])  # a field's name
     value = content.get(key)
     if key == "model":
         return f"{name}: model must be one of {', '.join(MODELS)}, got {_shown(value)}"
@@ -232,9 +235,9 @@ def _message(error: dict, content: Mapping, name: str) -> str:
     if key in PARAMS_KEYS:
         entries = value
     elif key == "estimate" and isinstance(value, Mapping) and len(error["loc"]) > 1:
-        label = error["loc"][1]
-        entries = value.get(label) if label in PARAMS_KEYS else None
-        label = f"estimate.{label}"
+        inner = error["loc"][1]
+        entries = value.get(inner) if inner in PARAMS_KEYS else None
+        label = f"estimate.{inner}"
     if label.split(".")[-1] in ("weights", "variances") and not isinstance(entries, list):
         return f"{name}: {label}: expected a list of numbers, got {_shown(entries)}"
     if entries is not None:

@@ -144,7 +144,8 @@ def constant_depth_pair(source, target, distance_mm, mask=None) -> ImagePair:
     source = np.asarray(source)
     if mask is None:
         mask = make_skin_mask(source, target).mask
-    return ImagePair(source, np.asarray(target), constant_depth(np.shape(source), distance_mm), np.asarray(mask))
+    depth = constant_depth(np.shape(source), distance_mm)
+    return ImagePair(source, np.asarray(target), depth, np.asarray(mask))  # type: ignore[arg-type]  # the fields' converters take array-likes
 
 
 def load_photo_pair(

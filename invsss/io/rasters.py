@@ -173,7 +173,8 @@ def code_bits(codes: np.ndarray) -> int | None:
 
 def _note_dropped_alpha(name: str, alpha: np.ndarray) -> None:
     """Say so when a transparent or translucent alpha is dropped: its colour is used as stored."""
-    opaque = 1.0 if code_bits(alpha) is None else float(2 ** code_bits(alpha) - 1)
+    bits = code_bits(alpha)
+    opaque = 1.0 if bits is None else float(2**bits - 1)
     see_through = int(np.count_nonzero(alpha < opaque))
     if see_through:
         warnings.warn(

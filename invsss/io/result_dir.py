@@ -219,7 +219,7 @@ class ResultDir:
         names: Iterable[str] = (),
         description: str = "",
         option: str = "--overwrite",
-        inputs: Iterable[tuple[str, object]] = (),
+        inputs: Iterable[tuple[str, str | os.PathLike[str]]] = (),
         advice: Mapping[str, str] | None = None,
     ):
         self.path = os.fspath(path)
@@ -311,7 +311,7 @@ class ResultDir:
             if same:
                 break
             os.close(fd)
-        holder = {
+        record = {
             "pid": os.getpid(),
             "host": socket.gethostname(),
             "started": datetime.datetime.now().isoformat(timespec="seconds"),
@@ -319,7 +319,7 @@ class ResultDir:
         }
         try:
             # Written, then cut to length: a full disk fails here, on the write.
-            written = os.write(fd, (json.dumps(holder) + "\n").encode())
+            written = os.write(fd, (json.dumps(record) + "\n").encode())
             os.ftruncate(fd, written)
         except OSError as err:
             # A full disk: refused now, before any work, leaving no empty lock

@@ -52,11 +52,14 @@ Measured against the bundled pairs' own masks (``tests/test_skin_mask.py``,
 from __future__ import annotations
 
 import warnings
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from ..validation import InputNotice, InvalidInputError
+
+if TYPE_CHECKING:  # face_mask (scikit-image) is imported only when a face is looked for
+    from .face_mask import FaceBox
 
 __all__ = [
     "BORDER_LIMIT",
@@ -237,7 +240,7 @@ class MadeMask(NamedTuple):
 
     mask: np.ndarray
     method: str
-    face: object
+    face: FaceBox | None
     checks: dict
     notices: tuple
 

@@ -243,7 +243,7 @@ def _initial_log_variances(r, y, num_gaussians, num_starts, variance_range):
 
 
 def _is_count(n) -> bool:
-    return isinstance(n, (int, np.integer)) and not isinstance(n, bool) and n >= 1
+    return isinstance(n, (int, np.integer)) and not isinstance(n, bool) and bool(n >= 1)
 
 
 def _check_inputs(r, profile, num_gaussians, weighting, num_starts, max_steps, variance_range):
@@ -418,7 +418,7 @@ def fit_sum_of_gaussians(
         jnp.asarray(_subset_masks(int(num_gaussians)), dtype),
         per_channel,
     )
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, norm=optx.rms_norm)
+    solver: optx.LevenbergMarquardt = optx.LevenbergMarquardt(rtol=rtol, atol=atol, norm=optx.rms_norm)
     results = [_fit_from(jnp.asarray(start, dtype), problem, solver, int(max_steps)) for start in log_v0]
     log_v, w, _, converged, steps = min(results, key=lambda result: float(result[2]))
     variances = jnp.exp(log_v)

@@ -237,7 +237,7 @@ def enabled_directory() -> Path | None:
         return None
     import jax
 
-    return _enabled if jax.config.jax_compilation_cache_dir == str(_enabled) else None
+    return _enabled if jax.config.jax_compilation_cache_dir == str(_enabled) else None  # type: ignore[attr-defined]  # jax.config's options are run-time attributes
 
 
 def enable_compile_cache(
@@ -325,7 +325,8 @@ def enable_compile_cache(
         jax.config.update("jax_compilation_cache_max_size", MAX_CACHE_BYTES)
     # -1: no size floor (0 would let JAX substitute its own default).
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
-    if _enabled == path and _read_only == read_only and jax.config.jax_compilation_cache_dir == str(path):
+    current = jax.config.jax_compilation_cache_dir  # type: ignore[attr-defined]  # jax.config's options are run-time attributes
+    if _enabled == path and _read_only == read_only and current == str(path):
         return path
     _read_only = read_only
     jax.config.update("jax_compilation_cache_dir", str(path))

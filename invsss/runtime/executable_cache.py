@@ -124,9 +124,10 @@ def _code_fingerprint() -> str:
 def _settings() -> tuple:
     device = jax.devices()[0]
     return (
-        bool(jax.config.jax_enable_x64),
-        str(jax.config.jax_default_matmul_precision),
-        str(jax.config.jax_numpy_dtype_promotion),
+        # jax.config's options are attributes made at run time, unknown to mypy.
+        bool(jax.config.jax_enable_x64),  # type: ignore[attr-defined]
+        str(jax.config.jax_default_matmul_precision),  # type: ignore[attr-defined]
+        str(jax.config.jax_numpy_dtype_promotion),  # type: ignore[attr-defined]
         os.environ.get("XLA_FLAGS", ""),
         # Which pass implementation is traced (invsss.forward.pass_kernels) and whether
         # the passes' scan is unrolled (invsss.forward.screen_space).
@@ -280,7 +281,7 @@ class persistent_jit:
     Array([0., 2., 4.], dtype=float32)
     """
 
-    def __init__(self, fun):
+    def __init__(self, fun) -> None:
         self.fun = fun
         self.jitted = eqx.filter_jit(fun)
         self.traces = 0
@@ -317,8 +318,9 @@ class persistent_jit:
             if folder is not None:
                 self._memory[key] = self._load_or_compile(folder, key, leaves, in_tree, static)
                 return
-            # filter_jit keeps what lower().compile() made for its later calls.
-            self.jitted.lower(*args).compile()
+            # filter_jit keeps what lower().compile() made for its later calls. (Its
+            # wrapper has lower(), though equinox annotates it as a plain callable.)
+            self.jitted.lower(*args).compile()  # type: ignore[attr-defined]
             self._prepared.add(key)
 
     def __call__(self, *args):

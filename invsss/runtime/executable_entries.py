@@ -199,7 +199,7 @@ def _try_in_child(data: bytes, digest: str, leaves) -> str | None:
     package_root = str(Path(__file__).resolve().parents[2])  # the folder holding invsss/
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
     weak = [bool(getattr(jax.typeof(leaf), "weak_type", False)) for leaf in leaves]
-    options = json.dumps({"x64": bool(jax.config.jax_enable_x64), "weak": weak})
+    options = json.dumps({"x64": bool(jax.config.jax_enable_x64), "weak": weak})  # type: ignore[attr-defined]  # jax.config's options are run-time attributes
     with tempfile.TemporaryDirectory(prefix="invsss-try-entry-") as scratch:
         entry_file = os.path.join(scratch, "entry")
         arguments = os.path.join(scratch, "arguments.npz")

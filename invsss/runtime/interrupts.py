@@ -154,7 +154,7 @@ class StopSignals:
     (True, 143)
     """
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.signum: int | None = None
         #: Whether a signal raised :class:`Interrupted` (outside :meth:`deferred`).
         self.raised = False

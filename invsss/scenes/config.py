@@ -254,6 +254,7 @@ class Camera(_Strict):
         """The horizontal field of view in degrees, whichever way it was given."""
         if self.fov is not None:
             return self.fov
+        assert self.focal_px is not None  # the validator requires fov or focal_px
         return math.degrees(2.0 * math.atan(self.width / 2.0 / self.focal_px))
 
     @property
@@ -261,6 +262,7 @@ class Camera(_Strict):
         """The focal length in pixels, whichever way it was given."""
         if self.focal_px is not None:
             return self.focal_px
+        assert self.fov is not None  # the validator requires fov or focal_px
         return self.width / 2.0 / math.tan(math.radians(self.fov) / 2.0)
 
 
@@ -538,7 +540,7 @@ def load_config(path) -> SceneConfig:
         mesh = os.path.join(os.path.dirname(os.path.abspath(name)), os.path.expanduser(config.object.mesh))
         if not os.path.isfile(mesh):
             raise InvalidInputError(f"{name}: object.mesh: file {config.object.mesh} not found (looked at {mesh})")
-        update = {"mesh": mesh}
+        update: dict[str, object] = {"mesh": mesh}
         pigment = config.object.pigment
         if pigment is not None:
             image = os.path.join(os.path.dirname(os.path.abspath(name)), os.path.expanduser(pigment.map))

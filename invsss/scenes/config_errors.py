@@ -9,14 +9,17 @@ from __future__ import annotations
 
 import difflib
 import json
-from typing import Literal, get_args, get_origin
+from typing import TYPE_CHECKING, Literal, get_args, get_origin
 
 from pydantic import BaseModel
+
+if TYPE_CHECKING:
+    from pydantic_core import ErrorDetails
 
 __all__ = ["pydantic_error_line"]
 
 
-def pydantic_error_line(error: dict, name: str, root: type[BaseModel]) -> str:
+def pydantic_error_line(error: ErrorDetails, name: str, root: type[BaseModel]) -> str:
     """One line for a pydantic error of the model ``root``: the key as a dotted path,
     what was expected (``name``: the file, first in the line)."""
     model, path, union = _walk(list(error["loc"]), root)

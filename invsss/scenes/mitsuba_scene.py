@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import os
 import warnings
+from typing import Any, cast
 
 import numpy as np
 
@@ -237,7 +238,8 @@ def pigmented_mesh(mesh_path: str, pigment) -> tuple[np.ndarray, np.ndarray, np.
     from ..io import read_image
 
     try:
-        mesh = trimesh.load(mesh_path, force="mesh", process=False)
+        # force="mesh" returns a Trimesh (trimesh annotates load() as any Geometry).
+        mesh = cast("trimesh.Trimesh", trimesh.load(mesh_path, force="mesh", process=False))
     except Exception as err:  # trimesh raises many types for bad files
         raise InvalidInputError(f"object.mesh: cannot read {mesh_path} ({' '.join(str(err).split())})") from None
     uv = getattr(mesh.visual, "uv", None)
@@ -373,6 +375,7 @@ def _object_shape(mi, config: SceneConfig, mesh_ply: str | None) -> dict:
     if obj.primitive == "sphere":
         return {"type": "sphere", "to_world": pose.scale(obj.radius)}
     if obj.primitive == "slab":
+        assert obj.size is not None  # the config requires a slab's size
         width, height, thickness = obj.size
         # Mitsuba's cube spans [-1, 1]^3; the slab's front face is z = 0.
         return {"type": "cube",
@@ -422,7 +425,7 @@ def _some_up(direction) -> list[float]:
 
 
 def _lights(mi, config: SceneConfig) -> dict:
-    lights = {}
+    lights: dict[str, dict[str, Any]] = {}
     for k, light in enumerate(config.lights):
         if light.type == "point":
             lights[f"light_{k}"] = {"type": "point", "position": light.position,
@@ -513,7 +516,7 @@ def scene_dict(mi, config: SceneConfig, kind: str, *, albedo=None, mesh_ply: str
     geometry = kind in ("geometry", "visible")
     if geometry:
         shape["bsdf"] = {"type": "diffuse", "reflectance": _colour(1.0)}
-        integrator = {"type": "aov", "aovs": "pos:position,nn:sh_normal,cov:albedo"}
+        integrator: dict[str, Any] = {"type": "aov", "aovs": "pos:position,nn:sh_normal,cov:albedo"}
         # Stratified samples give the pixel averages of coverage and depth with little noise.
         sampler = {"type": "stratified", "sample_count": spp or config.geometry_spp}
     else:
@@ -524,6 +527,8 @@ def scene_dict(mi, config: SceneConfig, kind: str, *, albedo=None, mesh_ply: str
             reflectance = {"type": "mesh_attribute", "name": "vertex_albedo_color"} if pigment else _colour(albedo)
             shape["bsdf"] = {"type": "diffuse", "reflectance": reflectance}
             integrator = {"type": "path", "max_depth": config.max_depth}
+        elif coefficients is None:
+            raise ValueError(f"kind {kind!r}: needs the medium's coefficients (Medium.coefficients())")
         elif pigment and kind == "target":
             # The pigment layer: each crossing of the (index-matched) surface is absorbed
             # with probability vertex_absorb, passed unchanged otherwise.

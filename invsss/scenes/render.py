@@ -39,6 +39,7 @@ import platform
 import tempfile
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -95,6 +96,7 @@ def object_ply(config: SceneConfig, folder: str) -> tuple[str | None, dict | Non
     ``scene.json`` keeps of it; ``(None, None)`` for Mitsuba's own sphere and slab.
     An object with a pigment is made by :func:`render_scene` itself."""
     if config.object.mesh:
+        assert config.object.mm_per_unit is not None  # the config requires it with a mesh
         return (load_mesh_ply(config.object.mesh, folder, bumps=config.object.bumps,
                               mm_per_unit=config.object.mm_per_unit, subdivisions=config.object.subdivisions),
                 _mesh_record(config.object.mesh))
@@ -111,10 +113,8 @@ def _is_grey(config: SceneConfig, coefficients: dict) -> bool:
     return len(coefficients["sigma_s_prime"]) == 1 and not any(isinstance(c, list) for c in colours)
 
 
-def _mesh_record(path: str | None) -> dict | None:
+def _mesh_record(path: str) -> dict:
     """The mesh file's name and SHA-256, so a scene.json pins the exact geometry."""
-    if path is None:
-        return None
     import hashlib
 
     with open(path, "rb") as f:
@@ -202,14 +202,18 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         return result
 
     half_spp = config.spp // 2
-    seeds = {"source": 2 * config.seed, "target_halves": [2 * config.seed, 2 * config.seed + 1],
+    seeds: dict[str, Any] = {"source": 2 * config.seed, "target_halves": [2 * config.seed, 2 * config.seed + 1],
              "specular_halves": [2 * config.seed, 2 * config.seed + 1], "calibration": 0}
     with tempfile.TemporaryDirectory(prefix="invsss-scene-") as folder:
         pigment = config.object.pigment
+        mesh_ply: str | None
+        mesh_record: dict | None
         if pigment is not None:
             # The pigment rides on the vertices of a finer copy of the same surface.
-            vertices, faces, transmittance, pigment_record = pigmented_mesh(config.object.mesh, pigment)
-            mesh_record = {**_mesh_record(config.object.mesh), "pigment": pigment_record}
+            mesh = config.object.mesh
+            assert mesh is not None  # the config allows a pigment only on a mesh
+            vertices, faces, transmittance, pigment_record = pigmented_mesh(mesh, pigment)
+            mesh_record = {**_mesh_record(mesh), "pigment": pigment_record}
             mesh_ply = write_attribute_ply(os.path.join(folder, "object.ply"), vertices, faces,
                                            {"absorb": 1.0 - np.sqrt(transmittance)})
         else:
@@ -332,7 +336,7 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
     }
     return SceneRender(
         source=source.astype(np.float32),
-        target=image.astype(np.float32) if target else None,
+        target=None if image is None else image.astype(np.float32),
         depth=depth.astype(np.float32),
         mask=mask,
         normal=normal.astype(np.float32),
@@ -459,6 +463,7 @@ def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
     True
     """
     text = json.dumps(result.info, indent=2) + "\n"
+    fill = _fill_light_buffer(result)
     writers = {
         "source.exr": lambda path: write_image(path, result.source),
         "target.exr": lambda path: write_image(path, result.target),
@@ -471,7 +476,6 @@ def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
         "fill_light.exr": lambda path: write_image(path, fill),
         "scene.json": lambda path: write_text_atomic(path, text),
     }
-    fill = _fill_light_buffer(result)
     if fill is None:
         del writers["fill_light.exr"]
     if result.target is None:

@@ -70,7 +70,7 @@ class SSSParams:
     def from_dict(cls, d: dict, source: str = "params") -> SSSParams:
         """Build from a params mapping (e.g. ``invsss.SSSParams.to_dict()`` or a JSON file)."""
         # check() covers the shapes and the constraints.
-        params = cls(**parameter_arrays(d, source))
+        params = cls(**parameter_arrays(d, source))  # type: ignore[arg-type]  # the fields' converters take array-likes
         params.check(source)
         return params
 

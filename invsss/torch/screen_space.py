@@ -7,6 +7,9 @@ entry point that converts and validates.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 import torch
 
@@ -150,7 +153,7 @@ def _render_kernel(image, depth, mask, params, tap_w, taps=17, strength=1.0, fol
 
 #: The twin's renderer of each layout of :data:`invsss.forward.models.LAYOUTS`, called
 #: as ``f(image, depth, mask, params, tap_w, **kernel_options)``.
-LAYOUT_RENDERERS = {
+LAYOUT_RENDERERS: dict[str, Callable[..., Any]] = {
     "layered": render_sog,
     "chained": render_thesis,
     "kernel": _render_kernel,
