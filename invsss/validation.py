@@ -40,7 +40,54 @@ __all__ = [
 
 
 class InvalidInputError(ValueError):
-    """An input (array, file or config) is not what invsss expects."""
+    """An input (array, file or config) is not what invsss expects.
+
+    Parameters
+    ----------
+    message : str
+        One line that names the input and says what was expected.
+    field : str, optional
+        The input the message is about, as the library names it (an option such
+        as ``"saturation"``, a pair's role such as ``"pairs[1].mask"``, a buffer
+        such as ``"light_buffers.key"``), where the message starts with it.
+        Callers that show the input under another name (the command line shows
+        a flag or a file's path) use :meth:`named`, never the message's text.
+
+    Examples
+    --------
+    >>> err = InvalidInputError("saturation: expected a number > 0, got -1", field="saturation")
+    >>> err.field
+    'saturation'
+    >>> str(err.named("--saturation"))
+    '--saturation: expected a number > 0, got -1'
+    >>> str(InvalidInputError("mask.png: mask is empty").named("--mask"))   # no field: unchanged
+    'mask.png: mask is empty'
+    """
+
+    def __init__(self, message, *, field: str | None = None):
+        super().__init__(message)
+        self.field = field
+
+    def named(self, label: str) -> "InvalidInputError":
+        """The same error with its field shown as ``label``; itself when it has no field.
+
+        The result keeps ``field``, the library's name.
+
+        Examples
+        --------
+        >>> err = InvalidInputError("no skin in the mask", field="pairs[1].mask")
+        >>> str(err.named("cheek.png (pairs[1].mask)"))
+        'cheek.png (pairs[1].mask): no skin in the mask'
+        """
+        if self.field is None:
+            return self
+        text = str(self)
+        # Messages start with their field by convention; one that does not is
+        # still shown under the label rather than left under the library's name.
+        rest = text[len(self.field):] if text.startswith(self.field) else f": {text}"
+        named = InvalidInputError(label + rest)
+        named.field = self.field
+        return named
 
 
 class InputNotice(UserWarning):
@@ -141,17 +188,18 @@ def number_array(value, key: str, source: str = "params") -> np.ndarray:
     if hasattr(value, "dtype") and hasattr(value, "shape"):  # NumPy, JAX, torch arrays
         array = np.asarray(value)
         if array.dtype.kind not in "iuf":
-            raise InvalidInputError(f"{source}: {key}: expected numbers, got dtype {array.dtype}")
+            raise InvalidInputError(f"{source}: {key}: expected numbers, got dtype {array.dtype}", field=source)
         return array.astype(np.float64)
     found = _first_non_number(value, key)
     if found:
         where, bad = found
-        raise InvalidInputError(f"{source}: {where}: expected a number, got {_shown(bad)}")
+        raise InvalidInputError(f"{source}: {where}: expected a number, got {_shown(bad)}", field=source)
     try:
         return np.asarray(value, dtype=np.float64)
     except ValueError:
         raise InvalidInputError(
-            f"{source}: {key}: expected a rectangular list of numbers (every row the same length)"
+            f"{source}: {key}: expected a rectangular list of numbers (every row the same length)",
+            field=source,
         ) from None
 
 
@@ -174,21 +222,23 @@ def check_image(image, name: str = "image", *, allow_batch: bool = False) -> Non
         h, w, c = core
         if c not in (1, 3):
             raise InvalidInputError(
-                f"{name}: expected 1 or 3 channels in the last axis, got shape {shape}"
+                f"{name}: expected 1 or 3 channels in the last axis, got shape {shape}",
+                field=name,
             )
     else:
-        raise InvalidInputError(f"{name}: expected shape (H, W) or (H, W, C), got {shape}")
+        raise InvalidInputError(f"{name}: expected shape (H, W) or (H, W, C), got {shape}", field=name)
     if h < 2 or w < 2:
-        raise InvalidInputError(f"{name}: expected at least 2x2 pixels, got shape {shape}")
+        raise InvalidInputError(f"{name}: expected at least 2x2 pixels, got shape {shape}", field=name)
     # Tracers have a dtype; only plain sequences need converting to find one.
     dtype = np.dtype(image.dtype if hasattr(image, "dtype") else np.asarray(image).dtype)
     if not np.issubdtype(dtype, np.floating):
         raise InvalidInputError(
             f"{name}: expected linear floating-point values, got dtype {dtype} "
-            "(decode 8/16-bit images with invsss.read_image)"
+            "(decode 8/16-bit images with invsss.read_image)",
+            field=name,
         )
     if is_concrete(image) and not bool(np.all(np.isfinite(np.asarray(image)))):
-        raise InvalidInputError(f"{name}: contains NaN or infinite values")
+        raise InvalidInputError(f"{name}: contains NaN or infinite values", field=name)
 
 
 def depth_is_valid(depth) -> np.ndarray:
@@ -235,7 +285,8 @@ def check_depth(depth, shape_hw: tuple[int, int], name: str = "depth", mask=None
     shape = _shape(depth)
     if shape != tuple(shape_hw):
         raise InvalidInputError(
-            f"{name}: expected shape {tuple(shape_hw)} to match the image, got {shape}"
+            f"{name}: expected shape {tuple(shape_hw)} to match the image, got {shape}",
+            field=name,
         )
     if not (is_concrete(depth) and (mask is None or is_concrete(mask))):
         return
@@ -249,7 +300,8 @@ def check_depth(depth, shape_hw: tuple[int, int], name: str = "depth", mask=None
         what = "pixel(s) are" if mask is None else "masked pixel(s) are"
         raise InvalidInputError(
             f"{name}: expected finite depth > 0 {where}, {bad} {what} not "
-            "(NaN, infinite or <= 0)"
+            "(NaN, infinite or <= 0)",
+            field=name,
         )
 
 
@@ -258,17 +310,19 @@ def check_mask(mask, shape_hw: tuple[int, int], name: str = "mask") -> None:
     shape = _shape(mask)
     if shape != tuple(shape_hw):
         raise InvalidInputError(
-            f"{name}: expected shape {tuple(shape_hw)} to match the image, got {shape}"
+            f"{name}: expected shape {tuple(shape_hw)} to match the image, got {shape}",
+            field=name,
         )
     if is_concrete(mask):
         m = np.asarray(mask)
         if not np.all(np.isfinite(m)):
-            raise InvalidInputError(f"{name}: expected values in [0, 1], got NaN or infinite values")
+            raise InvalidInputError(f"{name}: expected values in [0, 1], got NaN or infinite values", field=name)
         if m.min() < 0 or m.max() > 1:
             hint = " (a 0/255 mask? read mask files with invsss.read_mask)" if m.max() > 1 else ""
-            raise InvalidInputError(f"{name}: expected values in [0, 1], got {m.min():g} to {m.max():g}{hint}")
+            raise InvalidInputError(f"{name}: expected values in [0, 1], got {m.min():g} to {m.max():g}{hint}",
+                                    field=name)
         if not np.any(m > 0):
-            raise InvalidInputError(f"{name}: is empty (no pixel > 0)")
+            raise InvalidInputError(f"{name}: is empty (no pixel > 0)", field=name)
 
 
 def check_same_size(a_shape, b_shape, a_name: str, b_name: str) -> None:
@@ -276,7 +330,8 @@ def check_same_size(a_shape, b_shape, a_name: str, b_name: str) -> None:
         raise InvalidInputError(
             f"{b_name}: expected {a_shape[0]}x{a_shape[1]} pixels to match {a_name}, "
             f"got {b_shape[0]}x{b_shape[1]} (every image of a pair is on one pixel grid: crop or "
-            "resample them to it; --align registers a shift or rotation, not another size)"
+            "resample them to it; --align registers a shift or rotation, not another size)",
+            field=b_name,
         )
 
 
@@ -306,7 +361,8 @@ def check_target_channels(source_channels: int, target_channels: int, target_nam
         hint = (" (a colour target needs a colour source; for a grey source, give the target as grey too)"
                 if source_channels == 1 else " (or 1: a grey target of an RGB source)")
         raise InvalidInputError(
-            f"{target_name}: expected {source_channels} channel(s) like the source{hint}, got {target_channels}"
+            f"{target_name}: expected {source_channels} channel(s) like the source{hint}, got {target_channels}",
+            field=target_name,
         )
 
 

@@ -158,12 +158,8 @@ def fit_options_from(args: argparse.Namespace) -> FitOptions:
         return FitOptions(**values)
     except InvalidInputError as err:
         # FitOptions names the field; the user typed its flag.
-        text = str(err)
-        for field, flag in _fit_option_fields():
-            if text.startswith((f"{field.name}:", f"{field.name}[")):
-                text = flag + text[len(field.name):]
-                break
-        raise InvalidInputError(text) from None
+        flags = {field.name: flag for field, flag in _fit_option_fields()}
+        raise (err.named(flags[err.field]) if err.field in flags else err) from None
 
 
 def saturation_level(text: str, targets: list[str]) -> float | None:
@@ -269,7 +265,7 @@ def _run(args: argparse.Namespace, stop: StopSignals, notices: list[str]) -> int
             try:
                 result = run_fit(pairs, count == 1, options, progress, stop)
             except InvalidInputError as err:
-                raise InvalidInputError(_with_file_names(str(err), args, count)) from None
+                raise _with_file_names(err, args, count) from None
             except FitInterrupted:
                 progress.close()
                 print("invsss: interrupted before the first solver step; nothing written", file=sys.stderr)
@@ -299,22 +295,21 @@ def _run(args: argparse.Namespace, stop: StopSignals, notices: list[str]) -> int
     return 0
 
 
-def _with_file_names(text: str, args: argparse.Namespace, count: int) -> str:
-    """An estimator's error names a pair's role (``target``, ``pairs[1].mask``); the
-    user typed a file, so put its path first: ``nir.png (target): ...``. A missing
-    light-term buffer is named by the flag that gives it (``--light: ...``)."""
+def _with_file_names(err: InvalidInputError, args: argparse.Namespace, count: int) -> InvalidInputError:
+    """An estimator's error names a pair's role (``target``, ``pairs[1].mask``) in its
+    ``field``; the user typed a file, so show its path: ``nir.png (target): ...``. A
+    light-term buffer is shown as the flag that gives it (``--light: ...``)."""
+    shown = {}
     for role in ("source", "target", "depth", "mask"):
         for i, path in enumerate(getattr(args, role, None) or ()):
             name = role if count == 1 else f"pairs[{i}].{role}"
-            if text.startswith((f"{name}:", f"{name} ")):
-                return f"{path} ({name}){text[len(name):]}"
-    # A light term's missing buffer: the user gives it with a flag.
+            shown[name] = f"{path} ({name})"
     for buffer in ("normal", "light", "key", "fill_light"):
         flag = "--" + buffer.replace("_", "-")
-        for name in ["light_buffers." + buffer] + [f"pairs[{i}].{buffer}" for i in range(count)]:
-            if text.startswith(f"{name}:"):
-                return flag + ("" if count == 1 else f" ({name})") + text[len(name):]
-    return text
+        shown["light_buffers." + buffer] = flag
+        shown.update({f"pairs[{i}].{buffer}": flag + ("" if count == 1 else f" (pairs[{i}].{buffer})")
+                      for i in range(count)})
+    return err.named(shown[err.field]) if err.field in shown else err
 
 
 def _input_files(args: argparse.Namespace, options: FitOptions) -> list[tuple[str, str]]:

@@ -117,7 +117,8 @@ def on_canvas(pairs, options) -> tuple[tuple, list[str]]:
         h, w = np.shape(pair.mask)
         if h > canvas[0] or w > canvas[1]:
             raise InvalidInputError(
-                f"canvas: {name(i)} is {h} x {w} pixels, larger than the canvas of {canvas[0]} x {canvas[1]}"
+                f"canvas: {name(i)} is {h} x {w} pixels, larger than the canvas of {canvas[0]} x {canvas[1]}",
+                field="canvas",
             )
     blockers = frame_terms(options)
     if blockers:

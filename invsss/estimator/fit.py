@@ -159,7 +159,7 @@ def fit_pairs(
 
 def _check_callback(name, value):
     if value is not None and not callable(value):
-        raise InvalidInputError(f"{name}: expected a callable or None, got {type(value).__name__}")
+        raise InvalidInputError(f"{name}: expected a callable or None, got {type(value).__name__}", field=name)
 
 
 def _options(options, keywords) -> FitOptions:

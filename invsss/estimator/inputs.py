@@ -20,11 +20,11 @@ __all__ = ["prepare_pair", "prepare_pairs"]
 def _check_fit_weight(fit_weight, shape, mask, name: str):
     weight = np.asarray(fit_weight, np.float64)
     if weight.shape != tuple(shape):
-        raise InvalidInputError(f"{name}: expected shape {tuple(shape)} (the mask's), got {weight.shape}")
+        raise InvalidInputError(f"{name}: expected shape {tuple(shape)} (the mask's), got {weight.shape}", field=name)
     if not np.all(np.isfinite(weight)) or weight.min() < 0 or weight.max() > 1:
-        raise InvalidInputError(f"{name}: expected finite values in [0, 1]")
+        raise InvalidInputError(f"{name}: expected finite values in [0, 1]", field=name)
     if not np.any(weight * np.asarray(mask) > 0):
-        raise InvalidInputError(f"{name}: leaves no masked pixel in the fit")
+        raise InvalidInputError(f"{name}: leaves no masked pixel in the fit", field=name)
     return weight
 
 

@@ -38,7 +38,8 @@ def canvas_from_text(text: str | None, flag: str = "--canvas") -> tuple[int, int
     try:
         return check_canvas((int(height), int(width)) if sep else None)
     except (ValueError, InvalidInputError):
-        raise InvalidInputError(f"{flag} {text!r}: expected HxW, two integers >= 1 (e.g. 256x256)") from None
+        raise InvalidInputError(f"{flag} {text!r}: expected HxW, two integers >= 1 (e.g. 256x256)",
+                                field=flag) from None
 
 
 def saturation_from_text(text: str, flag: str = "--saturation") -> float | str | None:
@@ -57,7 +58,7 @@ def saturation_from_text(text: str, flag: str = "--saturation") -> float | str |
     try:
         return float(text)
     except ValueError:
-        raise InvalidInputError(f"{flag} {text!r}: expected auto, none or a number > 0") from None
+        raise InvalidInputError(f"{flag} {text!r}: expected auto, none or a number > 0", field=flag) from None
 
 
 def fix_from_text(items: list[str], flag: str = "--fix") -> dict | None:
@@ -78,11 +79,13 @@ def fix_from_text(items: list[str], flag: str = "--fix") -> dict | None:
     for item in items:
         name, equals, text = (part.strip() for part in item.partition("="))
         if not equals or not name or not text:
-            raise InvalidInputError(f"{flag} {item!r}: expected NAME=VALUE, e.g. maxdd=0.05 or variances=0.5,2")
+            raise InvalidInputError(f"{flag} {item!r}: expected NAME=VALUE, e.g. maxdd=0.05 or variances=0.5,2",
+                                    field=flag)
         if name not in known:
-            raise InvalidInputError(f"{flag} {item!r}: unknown parameter {name!r}, expected one of {', '.join(known)}")
+            raise InvalidInputError(f"{flag} {item!r}: unknown parameter {name!r}, expected one of {', '.join(known)}",
+                                    field=flag)
         if name in fixed:
-            raise InvalidInputError(f"{flag} {item!r}: {name} is given more than once")
+            raise InvalidInputError(f"{flag} {item!r}: {name} is given more than once", field=flag)
         try:
             numbers = [float(t) for t in text.split(",")]
         except ValueError:
@@ -91,7 +94,7 @@ def fix_from_text(items: list[str], flag: str = "--fix") -> dict | None:
             ) from None
         if name in FIX_SCALARS:
             if len(numbers) != 1:
-                raise InvalidInputError(f"{flag} {item!r}: {name} takes a single number")
+                raise InvalidInputError(f"{flag} {item!r}: {name} takes a single number", field=flag)
             fixed[name] = numbers[0]
         else:
             fixed[name] = numbers

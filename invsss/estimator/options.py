@@ -48,7 +48,7 @@ def check_canvas(canvas) -> tuple[int, int]:
         and all(isinstance(n, numbers.Integral) and not isinstance(n, bool) and n >= 1 for n in canvas)
     )
     if not ok:
-        raise InvalidInputError(f"canvas: expected (height, width), two integers >= 1, got {canvas!r}")
+        raise InvalidInputError(f"canvas: expected (height, width), two integers >= 1, got {canvas!r}", field="canvas")
     return int(canvas[0]), int(canvas[1])
 
 
@@ -253,14 +253,15 @@ class FitOptions:
             object.__setattr__(self, "canvas", check_canvas(self.canvas))
 
         if self.align not in ("none", *ALIGN_KINDS):
-            raise InvalidInputError(f"align: expected one of none, {', '.join(ALIGN_KINDS)}, got {self.align!r}")
+            raise InvalidInputError(f"align: expected one of none, {', '.join(ALIGN_KINDS)}, got {self.align!r}",
+                                    field="align")
         for name in ("vignetting", "highlights"):
             if not isinstance(getattr(self, name), bool):
-                raise InvalidInputError(f"{name}: expected true or false, got {getattr(self, name)!r}")
+                raise InvalidInputError(f"{name}: expected true or false, got {getattr(self, name)!r}", field=name)
         if self.saturation is not None:
             level = self.saturation
             if isinstance(level, bool) or not isinstance(level, numbers.Real) or not np.isfinite(level) or level <= 0:
-                raise InvalidInputError(f"saturation: expected a number > 0 or None, got {level!r}")
+                raise InvalidInputError(f"saturation: expected a number > 0 or None, got {level!r}", field="saturation")
             object.__setattr__(self, "saturation", float(level))
         terms, held = check_light_terms(self.light_terms)
         if self.light_fixed:
@@ -269,23 +270,27 @@ class FitOptions:
         object.__setattr__(self, "light_fixed", types.MappingProxyType(held))
         entry = get_model(self.model)  # one-line error naming the known models
         if self.gauge not in ("auto", *GAUGES):
-            raise InvalidInputError(f"gauge: expected one of auto, {', '.join(GAUGES)}, got {self.gauge!r}")
+            raise InvalidInputError(f"gauge: expected one of auto, {', '.join(GAUGES)}, got {self.gauge!r}",
+                                    field="gauge")
         if self.gauge == "auto":
             object.__setattr__(self, "gauge", entry.default_gauge)
         if isinstance(self.pigment, bool) or self.pigment not in PIGMENT_DEGREES:
             raise InvalidInputError(
-                f"pigment: expected a degree among {', '.join(map(str, PIGMENT_DEGREES))}, got {self.pigment!r}")
+                f"pigment: expected a degree among {', '.join(map(str, PIGMENT_DEGREES))}, got {self.pigment!r}",
+                field="pigment")
         if self.focal_px is not None:
             focal = self.focal_px
             if isinstance(focal, bool) or not isinstance(focal, numbers.Real) or not np.isfinite(focal) or focal <= 0:
-                raise InvalidInputError(f"focal_px: expected a number of pixels > 0 or None, got {focal!r}")
+                raise InvalidInputError(f"focal_px: expected a number of pixels > 0 or None, got {focal!r}",
+                                        field="focal_px")
             object.__setattr__(self, "focal_px", float(focal))
         if self.solver not in SOLVERS:
-            raise InvalidInputError(f"solver: expected one of {', '.join(SOLVERS)}, got {self.solver!r}")
+            raise InvalidInputError(f"solver: expected one of {', '.join(SOLVERS)}, got {self.solver!r}",
+                                    field="solver")
         for name in ("n_starts", "max_steps"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
-                raise InvalidInputError(f"{name}: expected an integer >= 1, got {value!r}")
+                raise InvalidInputError(f"{name}: expected an integer >= 1, got {value!r}", field=name)
             object.__setattr__(self, name, int(value))
         object.__setattr__(self, "robust", check_robust(self.robust))
         fixed = check_fix(self.fix)
@@ -328,11 +333,13 @@ def _held_number(name, value) -> float:
     try:
         number = float(value)
     except (TypeError, ValueError):
-        raise InvalidInputError(f"light_terms[{name!r}]: expected a number or None (fitted), got {value!r}") from None
+        raise InvalidInputError(f"light_terms[{name!r}]: expected a number or None (fitted), got {value!r}",
+                                field="light_terms") from None
     if not np.isfinite(number) or (name in ("grazing", "incidence") and number <= -1.0):
         raise InvalidInputError(
             f"light_terms[{name!r}]: expected a finite number"
-            f"{' > -1' if name in ('grazing', 'incidence') else ''}, got {value!r}"
+            f"{' > -1' if name in ('grazing', 'incidence') else ''}, got {value!r}",
+            field="light_terms",
         )
     return number
 
@@ -348,7 +355,8 @@ def _held_albedo(value) -> float | tuple[float, ...]:
     if w is None or w.ndim > 1 or w.size == 0 or not np.all(np.isfinite(w)) or np.any((w <= 0) | (w >= 1)):
         raise InvalidInputError(
             f"light_terms['law']: expected an albedo in (0, 1) or one per channel (e.g. 0.93/0.8/0.7), "
-            f"or None (fitted), got {value!r}"
+            f"or None (fitted), got {value!r}",
+            field="light_terms",
         )
     return float(w) if w.ndim == 0 else tuple(float(x) for x in w)
 
@@ -383,7 +391,8 @@ def check_light_terms(terms) -> tuple[tuple[str, ...], dict[str, float]]:
         try:
             entries = dict.fromkeys(terms)
         except TypeError:
-            raise InvalidInputError(f"light_terms: expected names of terms, got {terms!r}") from None
+            raise InvalidInputError(f"light_terms: expected names of terms, got {terms!r}",
+                                    field="light_terms") from None
     unknown = [t for t in entries if t not in LIGHT_TERM_NAMES]
     if unknown:
         raise InvalidInputError(
@@ -397,6 +406,7 @@ def check_light_terms(terms) -> tuple[tuple[str, ...], dict[str, float]]:
         held[name] = _held_albedo(value) if name == "law" else _held_number(name, value)
     if "fill" in entries and "law" not in entries:
         raise InvalidInputError(
-            "light_terms: 'fill' applies the law's albedo to the other lights; name 'law' too (e.g. \"law,fill\")"
+            "light_terms: 'fill' applies the law's albedo to the other lights; name 'law' too (e.g. \"law,fill\")",
+            field="light_terms",
         )
     return tuple(t for t in LIGHT_TERM_NAMES if t in entries), held

@@ -125,7 +125,8 @@ def resolve_profile(profile) -> tuple[np.ndarray, np.ndarray]:
     elif not isinstance(profile, SumOfGaussians):
         raise InvalidInputError(
             "profile: expected a profile name, a JSON path, a mapping with weights and "
-            f"variances, or an invsss SumOfGaussians, got {type(profile).__name__}"
+            f"variances, or an invsss SumOfGaussians, got {type(profile).__name__}",
+            field="profile",
         )
     profile.check("profile")
     return np.asarray(profile.weights, np.float64), np.asarray(profile.variances, np.float64)
@@ -136,7 +137,8 @@ def check_fix(fix) -> dict[str, np.ndarray]:
     if fix is None:
         return {}
     if not hasattr(fix, "items"):
-        raise InvalidInputError(f"fix: expected a mapping of parameter names to values, got {type(fix).__name__}")
+        raise InvalidInputError(f"fix: expected a mapping of parameter names to values, got {type(fix).__name__}",
+                                field="fix")
     unknown = sorted(set(fix) - set(PARAM_NAMES))
     if unknown:
         raise InvalidInputError(
@@ -146,28 +148,30 @@ def check_fix(fix) -> dict[str, np.ndarray]:
     out = {}
     for k, v in fix.items():
         if np.asarray(v).dtype.kind in "US":  # NumPy would read "0.5" as 0.5
-            raise InvalidInputError(f"fix[{k!r}]: expected numbers, got the text {v!r}")
+            raise InvalidInputError(f"fix[{k!r}]: expected numbers, got the text {v!r}", field="fix")
         try:
             a = np.asarray(v, dtype=np.float64)
         except (TypeError, ValueError):
-            raise InvalidInputError(f"fix[{k!r}]: expected numbers, got {v!r}") from None
+            raise InvalidInputError(f"fix[{k!r}]: expected numbers, got {v!r}", field="fix") from None
         if not np.all(np.isfinite(a)):
-            raise InvalidInputError(f"fix[{k!r}]: contains NaN or infinite values")
+            raise InvalidInputError(f"fix[{k!r}]: contains NaN or infinite values", field="fix")
         if k in _SCALARS and a.ndim != 0:
-            raise InvalidInputError(f"fix[{k!r}]: expected a single number, got shape {a.shape}")
+            raise InvalidInputError(f"fix[{k!r}]: expected a single number, got shape {a.shape}", field="fix")
         if k in ("sss_level", "maxdd") and a <= 0:
-            raise InvalidInputError(f"fix[{k!r}]: expected a value > 0, got {float(a):g}")
+            raise InvalidInputError(f"fix[{k!r}]: expected a value > 0, got {float(a):g}", field="fix")
         if k == "correction" and a < 0:
-            raise InvalidInputError(f"fix['correction']: expected a value >= 0, got {float(a):g}")
+            raise InvalidInputError(f"fix['correction']: expected a value >= 0, got {float(a):g}", field="fix")
         if k == "variances" and (a.ndim != 1 or a.size == 0 or np.any(a <= 0)):
-            raise InvalidInputError("fix['variances']: expected a non-empty list of values > 0")
+            raise InvalidInputError("fix['variances']: expected a non-empty list of values > 0", field="fix")
         if k == "weights" and (a.ndim not in (1, 2) or np.any(a < 0) or np.any(a.sum(axis=0) <= 0)):
-            raise InvalidInputError("fix['weights']: expected a (K,) or (K, C) array >= 0 with a positive sum")
+            raise InvalidInputError("fix['weights']: expected a (K,) or (K, C) array >= 0 with a positive sum",
+                                    field="fix")
         out[k] = a
     if "weights" in out and "variances" in out and out["weights"].shape[0] != out["variances"].shape[0]:
         raise InvalidInputError(
             f"fix['weights']: expected {out['variances'].shape[0]} rows, one per fixed variance, "
-            f"got shape {out['weights'].shape}"
+            f"got shape {out['weights'].shape}",
+            field="fix",
         )
     return out
 
@@ -175,16 +179,18 @@ def check_fix(fix) -> dict[str, np.ndarray]:
 def assign_roles(model: str, gauge: str, fixed: dict) -> dict[str, str]:
     """The role ("free", "linear", "fixed", "unused") of each parameter."""
     if gauge not in GAUGES:
-        raise InvalidInputError(f"gauge: expected one of {', '.join(GAUGES)}, got {gauge!r}")
+        raise InvalidInputError(f"gauge: expected one of {', '.join(GAUGES)}, got {gauge!r}", field="gauge")
     if gauge == "sss_level" and "sss_level" not in fixed:
         raise InvalidInputError(
-            "gauge: 'sss_level' needs the value of sss_level in fix= (e.g. the focal length in pixels)"
+            "gauge: 'sss_level' needs the value of sss_level in fix= (e.g. the focal length in pixels)",
+            field="gauge",
         )
     entry = get_model(model)
     if gauge == "depth" and entry.default_gauge != "depth":
         raise InvalidInputError(
             f"gauge: 'depth' estimates sss_level and the variances together, which model {model} cannot tell "
-            "apart (scaling one scales the other away); use variances or sss_level"
+            "apart (scaling one scales the other away); use variances or sss_level",
+            field="gauge",
         )
     roles = {}
     roles["sss_level"] = "fixed" if "sss_level" in fixed else "free"

@@ -50,7 +50,8 @@ def num_terms(degree: int) -> int:
     [0, 2, 5]
     """
     if isinstance(degree, bool) or degree not in DEGREES:
-        raise InvalidInputError(f"pigment: expected a degree among {', '.join(map(str, DEGREES))}, got {degree!r}")
+        raise InvalidInputError(f"pigment: expected a degree among {', '.join(map(str, DEGREES))}, got {degree!r}",
+                                field="pigment")
     return len(_exponents(degree))
 
 

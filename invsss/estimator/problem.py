@@ -69,11 +69,13 @@ def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, 
         w = fixed["weights"]
         if w.ndim == 2 and w.shape[1] not in (1, c_tgt):
             raise InvalidInputError(
-                f"fix['weights']: expected one column per target channel ({c_tgt}), got shape {w.shape}"
+                f"fix['weights']: expected one column per target channel ({c_tgt}), got shape {w.shape}",
+                field="fix",
             )
         if w.shape[0] != k:
             raise InvalidInputError(
-                f"fix['weights']: expected {k} rows, one per Gaussian of the profile, got shape {w.shape}"
+                f"fix['weights']: expected {k} rows, one per Gaussian of the profile, got shape {w.shape}",
+                field="fix",
             )
     carried = {"sss_level": 1.0, "correction": 0.0, "maxdd": scales.slope, "weights": w0, "variances": variances}
     values, reference, start, blocks = {}, {}, {}, []
@@ -127,7 +129,8 @@ def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, 
     if "law" in light_fixed and np.size(light_fixed["law"]) not in (1, c_src):
         raise InvalidInputError(
             f"light_terms['law']: expected one albedo or one per source channel ({c_src}), "
-            f"got {np.size(light_fixed['law'])}"
+            f"got {np.size(light_fixed['law'])}",
+            field="light_terms",
         )
     # A held term is a value like a fixed parameter's; the objective applies a
     # term whenever its name is among the natural values.

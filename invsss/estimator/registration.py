@@ -238,7 +238,7 @@ def estimate_warp(moving, reference, mask, kind: str = "similarity", start: Warp
     True
     """
     if kind not in ALIGN_KINDS:
-        raise InvalidInputError(f"align: expected one of none, {', '.join(ALIGN_KINDS)}, got {kind!r}")
+        raise InvalidInputError(f"align: expected one of none, {', '.join(ALIGN_KINDS)}, got {kind!r}", field="align")
     moving = np.asarray(moving, np.float64)
     reference = np.asarray(reference, np.float64)
     weight = (np.asarray(mask) > 0).astype(np.float64)

@@ -116,7 +116,8 @@ def step_ahead() -> bool:
     """
     choice = os.environ.get(STEP_AHEAD_VARIABLE, "auto").strip().lower()
     if choice not in ("auto", "1", "0"):
-        raise InvalidInputError(f"{STEP_AHEAD_VARIABLE}: expected one of auto, 1, 0, got {choice!r}")
+        raise InvalidInputError(f"{STEP_AHEAD_VARIABLE}: expected one of auto, 1, 0, got {choice!r}",
+                                field=STEP_AHEAD_VARIABLE)
     if choice == "auto":
         return jax.default_backend() != "cpu"
     return choice == "1"
@@ -149,7 +150,7 @@ def make_solver(name: str, tolerance: float | None = None):
         return optx.GaussNewton(rtol=rtol, atol=atol)
     if name == "bfgs":
         return optx.BFGS(rtol=rtol, atol=atol)
-    raise InvalidInputError(f"solver: expected one of {', '.join(SOLVERS)}, got {name!r}")
+    raise InvalidInputError(f"solver: expected one of {', '.join(SOLVERS)}, got {name!r}", field="solver")
 
 
 #: The Jacobians the solvers can be given: ``"forward-mode"`` (``jax.jacfwd``,

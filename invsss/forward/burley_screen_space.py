@@ -124,7 +124,8 @@ def check_burley_distances(variances, channels: int, name: str = "params") -> No
     if k not in (1, channels):
         raise InvalidInputError(
             f"{name}.variances: the burley model takes d^2 for one channel or for each of the image's "
-            f"{channels} channels, got {k} values"
+            f"{channels} channels, got {k} values",
+            field=f"{name}.variances",
         )
 
 

@@ -240,7 +240,7 @@ def _weights(rho: np.ndarray, r: np.ndarray, d: np.ndarray, d_max: float) -> np.
 
 def _check_int(value, name: str, low: int, hint: str = "") -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
-        raise InvalidInputError(f"{name}: expected an integer >= {low}{hint}, got {value!r}")
+        raise InvalidInputError(f"{name}: expected an integer >= {low}{hint}, got {value!r}", field=name)
     return int(value)
 
 
@@ -269,7 +269,7 @@ def _check_inputs(image, depth, mask, d_mm, sss_level, options) -> tuple:
     _check_int(options["seed"], "seed", 0)
     for switch in ("footprint", "snap", "rotate"):
         if not isinstance(options[switch], bool):
-            raise InvalidInputError(f"{switch}: expected True or False, got {options[switch]!r}")
+            raise InvalidInputError(f"{switch}: expected True or False, got {options[switch]!r}", field=switch)
     if options["downsample_steps"] and not options["snap"]:
         raise InvalidInputError("downsample_steps: HDRP reads the downsampled image at whole pixels; "
                                 "it needs snap=True")

@@ -211,20 +211,24 @@ class LightTerms(eqx.Module):
             if not is_concrete(value):
                 continue
             if np.ndim(value) != 0 or not np.isfinite(float(value)):
-                raise InvalidInputError(f"{name}.{field}: expected one finite number, got {np.asarray(value)!r}")
+                raise InvalidInputError(f"{name}.{field}: expected one finite number, got {np.asarray(value)!r}",
+                                        field=f"{name}.{field}")
         for field in ("grazing", "incidence"):
             value = getattr(self, field)
             if is_concrete(value) and float(value) <= -1.0:
-                raise InvalidInputError(f"{name}.{field}: expected a value > -1, got {float(value):g}")
+                raise InvalidInputError(f"{name}.{field}: expected a value > -1, got {float(value):g}",
+                                        field=f"{name}.{field}")
         if self.law is not None and is_concrete(self.law):
             w = np.asarray(self.law, np.float64)
             if w.ndim > 1 or not np.all(np.isfinite(w)) or np.any(w <= 0.0) or np.any(w >= 1.0):
                 raise InvalidInputError(
-                    f"{name}.law: expected an albedo in (0, 1), or one per channel, got {w.tolist()!r}"
+                    f"{name}.law: expected an albedo in (0, 1), or one per channel, got {w.tolist()!r}",
+                    field=f"{name}.law",
                 )
         if self.law is None and (not is_concrete(self.fill) or float(self.fill) != 0.0):
             raise InvalidInputError(
-                f"{name}.fill: the law on the other lights uses the law's albedo; give law too (an albedo in (0, 1))"
+                f"{name}.fill: the law on the other lights uses the law's albedo; give law too (an albedo in (0, 1))",
+                field=f"{name}.fill",
             )
 
     def to_dict(self) -> dict:
@@ -242,19 +246,22 @@ def _check_unit_vectors(array, shape, mask, name: str):
     try:
         a = np.asarray(array, dtype=np.float64)
     except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: expected an array of numbers, got {type(array).__name__}") from None
+        raise InvalidInputError(f"{name}: expected an array of numbers, got {type(array).__name__}",
+                                field=name) from None
     if a.shape != (*shape, 3):
-        raise InvalidInputError(f"{name}: expected shape {(*shape, 3)} (unit vectors per pixel), got {a.shape}")
+        raise InvalidInputError(f"{name}: expected shape {(*shape, 3)} (unit vectors per pixel), got {a.shape}",
+                                field=name)
     on = np.asarray(mask) > 0
     values = a[on]
     if not np.all(np.isfinite(values)):
-        raise InvalidInputError(f"{name}: NaN or infinite vectors on the mask")
+        raise InvalidInputError(f"{name}: NaN or infinite vectors on the mask", field=name)
     length = np.linalg.norm(values, axis=-1)
     worst = float(np.max(np.abs(length - 1.0))) if length.size else 0.0
     if worst > UNIT_TOLERANCE:
         raise InvalidInputError(
             f"{name}: expected unit vectors in camera space on the mask, but a length is off by "
-            f"{worst:.2g} (an 8-bit map must be decoded to [-1, 1] first)"
+            f"{worst:.2g} (an 8-bit map must be decoded to [-1, 1] first)",
+            field=name,
         )
     # Off the mask a renderer writes zeros; give those a harmless unit vector.
     safe = np.where(np.linalg.norm(a, axis=-1, keepdims=True) > 0.5, a, np.array([0.0, 0.0, 1.0]))
@@ -265,18 +272,20 @@ def _check_key(array, shape, channels, name: str, mask=None):
     try:
         a = np.asarray(array, dtype=np.float64)
     except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: expected an array of numbers, got {type(array).__name__}") from None
+        raise InvalidInputError(f"{name}: expected an array of numbers, got {type(array).__name__}",
+                                field=name) from None
     if a.ndim == 2:
         a = a[..., None]
     wanted = (*shape, channels) if channels else None
     if a.ndim != 3 or a.shape[:2] != tuple(shape) or (wanted and a.shape != wanted):
         expected = wanted or (*shape, "C")
         raise InvalidInputError(
-            f"{name}: expected shape {expected} (the key light's part of the source), got {np.shape(array)}"
+            f"{name}: expected shape {expected} (the key light's part of the source), got {np.shape(array)}",
+            field=name,
         )
     on = np.ones(a.shape[:2], bool) if mask is None else np.asarray(mask) > 0
     if not np.all(np.isfinite(a[on])):
-        raise InvalidInputError(f"{name}: NaN or infinite values on the mask")
+        raise InvalidInputError(f"{name}: NaN or infinite values on the mask", field=name)
     # Off the mask the term does nothing (it is multiplied by the mask), but a
     # NaN there would still poison the product: a renderer's cleared buffer.
     return np.where(np.isfinite(a), a, 0.0)

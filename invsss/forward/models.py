@@ -190,7 +190,7 @@ def get_model(name) -> ScreenSpaceModel:
     if isinstance(name, ScreenSpaceModel):
         return name
     if not isinstance(name, str) or name not in MODELS:
-        raise InvalidInputError(f"model: expected one of {', '.join(MODEL_NAMES)}, got {name!r}")
+        raise InvalidInputError(f"model: expected one of {', '.join(MODEL_NAMES)}, got {name!r}", field="model")
     return MODELS[name]
 
 

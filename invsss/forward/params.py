@@ -132,7 +132,7 @@ def parameter_arrays(d, source: str = "params") -> dict[str, np.ndarray]:
     """
     missing = [k for k in PARAM_NAMES if k not in d]
     if missing:
-        raise InvalidInputError(f"{source}: missing key(s) {', '.join(missing)}")
+        raise InvalidInputError(f"{source}: missing key(s) {', '.join(missing)}", field=source)
     return {k: number_array(d[k], k, source) for k in PARAM_NAMES}
 
 
@@ -148,7 +148,8 @@ def check_parameter_values(params, name: str = "params", *, values: bool = True)
     for k in ("sss_level", "correction", "maxdd"):
         if np.ndim(params[k]) != 0:
             raise InvalidInputError(
-                f"{name}: {k} must be a single number, got shape {np.shape(params[k])}"
+                f"{name}: {k} must be a single number, got shape {np.shape(params[k])}",
+                field=name,
             )
     if not values:
         check_profile_arrays(
@@ -158,14 +159,14 @@ def check_parameter_values(params, name: str = "params", *, values: bool = True)
     vals = {k: np.asarray(params[k]) for k in PARAM_NAMES}
     for k in ("sss_level", "correction", "maxdd"):
         if not np.all(np.isfinite(vals[k])):
-            raise InvalidInputError(f"{name}: {k} contains NaN or infinite values")
+            raise InvalidInputError(f"{name}: {k} contains NaN or infinite values", field=name)
     check_profile_arrays(vals["weights"], vals["variances"], name, zero_variances=True)
     if vals["sss_level"] <= 0:
-        raise InvalidInputError(f"{name}: sss_level must be > 0, got {float(vals['sss_level']):g}")
+        raise InvalidInputError(f"{name}: sss_level must be > 0, got {float(vals['sss_level']):g}", field=name)
     if vals["correction"] < 0:
-        raise InvalidInputError(f"{name}: correction must be >= 0, got {float(vals['correction']):g}")
+        raise InvalidInputError(f"{name}: correction must be >= 0, got {float(vals['correction']):g}", field=name)
     if vals["maxdd"] <= 0:
-        raise InvalidInputError(f"{name}: maxdd must be > 0, got {float(vals['maxdd']):g}")
+        raise InvalidInputError(f"{name}: maxdd must be > 0, got {float(vals['maxdd']):g}", field=name)
 
 
 def check_depth_unit(unit, name: str = "depth_unit") -> str:
@@ -177,7 +178,7 @@ def check_depth_unit(unit, name: str = "depth_unit") -> str:
     'cm'
     """
     if not isinstance(unit, str) or unit not in DEPTH_UNITS:
-        raise InvalidInputError(f"{name}: expected one of {', '.join(DEPTH_UNITS)}, got {unit!r}")
+        raise InvalidInputError(f"{name}: expected one of {', '.join(DEPTH_UNITS)}, got {unit!r}", field=name)
     return unit
 
 

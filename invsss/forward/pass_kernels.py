@@ -102,7 +102,8 @@ def _choice() -> str:
         from ..validation import InvalidInputError
 
         raise InvalidInputError(
-            f"{PASS_KERNEL_VARIABLE}: expected one of auto, pallas, xla, interpret, got {choice!r}"
+            f"{PASS_KERNEL_VARIABLE}: expected one of auto, pallas, xla, interpret, got {choice!r}",
+            field=PASS_KERNEL_VARIABLE,
         )
     return choice
 

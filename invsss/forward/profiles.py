@@ -354,25 +354,26 @@ def check_profile_arrays(
     """  # noqa: E501
     w_shape, v_shape = tuple(np.shape(weights)), tuple(np.shape(variances))
     if len(v_shape) != 1 or v_shape[0] == 0:
-        raise InvalidInputError(f"{name}: variances must be a non-empty list, got shape {v_shape}")
+        raise InvalidInputError(f"{name}: variances must be a non-empty list, got shape {v_shape}", field=name)
     if len(w_shape) not in (1, 2) or w_shape[0] != v_shape[0]:
         count = f"{w_shape[0]} weights of shape " if w_shape else ""
         raise InvalidInputError(
             f"{name}: weights must have shape ({v_shape[0]},) or ({v_shape[0]}, C) to "
-            f"match the {v_shape[0]} variances, got {count}{w_shape}"
+            f"match the {v_shape[0]} variances, got {count}{w_shape}",
+            field=name,
         )
     if not (values and is_concrete(weights) and is_concrete(variances)):
         return
     w, v = np.asarray(weights), np.asarray(variances)
     for key, x in (("weights", w), ("variances", v)):
         if not np.all(np.isfinite(x)):
-            raise InvalidInputError(f"{name}: {key} contains NaN or infinite values")
+            raise InvalidInputError(f"{name}: {key} contains NaN or infinite values", field=name)
     if zero_variances and np.any(v < 0):
-        raise InvalidInputError(f"{name}: variances must be >= 0, min is {float(v.min()):g}")
+        raise InvalidInputError(f"{name}: variances must be >= 0, min is {float(v.min()):g}", field=name)
     if not zero_variances and np.any(v <= 0):
-        raise InvalidInputError(f"{name}: variances must be > 0, min is {float(v.min()):g}")
+        raise InvalidInputError(f"{name}: variances must be > 0, min is {float(v.min()):g}", field=name)
     if np.any(w < 0) or np.any(w.sum(axis=0) <= 0):
-        raise InvalidInputError(f"{name}: weights must be >= 0 with a positive sum")
+        raise InvalidInputError(f"{name}: weights must be >= 0 with a positive sum", field=name)
 
 
 class SumOfGaussians(eqx.Module):
@@ -440,21 +441,22 @@ class SumOfGaussians(eqx.Module):
         ``"fit"`` entry (diagnostics written by the fitter) is accepted and ignored.
         """
         if not hasattr(d, "keys"):
-            raise InvalidInputError(f"{source}: expected a mapping with weights and variances")
+            raise InvalidInputError(f"{source}: expected a mapping with weights and variances", field=source)
         missing = [k for k in _PROFILE_KEYS if k not in d]
         if missing:
-            raise InvalidInputError(f"{source}: missing key(s) {', '.join(missing)}")
+            raise InvalidInputError(f"{source}: missing key(s) {', '.join(missing)}", field=source)
         unknown = sorted(set(d) - set(_PROFILE_KEYS) - set(_OPTIONAL_KEYS))
         if unknown:
             raise InvalidInputError(
                 f"{source}: unknown key(s) {', '.join(map(str, unknown))}; expected "
-                "weights, variances and optionally source"
+                "weights, variances and optionally source",
+                field=source,
             )
         weights = number_array(d["weights"], "weights", source)
         variances = number_array(d["variances"], "variances", source)
         label = d.get("source", "") or ""
         if not isinstance(label, str):
-            raise InvalidInputError(f"{source}: source must be a string")
+            raise InvalidInputError(f"{source}: source must be a string", field=source)
         profile = cls(weights, variances, label)  # type: ignore[arg-type]  # the fields' converters take array-likes
         profile.check(source)
         return profile
@@ -504,7 +506,8 @@ def load_profile(name_or_path) -> SumOfGaussians:
     key = os.fspath(name_or_path) if isinstance(name_or_path, (str, os.PathLike)) else None
     if key is None:
         raise InvalidInputError(
-            f"profile: expected a name or a JSON file path, got {type(name_or_path).__name__}"
+            f"profile: expected a name or a JSON file path, got {type(name_or_path).__name__}",
+            field="profile",
         )
     if isinstance(name_or_path, str) and key in _NAMED_PROFILES:
         table = _NAMED_PROFILES[key]
@@ -515,15 +518,16 @@ def load_profile(name_or_path) -> SumOfGaussians:
     if not looks_like_path and not os.path.exists(key):
         raise InvalidInputError(
             f"profile: unknown name {key!r}; expected one of {', '.join(PROFILE_NAMES)} "
-            "or a JSON file path"
+            "or a JSON file path",
+            field="profile",
         )
     if not os.path.isfile(key):
-        raise InvalidInputError(f"{key}: profile file not found")
+        raise InvalidInputError(f"{key}: profile file not found", field=key)
     try:
         with open(key, encoding="utf-8") as f:
             data = json.load(f)
     except json.JSONDecodeError as e:
-        raise InvalidInputError(f"{key}: not valid JSON ({e.msg} at line {e.lineno})") from None
+        raise InvalidInputError(f"{key}: not valid JSON ({e.msg} at line {e.lineno})", field=key) from None
     except (OSError, UnicodeDecodeError) as e:
-        raise InvalidInputError(f"{key}: cannot read profile file ({e.__class__.__name__})") from None
+        raise InvalidInputError(f"{key}: cannot read profile file ({e.__class__.__name__})", field=key) from None
     return SumOfGaussians.from_dict(data, source=key)

@@ -256,7 +256,8 @@ def _render(image, depth, mask, params, model, tap_w, taps, strength, follow_sur
 
 def _light_buffers(terms, buffers, hw, mask, channels) -> LightBuffers:
     if not isinstance(terms, LightTerms):
-        raise InvalidInputError(f"light_terms: expected invsss.LightTerms, got {type(terms).__name__}")
+        raise InvalidInputError(f"light_terms: expected invsss.LightTerms, got {type(terms).__name__}",
+                                field="light_terms")
     terms.check()
     if not isinstance(buffers, LightBuffers):
         raise InvalidInputError(

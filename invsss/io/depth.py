@@ -63,12 +63,12 @@ def read_depth(path, scale: float = 1.0) -> np.ndarray:
     codes = raster.codes[..., 0]
     bits = code_bits(codes)
     if bits == 8:
-        raise InvalidInputError(f"{name}: 8-bit depth is too coarse, {_DEPTH_FORMATS}")
+        raise InvalidInputError(f"{name}: 8-bit depth is too coarse, {_DEPTH_FORMATS}", field=name)
     if bits is not None and raster.file_format != "npy" and codes.dtype != np.uint16:
-        raise InvalidInputError(f"{name}: unsupported depth type {codes.dtype}, {_DEPTH_FORMATS}")
+        raise InvalidInputError(f"{name}: unsupported depth type {codes.dtype}, {_DEPTH_FORMATS}", field=name)
     depth = (codes.astype(np.float64) * scale).astype(np.float32)
     if depth.shape[0] < 2 or depth.shape[1] < 2:
-        raise InvalidInputError(f"{name}: expected at least 2x2 pixels, got {depth.shape}")
+        raise InvalidInputError(f"{name}: expected at least 2x2 pixels, got {depth.shape}", field=name)
     if not depth_is_valid(depth).any():
-        raise InvalidInputError(f"{name}: expected finite depth > 0 on the skin, no pixel has it")
+        raise InvalidInputError(f"{name}: expected finite depth > 0 on the skin, no pixel has it", field=name)
     return depth

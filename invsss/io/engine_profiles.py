@@ -113,7 +113,8 @@ def searchlight_scaling(albedo):
 def _distances(d, name="d") -> np.ndarray:
     d = np.asarray(d, np.float64).reshape(-1)
     if d.size not in (1, 3) or not np.all(np.isfinite(d)) or np.any(d <= 0):
-        raise InvalidInputError(f"{name}: expected one or three shape parameters > 0 (mm), got {d.tolist()}")
+        raise InvalidInputError(f"{name}: expected one or three shape parameters > 0 (mm), got {d.tolist()}",
+                                field=name)
     return np.broadcast_to(d, (3,)).copy()
 
 
@@ -121,9 +122,9 @@ def _positive(value, name) -> float:
     try:
         x = float(value)
     except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: expected a number > 0, got {value!r}") from None
+        raise InvalidInputError(f"{name}: expected a number > 0, got {value!r}", field=name) from None
     if not np.isfinite(x) or x <= 0:
-        raise InvalidInputError(f"{name}: expected a number > 0, got {value!r}")
+        raise InvalidInputError(f"{name}: expected a number > 0, got {value!r}", field=name)
     return x
 
 
@@ -409,7 +410,8 @@ def engine_asset(params, extras: dict, format: str, *, source: str = "params", m
         entry, why = next(iter(unmeasured.items()))
         raise InvalidInputError(
             f"{source}: Burley's d ({entry}) was {why}; refit with --model burley and no --gauge (its default "
-            "measures d), or give --accept-assumed to write it marked as assumed"
+            "measures d), or give --accept-assumed to write it marked as assumed",
+            field=source,
         )
     return engine_profile(params, format, mm_per_unit=mm_per_unit, albedo=albedo, world_scale=world_scale,
                           assumed=unmeasured or None)

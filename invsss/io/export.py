@@ -79,7 +79,8 @@ def _layer_weights(weights: np.ndarray, order: np.ndarray, name: str) -> np.ndar
         w = w[:, 0]
     if w.ndim == 2 and w.shape[1] != 3:
         raise InvalidInputError(
-            f"{name}: weights must have 1 or 3 columns (channels) to export, got shape {weights.shape}"
+            f"{name}: weights must have 1 or 3 columns (channels) to export, got shape {weights.shape}",
+            field=name,
         )
     return w / w.sum(axis=0)
 
@@ -192,7 +193,8 @@ def _light_constants(light_terms) -> dict:
         after = [light_terms.get(term, 0.0) for term in AFTER_BLUR]
     else:
         raise InvalidInputError(
-            f"light_terms: expected an invsss.LightTerms or a mapping, got {type(light_terms).__name__}"
+            f"light_terms: expected an invsss.LightTerms or a mapping, got {type(light_terms).__name__}",
+            field="light_terms",
         )
     # Checked as LightTerms, written from the given numbers: LightTerms holds
     # JAX's default float32 outside x64, which would round them.
@@ -228,7 +230,8 @@ def _check_light_term_keys(light_terms) -> None:
         if key not in known:
             raise InvalidInputError(
                 f"light_terms: unknown key {key!r}{did_you_mean(key, known)}; expected terms among "
-                f"{', '.join(LIGHT_TERM_FIELDS)}"
+                f"{', '.join(LIGHT_TERM_FIELDS)}",
+                field="light_terms",
             )
 
 
@@ -400,7 +403,7 @@ def _literal(x: float, name: str) -> str:
     # repr is the shortest text that reads back to the same double; HLSL reads
     # C-style literals ("0.5", "1e-05", "3.0") and rounds them to float.
     if not math.isfinite(x):
-        raise InvalidInputError(f"{name}: cannot write the non-finite number {x!r} as an HLSL constant")
+        raise InvalidInputError(f"{name}: cannot write the non-finite number {x!r} as an HLSL constant", field=name)
     return repr(float(x))
 
 
@@ -410,7 +413,7 @@ def _hlsl_vector(row, name: str) -> str:
 
 def _hlsl_declaration(name: str, value) -> str:
     if isinstance(value, bool):
-        raise InvalidInputError(f"{name}: booleans have no HLSL constant form here")
+        raise InvalidInputError(f"{name}: booleans have no HLSL constant form here", field=name)
     if isinstance(value, int):
         return f"static const int {name} = {value};"
     if isinstance(value, float):
@@ -425,7 +428,8 @@ def _hlsl_declaration(name: str, value) -> str:
             body = ",\n    ".join(_hlsl_vector(row, name) for row in value)
             return f"static const float{width} {name}[{len(value)}] = {{\n    {body}\n}};"
     raise InvalidInputError(
-        f"{name}: expected a number, a list of numbers or a list of 2-4 vectors, got {value!r}"
+        f"{name}: expected a number, a list of numbers or a list of 2-4 vectors, got {value!r}",
+        field=name,
     )
 
 

@@ -140,7 +140,8 @@ def _read_colour(path, linear: bool) -> tuple[np.ndarray, bool]:
     if raster.file_format == "npy" and raster.codes.dtype.kind != "f":
         raise InvalidInputError(
             f"{name}: expected a float NPY array of linear values, got {raster.codes.dtype} "
-            "(save integer-coded images as PNG or TIFF so their encoding is known)"
+            "(save integer-coded images as PNG or TIFF so their encoding is known)",
+            field=name,
         )
     image, encoding, assumed = _decode_colour(raster, linear)
     if encoding == "srgb":
@@ -162,7 +163,8 @@ def _read_colour(path, linear: bool) -> tuple[np.ndarray, bool]:
         )
     if image.shape[2] not in (1, 3):
         raise InvalidInputError(
-            f"{name}: expected 1 or 3 colour channels (plus optional alpha), got {image.shape[2]}"
+            f"{name}: expected 1 or 3 colour channels (plus optional alpha), got {image.shape[2]}",
+            field=name,
         )
     check_image(image, name)
     return np.ascontiguousarray(image), _is_grey_rgb(raster)

@@ -63,7 +63,7 @@ def read_mask(path) -> np.ndarray:
         mask = codes.astype(np.float64)
     mask = mask.astype(np.float32)
     if mask.shape[0] < 2 or mask.shape[1] < 2:
-        raise InvalidInputError(f"{name}: expected at least 2x2 pixels, got {mask.shape}")
+        raise InvalidInputError(f"{name}: expected at least 2x2 pixels, got {mask.shape}", field=name)
     if not np.all(np.isfinite(mask)) or mask.min() < 0 or mask.max() > 1:
         raise InvalidInputError(
             f"{name}: expected mask values in [0, 1], got range "
@@ -71,7 +71,7 @@ def read_mask(path) -> np.ndarray:
             + (" with NaN" if np.any(np.isnan(mask)) else "")
         )
     if not np.any(mask > 0):
-        raise InvalidInputError(f"{name}: mask is empty (no pixel > 0), expected some skin")
+        raise InvalidInputError(f"{name}: mask is empty (no pixel > 0), expected some skin", field=name)
     _note_mask_levels(mask, name)
     return mask
 

@@ -188,23 +188,26 @@ def _check_keys(keys, name: str) -> None:
         if key not in allowed:
             raise InvalidInputError(
                 f"{name}: unknown key {key!r}{did_you_mean(key, allowed)}; expected {', '.join(PARAMS_KEYS)} "
-                f"and optionally {', '.join(PARAMS_OPTIONAL_KEYS)}"
+                f"and optionally {', '.join(PARAMS_OPTIONAL_KEYS)}",
+                field=name,
             )
     missing = [k for k in PARAMS_KEYS if k not in keys]
     if missing:
-        raise InvalidInputError(f"{name}: missing key(s) {', '.join(missing)}")
+        raise InvalidInputError(f"{name}: missing key(s) {', '.join(missing)}", field=name)
 
 
 def _check_version(content: Mapping, name: str) -> None:
     version = content.get("schema_version", 1)
     if isinstance(version, bool) or not isinstance(version, int) or version < 1:
         raise InvalidInputError(
-            f"{name}: schema_version: expected an integer >= 1, got {_shown(version)}"
+            f"{name}: schema_version: expected an integer >= 1, got {_shown(version)}",
+            field=name,
         )
     if version > SCHEMA_VERSION:
         raise InvalidInputError(
             f"{name}: written by a newer invsss (schema_version {version}; this one reads up "
-            f"to {SCHEMA_VERSION}); upgrade invsss to read it"
+            f"to {SCHEMA_VERSION}); upgrade invsss to read it",
+            field=name,
         )
 
 
@@ -276,13 +279,15 @@ def _check_result_complete(path: str) -> None:
     if state == "incomplete":
         raise InvalidInputError(
             f"{path}: belongs to an incomplete result (the run that wrote it was "
-            "interrupted); re-run it"
+            "interrupted); re-run it",
+            field=path,
         )
     if state == "damaged":
         # Not an interruption (manifests are written atomically): the file was changed.
         raise InvalidInputError(
             f"{path}: its result's manifest {os.path.join(directory, MANIFEST_NAME)} is damaged "
-            "(not a JSON object), so whether the result is whole is unknown; re-run it"
+            "(not a JSON object), so whether the result is whole is unknown; re-run it",
+            field=path,
         )
 
 
@@ -314,14 +319,16 @@ def _fill_from_estimate(values: dict, estimate: Estimate | None, name: str) -> l
     if estimate is None:
         raise InvalidInputError(
             f"{name}: {', '.join(nulls)} is null (undetermined by the fit); "
-            "give a number, or re-fit with --fix"
+            "give a number, or re-fit with --fix",
+            field=name,
         )
     for key in nulls:
         point = getattr(estimate, key)
         if np.shape(point) != np.shape(_without_nulls(values[key])):
             raise InvalidInputError(
                 f"{name}: estimate.{key} has shape {np.shape(point)}, but {key} has shape "
-                f"{np.shape(_without_nulls(values[key]))}; cannot fill its null entries"
+                f"{np.shape(_without_nulls(values[key]))}; cannot fill its null entries",
+                field=name,
             )
         values[key] = _filled(values[key], point)
     return [entry for entries in nulls.values() for entry in entries]
@@ -373,17 +380,18 @@ def read_params(path) -> tuple[SSSParams, dict]:
     try:
         text = Path(name).read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise InvalidInputError(f"{name}: params file not found") from None
+        raise InvalidInputError(f"{name}: params file not found", field=name) from None
     except (OSError, UnicodeDecodeError) as err:
-        raise InvalidInputError(f"{name}: cannot read params file ({one_line(err)})") from None
+        raise InvalidInputError(f"{name}: cannot read params file ({one_line(err)})", field=name) from None
     try:
         content = json.loads(text)
     except json.JSONDecodeError as err:
         raise InvalidInputError(
-            f"{name}: invalid JSON at line {err.lineno} column {err.colno} ({err.msg})"
+            f"{name}: invalid JSON at line {err.lineno} column {err.colno} ({err.msg})",
+            field=name,
         ) from None
     if not isinstance(content, dict):
-        raise InvalidInputError(f"{name}: expected a JSON object with the parameter keys")
+        raise InvalidInputError(f"{name}: expected a JSON object with the parameter keys", field=name)
     _check_result_complete(name)
     params, filled = _params_of(content, _validated(content, name), name)
     extras = {k: content[k] for k in content if k not in PARAMS_KEYS and k != "schema_version"}
@@ -459,13 +467,14 @@ def write_params(path, mapping) -> None:
         mapping = mapping.to_dict()
     if not isinstance(mapping, Mapping):
         raise InvalidInputError(
-            f"{name}: expected a mapping or SSSParams to write, got {type(mapping).__name__}"
+            f"{name}: expected a mapping or SSSParams to write, got {type(mapping).__name__}",
+            field=name,
         )
     try:
         # Through JSON and back: what gets checked is exactly what gets written.
         content = json.loads(json.dumps(dict(mapping), default=_to_json))
     except (TypeError, ValueError) as err:
-        raise InvalidInputError(f"{name}: cannot write params ({one_line(err)})") from None
+        raise InvalidInputError(f"{name}: cannot write params ({one_line(err)})", field=name) from None
     content = {"schema_version": SCHEMA_VERSION, **content}
     # The values too (NaN, sss_level <= 0, shapes that disagree): read_params
     # would refuse them.

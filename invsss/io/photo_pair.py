@@ -88,7 +88,8 @@ def check_distance(distance_mm, name: str = "distance", *, notice: bool = True) 
     ok = isinstance(distance_mm, numbers.Real) and not isinstance(distance_mm, bool)
     if not ok or not math.isfinite(distance_mm) or distance_mm <= 0:
         raise InvalidInputError(
-            f"{name}: expected the face's distance from the camera in mm, a finite number > 0, got {distance_mm!r}"
+            f"{name}: expected the face's distance from the camera in mm, a finite number > 0, got {distance_mm!r}",
+            field=name,
         )
     low, high = PLAUSIBLE_DISTANCE_MM
     if notice and not low <= distance_mm <= high:

@@ -55,7 +55,8 @@ def image_extension(path, kind: str = "image") -> str:
     if ext not in IMAGE_EXTENSIONS:
         raise InvalidInputError(
             f"{name}: unsupported {kind} file extension {ext or '(none)'!r}, "
-            f"expected one of {', '.join(IMAGE_EXTENSIONS)}"
+            f"expected one of {', '.join(IMAGE_EXTENSIONS)}",
+            field=name,
         )
     return ext
 
@@ -65,10 +66,10 @@ def checked_path(path, kind: str) -> tuple[str, str]:
     name = os.fspath(path)
     ext = image_extension(name, kind)
     if not os.path.exists(name):
-        raise InvalidInputError(f"{name}: {kind} file not found")
+        raise InvalidInputError(f"{name}: {kind} file not found", field=name)
     if os.path.isdir(name):
         article = "an" if kind[0] in "aeiou" else "a"
-        raise InvalidInputError(f"{name}: is a directory, expected {article} {kind} file")
+        raise InvalidInputError(f"{name}: is a directory, expected {article} {kind} file", field=name)
     return name, ext
 
 
@@ -105,7 +106,8 @@ def open_input(name: str, kind: str):
     image_input = oiio.ImageInput.open(name)
     if image_input is None:
         raise InvalidInputError(
-            f"{name}: cannot read {kind} file ({one_line(oiio.geterror()) or 'unknown error'})"
+            f"{name}: cannot read {kind} file ({one_line(oiio.geterror()) or 'unknown error'})",
+            field=name,
         )
     return image_input
 
@@ -116,13 +118,14 @@ def read_raster(path, kind: str) -> tuple[str, Raster]:
         try:
             array = np.load(name, allow_pickle=False)
         except Exception as err:  # NumPy raises several types for a bad file
-            raise InvalidInputError(f"{name}: cannot read NPY file ({one_line(err)})") from None
+            raise InvalidInputError(f"{name}: cannot read NPY file ({one_line(err)})", field=name) from None
         if array.ndim == 2:
             array = array[..., None]
         if array.ndim != 3 or array.dtype.kind not in "biuf":
             raise InvalidInputError(
                 f"{name}: expected a numeric (H, W) or (H, W, C) array, "
-                f"got {array.dtype} of shape {array.shape}"
+                f"got {array.dtype} of shape {array.shape}",
+                field=name,
             )
         eps = float(np.finfo(array.dtype).eps) if array.dtype.kind == "f" else None
         return name, Raster(array, None, "npy", eps)
@@ -136,13 +139,15 @@ def read_raster(path, kind: str) -> tuple[str, Raster]:
         if read_as == "float" and basetype not in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE):
             raise InvalidInputError(
                 f"{name}: unsupported pixel type {spec.format}, "
-                "expected 8- or 16-bit unsigned integers or floats"
+                "expected 8- or 16-bit unsigned integers or floats",
+                field=name,
             )
         codes = image_input.read_image(format=read_as)
         if codes is None or image_input.has_error:
             raise InvalidInputError(
                 f"{name}: cannot read {kind} file, it may be truncated or corrupt "
-                f"({one_line(image_input.geterror()) or 'no pixels'})"
+                f"({one_line(image_input.geterror()) or 'no pixels'})",
+                field=name,
             )
         file_format = image_input.format_name()
     finally:

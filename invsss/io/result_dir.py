@@ -248,7 +248,7 @@ class ResultDir:
         """Create if needed, lock, and check the directory; raise before any work."""
         path = self.path
         if os.path.exists(path) and not os.path.isdir(path):
-            raise InvalidInputError(f"{path}: expected an output directory, but a file of that name exists")
+            raise InvalidInputError(f"{path}: expected an output directory, but a file of that name exists", field=path)
         if not os.path.isdir(path):
             try:
                 os.makedirs(path)
@@ -256,7 +256,8 @@ class ResultDir:
                 pass
             except OSError as err:
                 raise InvalidInputError(
-                    f"{path}: cannot create the output directory ({err.strerror})"
+                    f"{path}: cannot create the output directory ({err.strerror})",
+                    field=path,
                 ) from None
             else:
                 self._created = True
@@ -345,7 +346,8 @@ class ResultDir:
             target = os.path.join(path, name)
             if os.path.lexists(target) and not os.path.isfile(target):
                 raise InvalidInputError(
-                    f"{target}: is in the way of the result (not a regular file); move it away"
+                    f"{target}: is in the way of the result (not a regular file); move it away",
+                    field=target,
                 )
             refusal = self._refusal(name, here)
             if refusal is not None:
@@ -358,7 +360,8 @@ class ResultDir:
             kept = f" ({', '.join(self.kept)}, an input of this run, would stay)" if self.kept else ""
             raise InvalidInputError(
                 f"{path}: already holds {what.get(state, 'a result')} ({listed or MANIFEST_NAME}); "
-                f"pass {self.option} to replace it{kept}, or choose another output directory"
+                f"pass {self.option} to replace it{kept}, or choose another output directory",
+                field=path,
             )
         # Staging folders of a run that was killed mid-commit: nobody else can own
         # them while we hold the lock.

@@ -60,7 +60,8 @@ def shader_files(constants_path, model: str | None = None, light_terms=None) -> 
             continue
         path = os.path.join(folder, file)
         if os.path.abspath(path) == os.path.abspath(constants_path):
-            raise InvalidInputError(f"{constants_path}: has the name of a shader file; choose another name")
+            raise InvalidInputError(f"{constants_path}: has the name of a shader file; choose another name",
+                                    field=constants_path)
         files[path] = sources[file]
     return files
 

@@ -119,12 +119,13 @@ def _grey(image, name: str) -> np.ndarray:
     if x.ndim == 3:
         x = x.mean(axis=2)
     if x.ndim != 2 or min(x.shape) < 8:
-        raise InvalidInputError(f"{name}: expected an image of at least 8x8 pixels, got shape {np.shape(image)}")
+        raise InvalidInputError(f"{name}: expected an image of at least 8x8 pixels, got shape {np.shape(image)}",
+                                field=name)
     if not np.all(np.isfinite(x)):
-        raise InvalidInputError(f"{name}: holds NaN or infinite values")
+        raise InvalidInputError(f"{name}: holds NaN or infinite values", field=name)
     top = float(np.percentile(x, 99.0))
     if top <= 0:
-        raise InvalidInputError(f"{name}: is black (99th percentile <= 0); no skin to find")
+        raise InvalidInputError(f"{name}: is black (99th percentile <= 0); no skin to find", field=name)
     return np.clip(x / top, 0.0, None)
 
 

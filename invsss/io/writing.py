@@ -39,7 +39,7 @@ def _atomic_target(path: str):
     """Yield a temporary sibling of ``path``; on success it replaces ``path``."""
     directory, base = os.path.split(os.path.abspath(path))
     if not os.path.isdir(directory):
-        raise InvalidInputError(f"{path}: cannot write, directory {directory} does not exist")
+        raise InvalidInputError(f"{path}: cannot write, directory {directory} does not exist", field=path)
     ext = os.path.splitext(base)[1]
     # Same directory (so os.replace is a rename on one file system) and the same
     # extension (OpenImageIO picks the format from it); hidden while incomplete.
@@ -93,17 +93,18 @@ def check_file_target(path, *, overwrite: bool, option: str = "--overwrite", rol
     directory = os.path.dirname(os.path.abspath(name))
     if not os.path.isdir(directory):
         if os.path.lexists(directory):
-            raise InvalidInputError(f"{name}: cannot write, {directory} is a file, not a folder")
-        raise InvalidInputError(f"{name}: cannot write, directory {directory} does not exist")
+            raise InvalidInputError(f"{name}: cannot write, {directory} is a file, not a folder", field=name)
+        raise InvalidInputError(f"{name}: cannot write, directory {directory} does not exist", field=name)
     what = role or "the output file"
     if os.path.isdir(name):
-        raise InvalidInputError(f"{name}: is a folder, in the way of {what}; name a file, or move the folder away")
+        raise InvalidInputError(f"{name}: is a folder, in the way of {what}; name a file, or move the folder away",
+                                field=name)
     if os.path.lexists(name) and not os.path.isfile(name):
-        raise InvalidInputError(f"{name}: is in the way of {what} (not a regular file); move it away")
+        raise InvalidInputError(f"{name}: is in the way of {what} (not a regular file); move it away", field=name)
     if os.path.lexists(name) and not overwrite:
-        raise InvalidInputError(f"{name}: already exists; pass {option} to replace it")
+        raise InvalidInputError(f"{name}: already exists; pass {option} to replace it", field=name)
     if not os.access(directory, os.W_OK | os.X_OK):
-        raise InvalidInputError(f"{name}: cannot write, folder {directory} is not writable")
+        raise InvalidInputError(f"{name}: cannot write, folder {directory} is not writable", field=name)
 
 
 def write_texts_atomic(files, *, overwrite: bool = False, option: str = "--overwrite",
@@ -163,7 +164,7 @@ def write_texts_atomic(files, *, overwrite: bool = False, option: str = "--overw
         for current, temporary in temporaries.items():
             os.replace(temporary, current)
     except OSError as err:
-        raise InvalidInputError(f"{current}: cannot write ({err.strerror or err})") from None
+        raise InvalidInputError(f"{current}: cannot write ({err.strerror or err})", field=current) from None
     finally:
         for temporary in temporaries.values():
             with contextlib.suppress(OSError):
@@ -186,7 +187,7 @@ def atomic_output(path):
         with _atomic_target(name) as temporary:
             yield temporary
     except OSError as err:
-        raise InvalidInputError(f"{name}: cannot write ({err.strerror or err})") from None
+        raise InvalidInputError(f"{name}: cannot write ({err.strerror or err})", field=name) from None
 
 
 def _encode(image: np.ndarray, bits: int, ext: str) -> tuple[np.ndarray, str, str | None]:
@@ -236,7 +237,8 @@ def write_image(path, image, *, bits: int | None = None) -> None:
     bits = _DEFAULT_BITS[ext] if bits is None else bits
     if bits not in _ALLOWED_BITS[ext]:
         raise InvalidInputError(
-            f"{name}: cannot write {bits}-bit {ext} files, expected bits in {_ALLOWED_BITS[ext]}"
+            f"{name}: cannot write {bits}-bit {ext} files, expected bits in {_ALLOWED_BITS[ext]}",
+            field=name,
         )
     image = np.asarray(image)
     check_image(image, f"image for {name}")
@@ -262,9 +264,9 @@ def write_image(path, image, *, bits: int | None = None) -> None:
             spec.attribute("jpeg:subsampling", "4:4:4")
         output = oiio.ImageOutput.create(temporary)
         if output is None:
-            raise InvalidInputError(f"{name}: cannot write ({one_line(oiio.geterror())})")
+            raise InvalidInputError(f"{name}: cannot write ({one_line(oiio.geterror())})", field=name)
         ok = output.open(temporary, spec) and output.write_image(pixels)
         error = one_line(output.geterror())
         ok = output.close() and ok
         if not ok:
-            raise InvalidInputError(f"{name}: cannot write ({error or 'unknown error'})")
+            raise InvalidInputError(f"{name}: cannot write ({error or 'unknown error'})", field=name)

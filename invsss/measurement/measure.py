@@ -128,9 +128,9 @@ def _positive(value, name):
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: expected a number, got {value!r}") from None
+        raise InvalidInputError(f"{name}: expected a number, got {value!r}", field=name) from None
     if not np.isfinite(v) or v <= 0:
-        raise InvalidInputError(f"{name}: expected a finite number > 0, got {value!r}")
+        raise InvalidInputError(f"{name}: expected a finite number > 0, got {value!r}", field=name)
     return v
 
 
@@ -145,14 +145,15 @@ def _spectralon_reference(spectralon, black_level, lit_threshold, saturation, mm
     brightness = spectralon.mean(axis=-1) - black_level
     peak = brightness.max()
     if not peak > 0:
-        raise InvalidInputError(f"{name}: has no lit pixel (nothing above black_level)")
+        raise InvalidInputError(f"{name}: has no lit pixel (nothing above black_level)", field=name)
     lit = brightness >= lit_threshold * peak
     if saturation is not None:
         clipped = int(np.count_nonzero(np.any(spectralon[lit] >= saturation, axis=-1)))
         if clipped:
             raise InvalidInputError(
                 f"{name}: {clipped} lit pixel(s) at the saturation level {saturation:g}; "
-                "the reference needs an exposure without overexposure (thesis 4.1.2)"
+                "the reference needs an exposure without overexposure (thesis 4.1.2)",
+                field=name,
             )
     level = spectralon[lit].mean(axis=0) - black_level
     rows, cols = np.nonzero(lit)
@@ -263,7 +264,8 @@ def measure_profile(
     if spectralon.shape[-1] != skin.shape[-1]:
         raise InvalidInputError(
             f"{spectralon_name}: expected {skin.shape[-1]} channel(s) like {skin_name}, "
-            f"got {spectralon.shape[-1]}"
+            f"got {spectralon.shape[-1]}",
+            field=spectralon_name,
         )
     mm_per_pixel = _positive(mm_per_pixel, "mm_per_pixel")
     band_width_mm = _positive(band_width_mm, "band_width_mm")
@@ -332,7 +334,8 @@ def measure_profile(
     if not np.any(usable):
         raise InvalidInputError(
             f"{skin_name}: no usable pixel in the sample band (all saturated, directly lit, "
-            "or outside the image); check centre, direction and lit_radius_mm"
+            "or outside the image); check centre, direction and lit_radius_mm",
+            field=skin_name,
         )
 
     # Step 3: one sample per one-pixel bin of distance (per column in "column" mode).

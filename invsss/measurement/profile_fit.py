@@ -255,12 +255,13 @@ def _check_inputs(r, profile, num_gaussians, weighting, num_starts, max_steps, v
         raise InvalidInputError("r: expected finite, non-negative, strictly increasing radii")
     if y.ndim not in (1, 2) or y.shape[0] != r.size:
         raise InvalidInputError(
-            f"profile: expected shape ({r.size},) or ({r.size}, C) to match r, got {y.shape}"
+            f"profile: expected shape ({r.size},) or ({r.size}, C) to match r, got {y.shape}",
+            field="profile",
         )
     if not np.all(np.isfinite(y)):
-        raise InvalidInputError("profile: contains NaN or infinite values")
+        raise InvalidInputError("profile: contains NaN or infinite values", field="profile")
     if not np.any(y > 0):
-        raise InvalidInputError("profile: has no positive value to fit")
+        raise InvalidInputError("profile: has no positive value to fit", field="profile")
     if not _is_count(num_gaussians):
         raise InvalidInputError(f"num_gaussians: expected an integer >= 1, got {num_gaussians!r}")
     if num_gaussians > MAX_GAUSSIANS:
@@ -274,7 +275,7 @@ def _check_inputs(r, profile, num_gaussians, weighting, num_starts, max_steps, v
     if not _is_count(num_starts):
         raise InvalidInputError(f"num_starts: expected an integer >= 1, got {num_starts!r}")
     if not _is_count(max_steps):
-        raise InvalidInputError(f"max_steps: expected an integer >= 1, got {max_steps!r}")
+        raise InvalidInputError(f"max_steps: expected an integer >= 1, got {max_steps!r}", field="max_steps")
     if isinstance(weighting, str):
         if weighting not in WEIGHTINGS:
             raise InvalidInputError(

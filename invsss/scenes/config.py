@@ -532,20 +532,22 @@ def load_config(path) -> SceneConfig:
         with open(name, "rb") as f:
             content = tomllib.load(f)
     except OSError as err:
-        raise InvalidInputError(f"{name}: cannot read the scene file ({err.strerror})") from None
+        raise InvalidInputError(f"{name}: cannot read the scene file ({err.strerror})", field=name) from None
     except tomllib.TOMLDecodeError as err:
-        raise InvalidInputError(f"{name}: not valid TOML ({err})") from None
+        raise InvalidInputError(f"{name}: not valid TOML ({err})", field=name) from None
     config = parse_config(content, name)
     if config.object.mesh is not None:
         mesh = os.path.join(os.path.dirname(os.path.abspath(name)), os.path.expanduser(config.object.mesh))
         if not os.path.isfile(mesh):
-            raise InvalidInputError(f"{name}: object.mesh: file {config.object.mesh} not found (looked at {mesh})")
+            raise InvalidInputError(f"{name}: object.mesh: file {config.object.mesh} not found (looked at {mesh})",
+                                    field=name)
         update: dict[str, object] = {"mesh": mesh}
         pigment = config.object.pigment
         if pigment is not None:
             image = os.path.join(os.path.dirname(os.path.abspath(name)), os.path.expanduser(pigment.map))
             if not os.path.isfile(image):
-                raise InvalidInputError(f"{name}: object.pigment.map: file {pigment.map} not found (looked at {image})")
+                raise InvalidInputError(f"{name}: object.pigment.map: file {pigment.map} not found (looked at {image})",
+                                        field=name)
             update["pigment"] = pigment.model_copy(update={"map": image})
         config = config.model_copy(update={"object": config.object.model_copy(update=update)})
     return config

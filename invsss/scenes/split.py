@@ -48,22 +48,22 @@ def read_split(path) -> dict[str, str]:
         with open(name, "rb") as f:
             content = tomllib.load(f)
     except OSError as err:
-        raise InvalidInputError(f"{name}: cannot read the split file ({err.strerror})") from None
+        raise InvalidInputError(f"{name}: cannot read the split file ({err.strerror})", field=name) from None
     except tomllib.TOMLDecodeError as err:
-        raise InvalidInputError(f"{name}: not valid TOML ({err})") from None
+        raise InvalidInputError(f"{name}: not valid TOML ({err})", field=name) from None
     unknown = sorted(set(content) - set(SPLITS))
     if unknown:
-        raise InvalidInputError(f"{name}: {unknown[0]}: unknown key (valid: {', '.join(SPLITS)})")
+        raise InvalidInputError(f"{name}: {unknown[0]}: unknown key (valid: {', '.join(SPLITS)})", field=name)
     split: dict[str, str] = {}
     for part in SPLITS:
         if part not in content:
-            raise InvalidInputError(f"{name}: {part}: missing")
+            raise InvalidInputError(f"{name}: {part}: missing", field=name)
         names = content[part]
         if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
-            raise InvalidInputError(f"{name}: {part}: expected a list of pair folder names")
+            raise InvalidInputError(f"{name}: {part}: expected a list of pair folder names", field=name)
         for pair in names:
             if pair in split:
-                raise InvalidInputError(f"{name}: {pair} is listed as {split[pair]} and as {part}")
+                raise InvalidInputError(f"{name}: {pair} is listed as {split[pair]} and as {part}", field=name)
             split[pair] = part
     return split
 

@@ -108,7 +108,8 @@ def _model_files(model) -> tuple[str, ...]:
     """The files of ``model``'s shader: its own and, transitively, what it includes (not the constants)."""
     if not isinstance(model, str) or model not in MODEL_SHADERS:
         raise InvalidInputError(
-            f"model: expected one of {', '.join(MODEL_SHADERS)} (a reference shader), got {model!r}"
+            f"model: expected one of {', '.join(MODEL_SHADERS)} (a reference shader), got {model!r}",
+            field="model",
         )
     needed, todo = set(), [MODEL_SHADERS[model][0]]
     while todo:
@@ -313,7 +314,7 @@ def run_shader(
         Receives the compiler's messages per entry point (file, entry, text).
     """
     if model not in MODEL_SHADERS:
-        raise InvalidInputError(f"model: expected one of {', '.join(MODEL_SHADERS)}, got {model!r}")
+        raise InvalidInputError(f"model: expected one of {', '.join(MODEL_SHADERS)}, got {model!r}", field="model")
     device = _device(adapter_name)
     h, w = np.shape(depth)
     channels = 1 if np.ndim(image) == 2 else np.shape(image)[2]

@@ -88,7 +88,7 @@ def _resampled(checked, prepared, warps) -> list[ImagePair]:
     for (source, target, depth, mask, ndim), warp, pair in zip(checked, warps, prepared):
         moved, moved_depth, kept = align_source(source, depth, mask, warp, target.shape[:2])
         if not (kept > 0).any():
-            raise InvalidInputError("align: the registered source does not overlap the target")
+            raise InvalidInputError("align: the registered source does not overlap the target", field="align")
         # The rim of the resampled mask is where the resampling is least like the
         # camera's own view (the mask and depth jump there): leave it out of the
         # comparison, not out of the model.

@@ -32,7 +32,7 @@ def unsaturated(inner: Fit) -> Fit:
                 name = f"pairs[{i}].target" if len(prepared) > 1 else "target"
                 if not (keep * np.asarray(pair.mask)).any():
                     raise InvalidInputError(f"{name}: every masked pixel is at or above the saturation level "
-                                            f"{saturation:g}")
+                                            f"{saturation:g}", field=name)
                 messages.append(f"{name}: {count} masked pixel(s) at or above the saturation level "
                                 f"{saturation:g} (clipped) left out of the fit")
             out.append(dataclasses.replace(pair, fit_weight=keep if count else pair.fit_weight))
