@@ -40,7 +40,7 @@ def check_output_path(path: str) -> None:
 
 def model_choice(args: argparse.Namespace, extras: dict) -> tuple[str, object]:
     """Model and tap weights: the command-line flag wins over the params file."""
-    model = args.model or extras.get("model", "sog")
+    model = args.model or extras.get("model", MODELS[0])
     tap_weights = args.tap_weights or extras.get("tap_weights")
     return model, tap_weights
 

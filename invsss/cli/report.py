@@ -34,6 +34,7 @@ from matplotlib.ticker import LogFormatter, MaxNLocator
 
 from ..estimator.blur_width import blur_line
 from ..estimator.diagnostics import masked_psnr, masked_ssim
+from ..forward.models import MODEL_NAMES, get_model
 from ..forward.params import PARAM_NAMES
 from ..forward.profiles import sum_of_gaussians
 from ..validation import InvalidInputError
@@ -254,7 +255,8 @@ def _plot_profile(ax, result) -> None:
         curves.append(("start", np.asarray(start["weights"], np.float64),
                        np.asarray(start["variances"], np.float64), ":"))
     r_max = 3.0 * float(np.sqrt(max(np.max(c[2]) for c in curves)))
-    burley = getattr(result, "model", "sog") == "burley"  # issue 34: its variances are d^2
+    # A model whose variances are Burley's d^2 (issue 34) is drawn as Burley's profile.
+    burley = get_model(getattr(result, "model", MODEL_NAMES[0])).variance_meaning == "burley_d2"
     if burley:
         r_max = max(r_max, 6.0 * float(np.sqrt(np.max(variances))))
     r = np.linspace(r_max / 400.0 if burley else 0.0, r_max, 200)

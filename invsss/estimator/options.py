@@ -87,7 +87,7 @@ class FitOptions:
 
     Parameters
     ----------
-    model : {"sog", "thesis", "separable"}
+    model : {"sog", "thesis", "separable", "burley"}
     profile : str, path, mapping or SumOfGaussians
         Sum-of-Gaussians profile: in the default gauge its variances are fixed; it
         also gives the number of Gaussians and the starting values.

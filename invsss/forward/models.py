@@ -3,7 +3,8 @@
 Every place that behaves differently per model (the JAX and PyTorch renderers,
 the estimator's basis images and parameter roles, the shader-constant export)
 reads the entry here instead of comparing model names, so adding a model is
-adding one :class:`ScreenSpaceModel` to :data:`MODELS`.
+adding one :class:`ScreenSpaceModel` to :data:`MODEL_TABLE`. :data:`MODELS` (as
+``invsss.MODELS``) is the tuple of their names.
 """
 
 from __future__ import annotations
@@ -18,8 +19,10 @@ __all__ = [
     "LAYOUTS",
     "WEIGHTS_ROLES",
     "ScreenSpaceModel",
+    "MODEL_TABLE",
     "MODELS",
     "MODEL_NAMES",
+    "VARIANCE_MEANINGS",
     "get_model",
     "resolve_tap_weights",
 ]
@@ -38,6 +41,11 @@ WEIGHTS_ROLES = ("linear", "free", "unused")
 #: precomputed N-tap kernel; ``"disk"``: one gather of importance-sampled
 #: radii over a disk (:mod:`invsss.forward.burley_screen_space`, issue 34).
 LAYOUTS = ("layered", "chained", "kernel", "disk")
+
+#: What a model's ``variances`` are: ``"gaussian"``, the variances of the
+#: profile's Gaussians (scene units^2 per unit stretch); ``"burley_d2"``, the
+#: square of Burley's shape parameter ``d`` per channel (docs/model.md, section 4).
+VARIANCE_MEANINGS = ("gaussian", "burley_d2")
 
 
 @dataclass(frozen=True)
@@ -64,8 +72,15 @@ class ScreenSpaceModel:
         difference in scene units), so both are estimated.
     weights_role : {"linear", "free", "unused"}
         How the estimator treats the weights (see :data:`WEIGHTS_ROLES`).
-    layout : {"layered", "chained", "kernel"}
-        How it turns the profile into passes (see :data:`LAYOUTS`).
+    layout : {"layered", "chained", "kernel", "disk"}
+        How it turns the profile into passes (see :data:`LAYOUTS`); the JAX and
+        PyTorch renderers and the reference shader's dispatch follow it.
+    shader : (str, tuple of str)
+        The reference shader's HLSL file in ``invsss/shaders`` and its compute
+        entry points, in the order a frame dispatches them (:mod:`invsss.shaders`).
+    variance_meaning : {"gaussian", "burley_d2"}
+        What its variances are (see :data:`VARIANCE_MEANINGS`): the report draws
+        the profile, and the export converts it, by this.
 
     Examples
     --------
@@ -81,7 +96,9 @@ class ScreenSpaceModel:
     parameters: frozenset
     weights_role: str
     layout: str
+    shader: tuple[str, tuple[str, ...]]
     default_gauge: str = "variances"
+    variance_meaning: str = "gaussian"
 
     def __post_init__(self):
         # The table is written by hand; catch a typo when the module loads
@@ -93,6 +110,8 @@ class ScreenSpaceModel:
             raise ValueError(f"model {self.name}: weights_role {self.weights_role!r}")
         if self.layout not in LAYOUTS:
             raise ValueError(f"model {self.name}: layout {self.layout!r}")
+        if self.variance_meaning not in VARIANCE_MEANINGS:
+            raise ValueError(f"model {self.name}: variance_meaning {self.variance_meaning!r}")
         if self.default_gauge not in ("variances", "depth"):
             raise ValueError(f"model {self.name}: default_gauge {self.default_gauge!r}")
         if (self.weights_role == "unused") == ("weights" in self.parameters):
@@ -121,7 +140,7 @@ class ScreenSpaceModel:
 _ALL = frozenset(PARAM_NAMES)
 
 #: The models by name; the first one is the default.
-MODELS: dict[str, ScreenSpaceModel] = {
+MODEL_TABLE: dict[str, ScreenSpaceModel] = {
     m.name: m
     for m in (
         ScreenSpaceModel(
@@ -131,6 +150,7 @@ MODELS: dict[str, ScreenSpaceModel] = {
             parameters=_ALL,
             weights_role="linear",
             layout="layered",
+            shader=("invsss_sog.hlsl", ("BlurPassCS", "AccumulateCS")),
         ),
         ScreenSpaceModel(
             name="thesis",
@@ -139,6 +159,7 @@ MODELS: dict[str, ScreenSpaceModel] = {
             parameters=_ALL - {"weights"},
             weights_role="unused",
             layout="chained",
+            shader=("invsss_thesis.hlsl", ("BlurPassCS",)),
         ),
         ScreenSpaceModel(
             name="separable",
@@ -148,6 +169,7 @@ MODELS: dict[str, ScreenSpaceModel] = {
             parameters=frozenset({"sss_level", "weights", "variances"}),
             weights_role="free",
             layout="kernel",
+            shader=("invsss_separable.hlsl", ("SeparablePassCS",)),
         ),
         # --- issue 34: the engines' model (invsss.forward.burley_screen_space) ---
         ScreenSpaceModel(
@@ -158,6 +180,8 @@ MODELS: dict[str, ScreenSpaceModel] = {
             parameters=frozenset({"sss_level", "variances"}),
             weights_role="unused",
             layout="disk",
+            shader=("invsss_burley.hlsl", ("BurleyDiskCS",)),
+            variance_meaning="burley_d2",
             # Its weights see the depth difference in mm: L and d are separable
             # (recovered within 0.2 % on a 64 x 64 model-made pair, issue 46).
             default_gauge="depth",
@@ -167,7 +191,9 @@ MODELS: dict[str, ScreenSpaceModel] = {
 }
 
 #: The model names, default first.
-MODEL_NAMES: tuple[str, ...] = tuple(MODELS)
+MODEL_NAMES: tuple[str, ...] = tuple(MODEL_TABLE)
+#: The same names under the name the package exports (``invsss.MODELS``).
+MODELS = MODEL_NAMES
 
 
 def get_model(name) -> ScreenSpaceModel:
@@ -189,9 +215,9 @@ def get_model(name) -> ScreenSpaceModel:
     """
     if isinstance(name, ScreenSpaceModel):
         return name
-    if not isinstance(name, str) or name not in MODELS:
+    if not isinstance(name, str) or name not in MODEL_TABLE:
         raise InvalidInputError(f"model: expected one of {', '.join(MODEL_NAMES)}, got {name!r}", field="model")
-    return MODELS[name]
+    return MODEL_TABLE[name]
 
 
 def resolve_tap_weights(model, spec=None):

@@ -1,4 +1,4 @@
-"""The three screen-space subsurface-scattering models (docs/model.md, section 5).
+"""The screen-space subsurface-scattering models (docs/model.md, section 5).
 
 ``sog`` (default)
     The sum-of-Gaussians profile realised as d'Eon & Luebke do: blur layers of
@@ -8,6 +8,12 @@
     vertical passes; the weights do not enter.
 ``separable``
     Jimenez et al. 2015 separable SSS: one pass pair with a precomputed N-tap kernel.
+``burley``
+    Burley's normalized diffusion sampled over a disk, as Unity HDRP and Unreal
+    render it (:mod:`invsss.forward.burley_screen_space`).
+
+:data:`invsss.forward.models.MODEL_TABLE` says what each one is; :func:`render`
+dispatches on its ``layout``.
 
 All functions are pure and compose with ``jax.jit``, ``jax.grad`` and ``jax.vmap``.
 :func:`render` is the checked entry point; the ``render_*`` functions assume

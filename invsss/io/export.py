@@ -37,7 +37,7 @@ import jax
 import numpy as np
 
 from ..forward.light_terms import AFTER_BLUR, LAW_TRUST, LIGHT_TERM_FIELDS, LightTerms
-from ..forward.models import get_model, resolve_tap_weights
+from ..forward.models import MODEL_NAMES, get_model, resolve_tap_weights
 from ..forward.params import SSSParams
 from ..forward.passes import TAP_OFFSETS, tap_spread
 from ..forward.passes import tap_weights as tap_weight_set
@@ -107,7 +107,7 @@ def shader_constants(
     ----------
     params : SSSParams
         Weights of shape (K,), (K, 1) or (K, 3).
-    model : {"sog", "thesis", "separable"}
+    model : {"sog", "thesis", "separable", "burley"}
         A name from :data:`invsss.forward.models.MODEL_NAMES`.
     tap_weights : {"jimenez", "thesis"} or 7 numbers, optional
         7-tap weight set of ``sog`` and ``thesis`` (default: the model's
@@ -575,7 +575,7 @@ def export_params(
     # Read in float64 so the file's numbers reach the constants unrounded.
     with jax.enable_x64(True):
         params, extras = read_params(params_json_path)
-    model = model or extras.get("model", "sog")
+    model = model or extras.get("model", MODEL_NAMES[0])
     tap_weights = tap_weights or extras.get("tap_weights")
     if format in ("hdrp", "unreal"):  # issue 34: the engines' assets
         from .engine_profiles import engine_asset

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..forward.models import MODEL_TABLE, get_model
 from ..validation import InvalidInputError
 
 __all__ = [
@@ -53,12 +54,9 @@ SHADER_FILES = (
     "invsss_light_terms.hlsl",
 )
 #: For each model: the file and the entry points it runs.
-MODEL_SHADERS = {
-    "sog": ("invsss_sog.hlsl", ("BlurPassCS", "AccumulateCS")),
-    "thesis": ("invsss_thesis.hlsl", ("BlurPassCS",)),
-    "separable": ("invsss_separable.hlsl", ("SeparablePassCS",)),
-    "burley": ("invsss_burley.hlsl", ("BurleyDiskCS",)),
-}
+#: Each model's reference shader: its HLSL file and entry points (the model
+#: table's ``shader`` field, :mod:`invsss.forward.models`), by model name.
+MODEL_SHADERS = {name: entry.shader for name, entry in MODEL_TABLE.items()}
 
 
 class ShaderUnavailable(RuntimeError):
@@ -352,23 +350,24 @@ def run_shader(
         run("LawCS", a, b)
         a, b = b, a
     passes = _num_passes(constants_hlsl)
-    if model == "sog":
+    layout = get_model(model).layout
+    if layout == "layered":
         accum = runner.texture(zero)
         for i in range(passes):
             run("BlurPassCS", a, b, i, 0)
             run("BlurPassCS", b, a, i, 1)
             run("AccumulateCS", a, accum, i)
         a, b = accum, b
-    elif model == "thesis":
+    elif layout == "chained":
         for axis in (0, 1):
             for i in range(passes):
                 run("BlurPassCS", a, b, i, axis)
                 a, b = b, a
-    elif model == "separable":
+    elif layout == "kernel":
         for axis in (0, 1):
             run("SeparablePassCS", a, b, 0, axis)
             a, b = b, a
-    else:  # burley: one gather over the disk
+    else:  # "disk" (burley): one gather over the disk
         run("BurleyDiskCS", a, b)
         a, b = b, a
     if after_blur:

@@ -1,4 +1,4 @@
-"""The three screen-space models (twin of :mod:`invsss.forward.screen_space`, docs/model.md, section 5).
+"""The screen-space models (twin of :mod:`invsss.forward.screen_space`, docs/model.md, section 5).
 
 The ``render_*`` functions take (H, W, C) tensors of one dtype and a
 :class:`~invsss.torch.SSSParams` in that dtype; :func:`render` is the checked
@@ -197,7 +197,7 @@ def render(
         1 on skin, 0 elsewhere; fractional values blend.
     params : invsss.torch.SSSParams
         Weights of shape (K, C) must have the image's C (or 1).
-    model : {"sog", "thesis", "separable"}
+    model : {"sog", "thesis", "separable", "burley"}
         A name from :data:`invsss.forward.models.MODEL_NAMES`.
     tap_weights : {"jimenez", "thesis"} or 7 numbers, optional
         Default the model's ``default_tap_weights`` ("jimenez" for ``sog``,
