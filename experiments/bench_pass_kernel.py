@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from invsss.forward.pass_kernels import directional_pass_kernel
-from invsss.forward.passes import _directional_pass_xla, tap_weights
+from invsss.forward.passes import directional_pass_xla, tap_weights
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 from bench_forward import queued_time  # noqa: E402
@@ -101,7 +101,7 @@ def main(argv=None) -> int:
         t_f = jnp.asarray(rng.standard_normal((8,) + footprint.shape), jnp.float32)
         cot = jnp.asarray(rng.standard_normal(image.shape), jnp.float32)
         for axis in (1, 0):
-            paths = [("xla", _directional_pass_xla)] + [
+            paths = [("xla", directional_pass_xla)] + [
                 (f"pallas {b[0]}x{b[1]}",
                  lambda i, f, m, w, a, b=b: directional_pass_kernel(i, f, m, w, a, block=b))
                 for b in blocks

@@ -30,14 +30,15 @@ def canvas_from_text(text: str | None, flag: str = "--canvas") -> tuple[int, int
     ...
     invsss.validation.InvalidInputError: --canvas '256': expected HxW, two integers >= 1 (e.g. 256x256)
     """
-    from .options import check_canvas
-
     if text is None:
         return None
     height, sep, width = text.lower().partition("x")
     try:
-        return check_canvas((int(height), int(width)) if sep else None)
-    except (ValueError, InvalidInputError):
+        size = int(height), int(width)
+        if not sep or min(size) < 1:
+            raise ValueError(text)
+        return size
+    except ValueError:
         raise InvalidInputError(f"{flag} {text!r}: expected HxW, two integers >= 1 (e.g. 256x256)",
                                 field=flag) from None
 

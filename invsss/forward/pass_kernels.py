@@ -47,7 +47,7 @@ import jax.numpy as jnp
 from jax.extend.core import Primitive
 from jax.interpreters import ad, batching, mlir
 
-from .passes import TAP_OFFSETS, _directional_pass_xla, tap_sum
+from .taps import TAP_OFFSETS, directional_pass_xla, tap_sum
 
 __all__ = [
     "PASS_KERNEL_VARIABLE",
@@ -317,13 +317,13 @@ def _transpose_pallas(image, footprint, mask, weights, axis, ct, *, interpret, b
 
 
 def _forward_xla(image, footprint, mask, weights, axis, **_):
-    return _directional_pass_xla(image, footprint, mask, weights, axis)
+    return directional_pass_xla(image, footprint, mask, weights, axis)
 
 
 def _tangent_map_xla(image, footprint, mask, weights, axis):
     def tangent(d_image, d_footprint):
         return jax.jvp(
-            lambda i, f: _directional_pass_xla(i, f, mask, weights, axis),
+            lambda i, f: directional_pass_xla(i, f, mask, weights, axis),
             (image, footprint),
             (d_image, d_footprint),
         )[1]
@@ -404,7 +404,7 @@ for _prim in _IMPLEMENTATIONS:
 
 
 def _blurred_xla(image, footprint, weights, axis):
-    return _directional_pass_xla(image, footprint, jnp.ones(image.shape[:2], image.dtype), weights, axis)
+    return directional_pass_xla(image, footprint, jnp.ones(image.shape[:2], image.dtype), weights, axis)
 
 
 def _pass_jvp(primals, tangents, *, interpret, block):

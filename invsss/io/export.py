@@ -36,14 +36,15 @@ from collections.abc import Mapping
 import jax
 import numpy as np
 
-from ..forward.light_terms import AFTER_BLUR, LAW_TRUST, LIGHT_TERM_FIELDS, LightTerms
+from ..forward.light_terms import LAW_TRUST
 from ..forward.models import MODEL_NAMES, get_model, resolve_tap_weights
 from ..forward.params import SSSParams
 from ..forward.passes import TAP_OFFSETS, tap_spread
 from ..forward.passes import tap_weights as tap_weight_set
 from ..forward.screen_space import separable_kernel
-from ..validation import InvalidInputError, did_you_mean
+from ..validation import InvalidInputError
 from . import read_params
+from .light_constants import light_constants
 from .shader_export import shader_files, write_shader
 from .writing import write_texts_atomic
 
@@ -175,64 +176,8 @@ def shader_constants(
     options = {"tap_weights": tap_weights, "taps": taps, "strength": strength}
     constants.update(_RECIPES[entry.layout](entry, weights, variances, options))
     if light_terms is not None:
-        constants.update(_light_constants(light_terms))
+        constants.update(light_constants(light_terms))
     return constants
-
-
-def _light_constants(light_terms) -> dict:
-    """``lightShift``, ``grazingGain``, ``incidenceGain`` and ``lawAlbedo`` of the terms in use."""
-    if isinstance(light_terms, LightTerms):
-        given = {term: getattr(light_terms, term) for term in light_terms.used}
-        if "law" in given or "fill" in given:
-            given["law"], given["law_strength"] = light_terms.law, light_terms.law_strength
-        after = [getattr(light_terms, term) for term in AFTER_BLUR]
-    elif hasattr(light_terms, "get"):
-        _check_light_term_keys(light_terms)
-        given = {term: light_terms[term] for term in (*AFTER_BLUR, "law", "law_strength", "fill")
-                 if term in light_terms}
-        after = [light_terms.get(term, 0.0) for term in AFTER_BLUR]
-    else:
-        raise InvalidInputError(
-            f"light_terms: expected an invsss.LightTerms or a mapping, got {type(light_terms).__name__}",
-            field="light_terms",
-        )
-    # Checked as LightTerms, written from the given numbers: LightTerms holds
-    # JAX's default float32 outside x64, which would round them.
-    shift, grazing, incidence = (float(np.asarray(v, np.float64)) for v in after)
-    law = None if given.get("law") is None else np.asarray(given["law"], np.float64)
-    # A params file from before the strength existed applied the law in full.
-    strength = float(np.asarray(given.get("law_strength", 1.0), np.float64))
-    fill = float(np.asarray(given.get("fill", 0.0), np.float64))
-    LightTerms(shift, grazing, incidence, law, strength, fill).check()  # type: ignore[arg-type]  # the fields' converters take array-likes
-    out: dict = {}
-    if law is None or any(term in given for term in AFTER_BLUR):
-        out.update(lightShift=shift, grazingGain=grazing, incidenceGain=incidence)
-    if law is not None:
-        if law.size not in (1, 3):
-            raise InvalidInputError(f"light_terms.law: expected one albedo or three (RGB), got {law.size}")
-        out["lawAlbedo"] = np.broadcast_to(law.ravel(), (3,)).tolist()
-        out["lawStrength"] = strength
-        if fill != 0.0:
-            out["lawFillStrength"] = fill
-    return out
-
-
-#: What else a fit's ``light_terms`` record holds (params.json; docs/params-json.md):
-#: a mapping with these is accepted as the terms it reports.
-LIGHT_TERMS_RECORD_KEYS = ("stderr", "fixed", "psnr_plain", "psnr_without", "fallback")
-
-
-def _check_light_term_keys(light_terms) -> None:
-    """Refuse a key that is neither a term nor part of a fit's record: a misspelt
-    term would otherwise be left out, and its constant exported switched off."""
-    known = (*LIGHT_TERM_FIELDS, *LIGHT_TERMS_RECORD_KEYS)
-    for key in light_terms:
-        if key not in known:
-            raise InvalidInputError(
-                f"light_terms: unknown key {key!r}{did_you_mean(key, known)}; expected terms among "
-                f"{', '.join(LIGHT_TERM_FIELDS)}",
-                field="light_terms",
-            )
 
 
 #: The HLSL function :func:`to_hlsl` appends when the constants hold the light-aware

@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 
 from ..validation import InvalidInputError
+from .light_constants import light_constants
 from .writing import write_texts_atomic
 
 __all__ = ["shader_files", "write_shader"]
@@ -44,13 +45,12 @@ def shader_files(constants_path, model: str | None = None, light_terms=None) -> 
         of the shader files.
     """
     from ..shaders import SHADER_FILES, shader_sources
-    from .export import _light_constants  # the one rule for which light constants a fit has
 
     constants_path = os.fspath(constants_path)
     name = os.path.basename(constants_path)
     sources = shader_sources(name) if model is None else shader_sources(name, model=model)
     if model is not None and light_terms is not None:
-        used = _light_constants(light_terms)
+        used = light_constants(light_terms)
         every = shader_sources(name)
         sources.update({file: every[file] for key, file in _LIGHT_TERM_SHADERS.items() if key in used})
     folder = os.path.dirname(os.path.abspath(constants_path))
