@@ -648,11 +648,12 @@ def read_pair_folder(pair_dir: str):
 
 def _compare(pair_dirs, title: str, settings: dict) -> None:
     """Each pair fitted with the CLI defaults under each of ``settings`` (name ->
-    ``{invsss.estimator.search constant: value}``), in one process; a short warm-up
-    fit per pair and setting comes first so that no column pays for compilation."""
+    ``{invsss.estimator.search constant: value}``, and ``"options"``: fit options),
+    in one process; a short warm-up fit per pair and setting comes first so that no
+    column pays for compilation."""
     import invsss.estimator.search as fit_module
 
-    defaults = {k: getattr(fit_module, k) for values in settings.values() for k in values}
+    defaults = {k: getattr(fit_module, k) for values in settings.values() for k in values if k != "options"}
     print(f"bench_fit {title}: fit_pair with the CLI defaults; "
           f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}")
     first = next(iter(settings))
@@ -665,11 +666,13 @@ def _compare(pair_dirs, title: str, settings: dict) -> None:
         pair = read_pair_folder(pair_dir)
         results = {}
         for name, values in settings.items():
+            options = values.get("options", {})
             for key, value in {**defaults, **values}.items():
-                setattr(fit_module, key, value)
-            fit_pair(pair.source, pair.target, pair.depth, pair.mask, max_steps=2)  # compile this setting
+                if key != "options":
+                    setattr(fit_module, key, value)
+            fit_pair(pair.source, pair.target, pair.depth, pair.mask, max_steps=2, **options)  # compile this setting
             t0 = time.perf_counter()
-            results[name] = result = fit_pair(pair.source, pair.target, pair.depth, pair.mask)
+            results[name] = result = fit_pair(pair.source, pair.target, pair.depth, pair.mask, **options)
             seconds = time.perf_counter() - t0
             totals[name][0] += result.iterations
             totals[name][1] += seconds
@@ -703,8 +706,8 @@ def stopping(pair_dirs) -> None:
 def jacobian(pair_dirs) -> None:
     """The solvers' Jacobian by forward mode and by forward differences."""
     _compare(pair_dirs, "--jacobian (forward mode / forward differences)", {
-        "forward-mode": {"SOLVER_JACOBIAN": "forward-mode"},
-        "differences": {"SOLVER_JACOBIAN": "differences"},
+        "forward-mode": {"options": {"solver_jacobian": "forward-mode"}},
+        "differences": {"options": {"solver_jacobian": "differences"}},
     })
 
 

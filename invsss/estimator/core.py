@@ -20,7 +20,6 @@ from .options import FitOptions
 from .parametrisation import by_unknown
 from .problem import build_problem
 from .result import FitResult
-from . import search
 from .search import solve
 from .solve import NOISE_TOL, SCREEN_TOL, compile_solver, make_solver
 from .summary import mean_psnr, summarise
@@ -160,8 +159,7 @@ class SolverCompilation:
                     solver = make_solver(self.options.solver, tolerance=SCREEN_TOL)
                     # device_put, not jnp.asarray: that compiles a small copy for the shape.
                     z = jax.device_put(np.asarray(problem.z_base, np.float64))
-                    # Read from the module at run time: experiments/bench_fit.py --jacobian sets it there.
-                    compile_solver(solver, problem.objective, z, NOISE_TOL, search.SOLVER_JACOBIAN)
+                    compile_solver(solver, problem.objective, z, NOISE_TOL, self.options.solver_jacobian)
             except Exception:  # noqa: BLE001 - the solve compiles it again and says what is wrong
                 pass
 

@@ -26,7 +26,7 @@ from .parametrisation import GAUGES, assign_roles, check_fix, resolve_profile
 from .pigment import DEGREES as PIGMENT_DEGREES
 from .option_text import canvas_from_text, fix_from_text, saturation_from_text
 from .robust import check_robust
-from .solve import SOLVERS
+from .solve import JACOBIANS, SOLVERS
 
 __all__ = ["FitOptions", "check_canvas"]
 
@@ -105,6 +105,10 @@ class FitOptions:
         Number of starting points (best grid points of a coarse search).
     max_steps : int
         Maximum solver steps per start and per refinement.
+    solver_jacobian : {"differences", "forward-mode"}
+        How the solvers differentiate the blur: by forward differences (the
+        default, 0.64-0.77 of forward mode's time per step) or by forward mode.
+        The standard errors use forward mode either way.
     tap_weights : {"jimenez", "thesis"} or 7 numbers, optional
         Default "thesis" for the thesis model, else "jimenez".
     robust : {"pseudo-huber", "cauchy"} or None
@@ -207,6 +211,11 @@ class FitOptions:
     n_starts: int = _option(4, "starting points of the multi-start search", flag="--starts", type=int,
                             metavar="N")
     max_steps: int = _option(200, "solver steps per start and per refinement", type=int, metavar="N")
+    # The blur by forward differences took 0.64-0.77 of forward mode's time per
+    # step (experiments/bench_fit.py --jacobian); the covariance uses forward mode.
+    solver_jacobian: str = _option(
+        "differences", "the solvers' Jacobian of the blur: 'differences' (forward differences) or "
+        "'forward-mode' (exact, slower)", flag=None)
     tap_weights: object = _option(None, "the 7 tap weights: a set's name or 7 numbers", flag=None)
     robust: str | None = _option("pseudo-huber", "robust loss (pseudo-huber, cauchy or none)", flag=None)
     align: str = _option(
@@ -284,6 +293,10 @@ class FitOptions:
                 raise InvalidInputError(f"focal_px: expected a number of pixels > 0 or None, got {focal!r}",
                                         field="focal_px")
             object.__setattr__(self, "focal_px", float(focal))
+        if self.solver_jacobian not in JACOBIANS:
+            raise InvalidInputError(
+                f"solver_jacobian: expected one of {', '.join(JACOBIANS)}, got {self.solver_jacobian!r}",
+                field="solver_jacobian")
         if self.solver not in SOLVERS:
             raise InvalidInputError(f"solver: expected one of {', '.join(SOLVERS)}, got {self.solver!r}",
                                     field="solver")

@@ -50,10 +50,6 @@ _DISTINCT_LEVEL = 0.1
 #: so (see choose_basin).
 AMBIGUOUS_Z = 2.0
 
-# The solvers' Jacobian (invsss.estimator.solve.DenseJacobian): the blur by forward
-# differences, 0.64-0.77 of forward mode's time per step; the covariance uses
-# forward mode.
-SOLVER_JACOBIAN = "differences"
 
 
 class SolvePath:
@@ -104,7 +100,7 @@ def solve(problem, options, steps, before_first_step=None) -> SolvePath:
         steps.begin(label)
         stall = SCREEN_STALL_TOL if with_solver is screen else STALL_TOL
         return run_solver(with_solver, on.objective, z0, max_steps or options.max_steps, steps,
-                          steps.stop_requested, arrived, NOISE_TOL, stall, SOLVER_JACOBIAN, state)
+                          steps.stop_requested, arrived, NOISE_TOL, stall, options.solver_jacobian, state)
 
     best, records, interrupted = _starts(problem, options, functools.partial(run, path), screen)
     path.extend(best)

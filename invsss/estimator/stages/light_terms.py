@@ -47,8 +47,7 @@ def with_light_terms(inner: Fit) -> Fit:
         plain = inner(dataclasses.replace(call, options=plain_model(options)))
         if plain.interrupted:
             return plain
-        # Looked up at call time, so that a test can replace it.
-        compare = functools.partial(_compare_with_plain, plain=plain)
+        compare = functools.partial(against_plain, plain=plain)
         return inner(dataclasses.replace(call, nested={**estimate_of(plain), **IDENTITY}, after_solve=compare))
 
     return fit
@@ -57,10 +56,6 @@ def with_light_terms(inner: Fit) -> Fit:
 def plain_model(options: FitOptions) -> FitOptions:
     """The contained model's options: the same fit without light terms."""
     return dataclasses.replace(options, light_terms=(), light_fixed={})
-
-
-def _compare_with_plain(problem, path, result, *, plain):
-    return against_plain(problem, path, result, plain)
 
 
 def against_plain(problem, path, result, plain) -> FitResult:
