@@ -28,7 +28,7 @@ import sys
 import tempfile
 import time
 
-import invsss.experiments as ex
+import invsss.sweeps as ex
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PAIR = os.path.join(HERE, "..", "data_synthetic", "fran_front")

@@ -82,7 +82,8 @@ _LAZY = {
 # Submodules reachable as attributes (``invsss.io.PARAMS_KEYS``) without an import: the
 # layer folders (docs/architecture.md).
 _SUBMODULES = (
-    "cli", "estimator", "experiments", "forward", "io", "measurement", "runtime", "scenes", "shaders", "torch",
+    "cli", "estimator", "experiments", "forward", "io", "measurement", "runtime", "scenes", "shaders", "sweeps",
+    "torch",
 )
 
 __all__ = [

@@ -44,8 +44,8 @@ def add_parser(subparsers) -> None:
 
 
 def run(args: argparse.Namespace, stop: StopSignals) -> int:
-    from ..experiments import load, run
-    from ..experiments.experiment import MAX_TRIALS
+    from ..sweeps import load, run
+    from ..sweeps.experiment import MAX_TRIALS
 
     limit = MAX_TRIALS if args.max_trials is None else args.max_trials
     if limit < 1:
@@ -85,7 +85,7 @@ def add_report_parser(subparsers) -> None:
 
 
 def run_report(args: argparse.Namespace, stop: StopSignals) -> int:
-    from ..experiments.report import write_report
+    from ..sweeps.report import write_report
 
     table, written = write_report(args.out, plots=not args.no_plots, parquet=args.parquet)
     _print_out(table)

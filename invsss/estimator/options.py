@@ -192,7 +192,7 @@ class FitOptions:
     # Each field is the one declaration of its option: its default, and in its
     # metadata the command line's flag, help and parser (invsss.cli.fit builds the
     # fit command's arguments from them), and the sweep schema's fit options
-    # (invsss.experiments.schema) take their names and defaults from here.
+    # (invsss.sweeps.schema) take their names and defaults from here.
     model: str = _option("sog", "screen-space model", choices=lambda: MODEL_NAMES)
     profile: object = _option(
         "thesis-nir", f"sum-of-Gaussians profile ({', '.join(PROFILE_NAMES)}, or a JSON file); its variances "

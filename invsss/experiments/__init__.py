@@ -1,40 +1,52 @@
-"""Experiments from files: batch fits, render matrices and hyperparameter sweeps.
+"""The old name of :mod:`invsss.sweeps`, kept working for one release.
 
-An experiment file (TOML) names the data, the task (``fit``, ``fit-joint`` or
-``render``), a base configuration and the axes to vary; :func:`load` checks and
-expands it into trials with stable ids, :func:`run` runs them (resumably, in
-this process, a process pool or on Dask) into a results folder, and
-:func:`results` reads that folder back. ``invsss sweep`` and ``invsss
-sweep-report`` are the same from the command line.
-
-Example (a notebook)::
-
-    import invsss.experiments as ex
-    experiment = ex.load("experiments/render_matrix.toml")
-    ex.run(experiment, "runs/render_matrix", jobs=2)
-    table = ex.results("runs/render_matrix")      # a pandas DataFrame
-
-The modules, one idea each:
-
-* :mod:`.schema` -- the file's keys and types (pydantic), one-line errors;
-* :mod:`.data` -- locating the pairs (folders, globs, file sets);
-* :mod:`.axes` -- grid, zip and Sobol'/random points;
-* :mod:`.trials` -- resolved trial configurations and their ids;
-* :mod:`.experiment` -- :func:`load`;
-* :mod:`.tasks`, :mod:`.scoring` -- what a trial computes;
-* :mod:`.runner` -- one trial, start to committed files;
-* :mod:`.store` -- the SQLite results database;
-* :mod:`.executors` -- local process pool and Dask;
-* :mod:`.sweep` -- :func:`run`;
-* :mod:`.results` -- :func:`results`;
-* :mod:`.report` -- table, CSV and plots of a finished sweep.
+``import invsss.experiments`` and ``from invsss.experiments.store import
+rebuild`` give the modules of :mod:`invsss.sweeps` themselves (the same module
+objects, so their classes and results are the same), with a
+:class:`DeprecationWarning` at the first import. The name clashed with the
+repository's ``experiments/`` folder of scripts.
 """
 
-from .executors import EXECUTORS, DaskExecutor, LocalExecutor
-from .experiment import Experiment, load
-from .results import results
-from .sweep import SweepSummary, run
-from .trials import Trial
+from __future__ import annotations
 
-__all__ = ["load", "run", "results", "Experiment", "Trial", "SweepSummary", "LocalExecutor",
-           "DaskExecutor", "EXECUTORS"]
+import importlib
+import importlib.abc
+import importlib.util
+import sys
+import warnings
+
+warnings.warn(
+    "invsss.experiments is now invsss.sweeps; the old name will be removed in the next release",
+    DeprecationWarning,
+    stacklevel=2,
+)
+
+from ..sweeps import *  # noqa: E402, F403 - the old name's public names
+from ..sweeps import __all__  # noqa: E402, F401
+
+_NEW = "invsss.sweeps"
+
+
+class _Alias(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """Imports ``invsss.experiments.X`` as the module ``invsss.sweeps.X``."""
+
+    def find_spec(self, fullname, path=None, target=None):
+        if fullname.startswith(__name__ + "."):
+            return importlib.util.spec_from_loader(fullname, self)
+        return None
+
+    def __init__(self):
+        self.specs = {}
+
+    def create_module(self, spec):
+        module = importlib.import_module(_NEW + spec.name[len(__name__):])
+        self.specs[spec.name] = module.__spec__
+        return module
+
+    def exec_module(self, module):
+        # The import system gave the module the alias's spec; it keeps its own.
+        module.__spec__ = self.specs.pop(module.__spec__.name)
+
+
+if not any(isinstance(finder, _Alias) for finder in sys.meta_path):
+    sys.meta_path.insert(0, _Alias())

@@ -93,7 +93,7 @@ def results(out, *, frame: bool | None = None):
 
     Examples
     --------
-    >>> import os, tempfile, numpy as np, invsss, invsss.experiments as ex
+    >>> import os, tempfile, numpy as np, invsss, invsss.sweeps as ex
     >>> root = tempfile.mkdtemp(); pair = os.path.join(root, "face"); os.mkdir(pair)
     >>> for name, image in [("source.exr", np.ones((8, 8, 3))), ("target.exr", np.ones((8, 8))),
     ...         ("depth.exr", np.full((8, 8), 500.0)), ("mask.png", np.ones((8, 8)))]:

@@ -192,7 +192,7 @@ def _fit_task_fields() -> dict:
             out[field.name] = (_PLAIN_TYPES[field.type], field.default)
         else:
             # A new option whose type has no plain TOML form: say where to add it.
-            raise TypeError(f"FitOptions.{field.name}: add its TOML form to invsss.experiments.schema._TOML_FORMS")
+            raise TypeError(f"FitOptions.{field.name}: add its TOML form to invsss.sweeps.schema._TOML_FORMS")
     return out
 
 

@@ -7,7 +7,7 @@ does it return ``status: "done"``; the sweep marks the trial done in the
 database after that, so a done row always has its files. The manifest of
 those files holds the row the sweep records (``info.row``: the trial's
 position, configuration, axes, attempt and outcome), from which
-:func:`invsss.experiments.store.rebuild` recovers a damaged database.
+:func:`invsss.sweeps.store.rebuild` recovers a damaged database.
 Any exception becomes ``status: "failed"`` with a one-line message: one bad
 trial never ends a sweep.
 

@@ -68,7 +68,7 @@ def check_task_options(task: str, options: dict) -> None:
 
     Examples
     --------
-    >>> from invsss.experiments.schema import FitTaskOptions
+    >>> from invsss.sweeps.schema import FitTaskOptions
     >>> check_task_options("fit", {**FitTaskOptions().model_dump(), "solver": "adam"})
     Traceback (most recent call last):
     ...

@@ -352,7 +352,7 @@ def rebuild(directory, experiment=None) -> tuple[int, int]:
     never deleted. Each trial folder whose manifest is complete and holds the
     trial's row (:mod:`.runner` puts it there) becomes a ``done`` row, exactly
     as it was recorded; the trials of ``experiment`` (an
-    :class:`~invsss.experiments.Experiment`) that have no such folder are
+    :class:`~invsss.sweeps.Experiment`) that have no such folder are
     added as ``pending``, as are trials that had failed (they have no files;
     a sweep runs them again either way). The caller holds the sweep's lock.
 

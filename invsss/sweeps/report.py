@@ -2,7 +2,7 @@
 
 Written into ``OUT/report/``:
 
-* ``results.csv`` -- every column of :func:`invsss.experiments.results`
+* ``results.csv`` -- every column of :func:`invsss.sweeps.results`
   (lists as JSON text);
 * ``results.parquet`` with ``parquet=True`` -- the same table through
   pandas (needs ``pip install 'invsss[report]'``: pandas and pyarrow), lists

@@ -167,7 +167,7 @@ def load(path, *, max_trials: int = MAX_TRIALS) -> Experiment:
     Parameters
     ----------
     path : str or os.PathLike
-        A TOML experiment file (format: :mod:`invsss.experiments.schema`). Data
+        A TOML experiment file (format: :mod:`invsss.sweeps.schema`). Data
         paths in it are relative to its folder.
     max_trials : int
         Refuse a file of more trials than this (default :data:`MAX_TRIALS`),
@@ -188,7 +188,7 @@ def load(path, *, max_trials: int = MAX_TRIALS) -> Experiment:
     Examples
     --------
     >>> import os, tempfile
-    >>> from invsss.experiments.data import PAIR_FILES
+    >>> from invsss.sweeps.data import PAIR_FILES
     >>> root = tempfile.mkdtemp(); os.mkdir(os.path.join(root, "face"))
     >>> for f in PAIR_FILES.values(): open(os.path.join(root, "face", f), "w").close()
     >>> path = os.path.join(root, "matrix.toml")

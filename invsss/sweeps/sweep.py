@@ -197,12 +197,12 @@ def run(
     Parameters
     ----------
     experiment : Experiment or path
-        From :func:`invsss.experiments.load`, or the path of an experiment file.
+        From :func:`invsss.sweeps.load`, or the path of an experiment file.
     out : str or os.PathLike
         The sweep's folder (created if missing): ``results.sqlite`` and
         ``trials/<id>/``.
     executor : {"local", "dask"} or an executor object
-        See :mod:`invsss.experiments.executors`.
+        See :mod:`invsss.sweeps.executors`.
     jobs : int, optional
         Local worker processes (default 1: this process), or the workers of a
         Dask ``LocalCluster`` (default 2).
@@ -217,7 +217,7 @@ def run(
     rebuild_store : bool
         First make ``results.sqlite`` again from the trial folders (the old
         file is moved aside to ``results.sqlite.damaged-<time>``); see
-        :func:`invsss.experiments.store.rebuild`.
+        :func:`invsss.sweeps.store.rebuild`.
 
     Returns
     -------
@@ -227,7 +227,7 @@ def run(
     ------
     InvalidInputError
         A bad experiment file, an unusable output folder, another sweep running
-        into it, a bad executor choice; :class:`~invsss.experiments.store.StoreError`
+        into it, a bad executor choice; :class:`~invsss.sweeps.store.StoreError`
         (a subclass) for a damaged or empty results database, or one that
         cannot be written (a full disk).
 
@@ -235,7 +235,7 @@ def run(
     --------
     A render matrix on one generated pair, run twice: the second run has nothing to do.
 
-    >>> import os, tempfile, numpy as np, invsss, invsss.experiments as ex
+    >>> import os, tempfile, numpy as np, invsss, invsss.sweeps as ex
     >>> root = tempfile.mkdtemp(); pair = os.path.join(root, "pair"); os.mkdir(pair)
     >>> rng = np.random.default_rng(0)
     >>> for name, image in [("source.exr", rng.uniform(0.2, 1, (16, 16, 3))), ("target.exr",
