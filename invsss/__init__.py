@@ -11,16 +11,19 @@ only renders arrays does not pay for them.
 
 # First of all, before JAX is imported (a second or more): in the `invsss` command's
 # own process, a Ctrl-C from here on ends it with one line and status 130 instead of
-# a KeyboardInterrupt traceback. Nothing changes for any other process.
+# a KeyboardInterrupt traceback. Nothing changes for any other process. That is why the
+# imports below come after a statement ("noqa: E402" on each).
 from .runtime.interrupts import guard_command_line as _guard_command_line
 
 _guard_command_line()
 
-import importlib
+import importlib  # noqa: E402
 
-from .forward.params import SSSParams
-from .forward.passes import TAP_WEIGHTS, directional_pass, sample_along, tap_spread, tap_weights
-from .forward.profiles import (
+from .forward.light_terms import LightBuffers, LightTerms, apply_law, apply_light_terms  # noqa: E402
+from .forward.models import MODEL_NAMES, ScreenSpaceModel, get_model  # noqa: E402
+from .forward.params import SSSParams  # noqa: E402
+from .forward.passes import TAP_WEIGHTS, directional_pass, sample_along, tap_spread, tap_weights  # noqa: E402
+from .forward.profiles import (  # noqa: E402
     DEON_SKIN_RGB,
     JENSEN_SKIN1,
     JENSEN_SKIN1_SOG,
@@ -35,7 +38,7 @@ from .forward.profiles import (
     sum_of_gaussians,
     total_diffuse_reflectance,
 )
-from .forward.screen_space import (
+from .forward.screen_space import (  # noqa: E402
     MODELS,
     render,
     render_separable,
@@ -44,10 +47,8 @@ from .forward.screen_space import (
     separable_kernel,
     sog_layers,
 )
-from .forward.light_terms import LightBuffers, LightTerms, apply_law, apply_light_terms
-from .forward.models import MODEL_NAMES, ScreenSpaceModel, get_model
-from .forward.stretch import depth_slopes, stretch_factors
-from .validation import InputNotice, InvalidInputError
+from .forward.stretch import depth_slopes, stretch_factors  # noqa: E402
+from .validation import InputNotice, InvalidInputError  # noqa: E402
 
 __version__ = "0.1.0"
 
@@ -86,10 +87,47 @@ _SUBMODULES = (
     "torch",
 )
 
+# The names imported above (in their former import order, which this list kept when it
+# was read from the module's globals), then the lazy ones. Written out so that ruff sees
+# them as re-exports: an import left out of this list is reported as unused (F401).
 __all__ = [
-    name
-    for name, value in globals().items()
-    if not name.startswith("_") and not isinstance(value, type(importlib))
+    "SSSParams",
+    "TAP_WEIGHTS",
+    "directional_pass",
+    "sample_along",
+    "tap_spread",
+    "tap_weights",
+    "DEON_SKIN_RGB",
+    "JENSEN_SKIN1",
+    "JENSEN_SKIN1_SOG",
+    "PROFILE_NAMES",
+    "THESIS_NIR_940",
+    "SumOfGaussians",
+    "burley",
+    "gaussian",
+    "jensen_dipole",
+    "jensen_dipole_total",
+    "load_profile",
+    "sum_of_gaussians",
+    "total_diffuse_reflectance",
+    "MODELS",
+    "render",
+    "render_separable",
+    "render_sog",
+    "render_thesis",
+    "separable_kernel",
+    "sog_layers",
+    "LightBuffers",
+    "LightTerms",
+    "apply_law",
+    "apply_light_terms",
+    "MODEL_NAMES",
+    "ScreenSpaceModel",
+    "get_model",
+    "depth_slopes",
+    "stretch_factors",
+    "InputNotice",
+    "InvalidInputError",
 ] + sorted(_LAZY)
 
 

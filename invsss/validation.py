@@ -68,7 +68,7 @@ class InvalidInputError(ValueError):
         super().__init__(message)
         self.field = field
 
-    def named(self, label: str) -> "InvalidInputError":
+    def named(self, label: str) -> InvalidInputError:
         """The same error with its field shown as ``label``; itself when it has no field.
 
         The result keeps ``field``, the library's name.
@@ -281,7 +281,7 @@ def check_depth(depth, shape_hw: tuple[int, int], name: str = "depth", mask=None
     Traceback (most recent call last):
     ...
     invsss.validation.InvalidInputError: depth.exr: expected finite depth > 0 on every pixel (no mask given), 4 pixel(s) are not (NaN, infinite or <= 0)
-    """
+    """  # noqa: E501
     shape = _shape(depth)
     if shape != tuple(shape_hw):
         raise InvalidInputError(
@@ -348,7 +348,7 @@ def check_same_frame(named_arrays) -> None:
     Traceback (most recent call last):
     ...
     invsss.validation.InvalidInputError: depth: expected 4x6 pixels to match image, got 4x5 (every image of a pair is on one pixel grid: crop or resample them to it; --align registers a shift or rotation, not another size)
-    """
+    """  # noqa: E501
     (reference_name, reference), *others = named_arrays
     for name, array in others:
         if array is not None:

@@ -7,9 +7,9 @@ import os
 
 import numpy as np
 
-from ..io import image_extension, read_image
 from ..forward.passes import TAP_WEIGHTS
 from ..forward.screen_space import MODELS
+from ..io import image_extension, read_image
 from ..validation import InvalidInputError
 
 

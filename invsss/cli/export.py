@@ -6,11 +6,10 @@ import argparse
 import os
 import sys
 
-
-from ..runtime.interrupts import StopSignals
-from ..validation import InvalidInputError
 from ..io import read_params
 from ..io.export import EXPORT_FORMATS, export_params, shader_files
+from ..runtime.interrupts import StopSignals
+from ..validation import InvalidInputError
 from .arguments import add_model_arguments, model_choice
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import importlib
 import json
 import os
@@ -23,21 +24,18 @@ import warnings
 import numpy as np
 
 from ..estimator import FitInterrupted
-from ..runtime.interrupts import StopSignals
-from ..io import photo_pair, shared_clipping_level, write_image, write_params
-from ..io.result_dir import ResultDir, ResultWriteError
-from ..forward.pair import ImagePair
-from ..forward.params import DEPTH_UNITS
 from ..estimator.blur_width import blur_line
-from ..validation import InputNotice, InvalidInputError, one_line
-
-import dataclasses
 from ..estimator.fit import run_fit
 from ..estimator.option_text import saturation_from_text
 from ..estimator.options import FitOptions
-from .progress import ProgressLine, compile_seconds, trial_seconds
+from ..forward.pair import ImagePair
+from ..forward.params import DEPTH_UNITS
+from ..io import photo_pair, shared_clipping_level, write_image, write_params
+from ..io.result_dir import ResultDir, ResultWriteError
+from ..runtime.interrupts import StopSignals
+from ..validation import InputNotice, InvalidInputError, one_line
 from .arguments import add_no_cache_argument, read_key_buffer, read_light_buffer
-
+from .progress import ProgressLine, compile_seconds, trial_seconds
 
 #: The flags that give one file per pair.
 _PAIR_FLAGS = ("source", "target", "depth", "mask")

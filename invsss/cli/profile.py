@@ -9,8 +9,8 @@ import tempfile
 
 import numpy as np
 
-from ..runtime.interrupts import StopSignals
 from ..io import read_image
+from ..runtime.interrupts import StopSignals
 from ..validation import InvalidInputError
 
 

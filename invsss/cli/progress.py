@@ -6,7 +6,6 @@ import time
 
 import numpy as np
 
-
 #: Wall-time intervals, by what filled them: "compile" (JAX's compile events) and
 #: "trial" (the executable cache trying an entry in a child process).
 _SPANS = {"compile": [], "trial": [], "listening": False}

@@ -7,12 +7,12 @@ import sys
 
 import numpy as np
 
-from ..runtime.interrupts import StopSignals
-from ..io import read_depth, read_image, read_mask, read_params, write_image
-from ..forward.screen_space import render
 from ..forward.light_terms import LIGHT_TERM_FIELDS, NEEDED_BUFFERS, LightBuffers, LightTerms
 from ..forward.pair import fill_background_depth
 from ..forward.params import DEPTH_UNITS
+from ..forward.screen_space import render
+from ..io import read_depth, read_image, read_mask, read_params, write_image
+from ..runtime.interrupts import StopSignals
 from ..validation import InvalidInputError, check_depth, check_same_frame
 from .arguments import (
     add_model_arguments,

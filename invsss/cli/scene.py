@@ -5,9 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-
-from ..runtime.interrupts import StopSignals
 from ..io.result_dir import ResultDir, ResultWriteError
+from ..runtime.interrupts import StopSignals
 from ..validation import InvalidInputError
 
 

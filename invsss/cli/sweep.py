@@ -7,7 +7,6 @@ import os
 import signal
 import sys
 
-
 from ..runtime.interrupts import StopSignals
 from ..validation import InvalidInputError
 from .arguments import add_no_cache_argument

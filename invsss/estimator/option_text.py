@@ -74,7 +74,7 @@ def fix_from_text(items: list[str], flag: str = "--fix") -> dict | None:
     Traceback (most recent call last):
     ...
     invsss.validation.InvalidInputError: --fix 'depth=3': unknown parameter 'depth', expected one of sss_level, correction, maxdd, weights, variances
-    """
+    """  # noqa: E501
     known = FIX_SCALARS + FIX_LISTS
     fixed: dict = {}
     for item in items:

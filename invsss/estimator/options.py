@@ -22,9 +22,9 @@ from ..forward.models import MODEL_NAMES, get_model
 from ..forward.passes import tap_weights as tap_weight_set
 from ..forward.profiles import PROFILE_NAMES
 from ..validation import InvalidInputError
+from .option_text import canvas_from_text, fix_from_text, saturation_from_text
 from .parametrisation import GAUGES, assign_roles, check_fix, resolve_profile
 from .pigment import DEGREES as PIGMENT_DEGREES
-from .option_text import canvas_from_text, fix_from_text, saturation_from_text
 from .robust import check_robust
 from .solve import JACOBIANS, SOLVERS
 

@@ -19,7 +19,14 @@ from . import uncertainty
 from .problem import evaluate
 from .robust import psi_and_slope, robust_loss, robust_scale, robust_weights
 from .solve import (
-    NOISE_TOL, RTOL, SCREEN_STALL_TOL, SCREEN_TOL, STALL_TOL, FitInterrupted, make_solver, run_solver,
+    NOISE_TOL,
+    RTOL,
+    SCREEN_STALL_TOL,
+    SCREEN_TOL,
+    STALL_TOL,
+    FitInterrupted,
+    make_solver,
+    run_solver,
 )
 from .summary import entry_name
 from .uncertainty import block_index

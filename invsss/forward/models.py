@@ -11,9 +11,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..validation import InvalidInputError
 from .params import PARAM_NAMES
 from .pass_plan import LAYOUTS_WITH_PASSES, PassPlan, pass_plan
-from ..validation import InvalidInputError
 
 __all__ = [
     "LAYOUTS",

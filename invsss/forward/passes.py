@@ -38,7 +38,7 @@ def directional_pass(
     image: Float[Array, "H W C"],
     footprint: Float[Array, "H W"],
     mask: Float[Array, "H W"],
-    weights: Float[Array, "7"],
+    weights: Float[Array, " 7"],
     axis: int,
 ) -> Float[Array, "H W C"]:
     """``P(I; f)[y, x] = sum_k W_k I(y, x + t_k f[y, x])``, blended by the mask.

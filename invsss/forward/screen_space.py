@@ -30,17 +30,17 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ..validation import InvalidInputError, check_depth, check_image, check_mask, is_concrete
 from .burley_screen_space import check_burley_distances, render_burley
 from .light_terms import AFTER_BLUR, LightBuffers, LightTerms, apply_law, apply_light_terms
 from .models import MODEL_NAMES, get_model, resolve_tap_weights
+from .pair import fill_background_depth
 from .params import SSSParams, check_plausible
 from .pass_plan import pass_plan
 from .passes import directional_pass, pixel_coordinates, sample_along, tap_spread
 from .passes import tap_weights as tap_weight_set
 from .profiles import sum_of_gaussians
 from .stretch import stretch_factors
-from .pair import fill_background_depth
-from ..validation import InvalidInputError, check_depth, check_image, check_mask, is_concrete
 
 __all__ = [
     "MODELS",
@@ -125,7 +125,7 @@ def sog_layers(
     correction,
     maxdd,
     variances: Float[Array, " K"],
-    tap_weights: Float[Array, "7"] | str = "jimenez",
+    tap_weights: Float[Array, " 7"] | str = "jimenez",
 ) -> tuple[Float[Array, "K H W C"], Array]:
     """The blurred layers ``B_1..B_K`` of the ``sog`` model, by increasing variance.
 
@@ -172,7 +172,7 @@ def render_thesis(image, depth, mask, params: SSSParams, tap_weights="thesis"):
 
 
 def separable_kernel(
-    weights: Float[Array, "K *C"], variances: Float[Array, " K"], taps: int = 17, strength=1.0
+    weights: Float[Array, " K *C"], variances: Float[Array, " K"], taps: int = 17, strength=1.0
 ) -> tuple[Float[Array, " N"], Float[Array, "N C"]]:
     """Jimenez 2015's precomputed kernel: offsets (scene units) and weights (N, C).
 

@@ -41,7 +41,7 @@ TAP_WEIGHTS = {
 }
 
 
-def tap_weights(spec="jimenez", dtype=None) -> Float[Array, "7"]:
+def tap_weights(spec="jimenez", dtype=None) -> Float[Array, " 7"]:
     """The 7 tap weights named by ``spec`` ("jimenez", "thesis") or given as numbers."""
     if isinstance(spec, str):
         if spec not in TAP_WEIGHTS:
@@ -55,7 +55,7 @@ def tap_weights(spec="jimenez", dtype=None) -> Float[Array, "7"]:
     return w
 
 
-def tap_spread(weights: Float[Array, "7"]) -> Float[Array, ""]:
+def tap_spread(weights: Float[Array, " 7"]) -> Float[Array, ""]:
     """``c_W = sqrt(sum_k W_k t_k^2)``: a footprint ``f`` blurs with std ``c_W * f`` pixels."""
     t = jnp.asarray(TAP_OFFSETS, dtype=weights.dtype)
     return jnp.sqrt(jnp.sum(weights * t**2))

@@ -110,7 +110,9 @@ def sample_rows(sample: SampleSpec | None, name: str) -> list[dict]:
             and bounds[0] < bounds[1]
         )
         if not ok:
-            raise InvalidInputError(f"{name}: sample.ranges.{key}: expected [low, high] with low < high, got {bounds!r}")
+            raise InvalidInputError(
+                f"{name}: sample.ranges.{key}: expected [low, high] with low < high, got {bounds!r}"
+            )
         if key in sample.log and bounds[0] <= 0:
             raise InvalidInputError(f"{name}: sample.ranges.{key}: a log-scale range needs low > 0, got {bounds!r}")
         lows.append(math.log(bounds[0]) if key in sample.log else float(bounds[0]))

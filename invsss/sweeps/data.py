@@ -81,9 +81,10 @@ def resolve_pairs(data: DataSpec, root: str, name: str) -> list[dict]:
             for role, file in PAIR_FILES.items():
                 path = os.path.join(folder, file)
                 if not os.path.isfile(path):
+                    # A folder named outright, as the user wrote it ('../x/' is '.' relative to the file).
+                    shown = pattern if not glob.has_magic(pattern) else os.path.relpath(folder, root)
                     raise InvalidInputError(
-                        # A folder named outright, as the user wrote it ('../x/' is '.' relative to the file).
-                        f"{name}: data.pairs: {pattern if not glob.has_magic(pattern) else os.path.relpath(folder, root)!r}"
+                        f"{name}: data.pairs: {shown!r}"
                         f" has no {file} "
                         f"(a pair folder holds {', '.join(PAIR_FILES.values())})"
                     )

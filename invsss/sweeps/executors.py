@@ -139,7 +139,7 @@ class LocalExecutor:
         """How many trials to keep in flight."""
         return self.jobs
 
-    def __enter__(self) -> "LocalExecutor":
+    def __enter__(self) -> LocalExecutor:
         if not self.in_process:
             self._pool = concurrent.futures.ProcessPoolExecutor(
                 max_workers=self.jobs, mp_context=multiprocessing.get_context("spawn"),
@@ -199,7 +199,7 @@ class DaskExecutor:
         self._client = None
         self._cluster = None
 
-    def __enter__(self) -> "DaskExecutor":
+    def __enter__(self) -> DaskExecutor:
         from distributed import Client, LocalCluster
 
         if self.scheduler is None:

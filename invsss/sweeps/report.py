@@ -137,7 +137,7 @@ class _SampleKeys:
     log: frozenset = frozenset()
 
     @classmethod
-    def of(cls, meta: dict) -> "_SampleKeys":
+    def of(cls, meta: dict) -> _SampleKeys:
         # The experiment's own text is in the store; an older store, or one whose
         # text no longer parses, has no sampled axes as far as the plots know.
         try:
@@ -313,7 +313,6 @@ def _contact_sheets(plt, rows, axes, out, folder) -> list[str]:
 
 def _write_parquet(rows: list[dict], path: str) -> None:
     import pandas
-
     import pyarrow
 
     table = pandas.DataFrame(rows)

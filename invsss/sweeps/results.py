@@ -2,11 +2,14 @@
 
 One flat row per trial, the shape a table or a plot wants: ``id``,
 ``status`` (``pending``, ``running``, ``done``, ``failed``, or ``interrupted``: marked
-running by a sweep that no longer runs, which runs it again when resumed), ``task`` (a folder may hold the trials of several experiments), one column per varied key (``sss_level``, ``fix.maxdd``, ``pair``),
+running by a sweep that no longer runs, which runs it again when resumed), ``task`` (a
+folder may hold the trials of several experiments), one column per varied key
+(``sss_level``, ``fix.maxdd``, ``pair``),
 the metrics (``loss``, ``psnr``, ``ssim``, and for fits ``sigma``,
 ``converged``, ``iterations``), the parameters (``param.sss_level``,
 ``param.weights``...; ``param.light_shift``, ``param.grazing``, ``param.incidence`` and
-``param.law``, a list of albedos per source channel, where a trial fitted light terms), their standard errors (``stderr.sss_level``...),
+``param.law``, a list of albedos per source channel, where a trial fitted light terms),
+their standard errors (``stderr.sss_level``...),
 ``seconds`` (the trial's total time), ``compute_seconds`` (the fit or render
 alone), ``host``, ``pid``, ``attempts``, ``warnings`` and ``error``. A pandas
 ``DataFrame`` when pandas is installed (``pip install 'invsss[report]'``),
@@ -113,6 +116,8 @@ def results(out, *, frame: bool | None = None):
         import pandas
     except ImportError:
         if frame:
-            raise InvalidInputError("results(frame=True): pandas is not installed; pip install 'invsss[report]'") from None
+            raise InvalidInputError(
+                "results(frame=True): pandas is not installed; pip install 'invsss[report]'"
+            ) from None
         return rows
     return pandas.DataFrame(rows)

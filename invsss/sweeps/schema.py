@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-from typing import Literal, Optional, Union
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator
 
@@ -74,9 +74,9 @@ _STRICT = ConfigDict(extra="forbid", strict=True)
 
 _Numbers = list[float]
 # A profile: a name (thesis-nir, deon-skin, jensen-skin1), a JSON file, or numbers.
-_Profile = Union[str, dict[str, Union[_Numbers, list[_Numbers]]]]
+_Profile = str | dict[str, _Numbers | list[_Numbers]]
 # Tap weights: a set's name or 7 numbers.
-_Taps = Optional[Union[str, _Numbers]]
+_Taps = str | _Numbers | None
 
 
 class FileSet(BaseModel):
@@ -84,15 +84,15 @@ class FileSet(BaseModel):
     ``key`` and ``fill_light`` are the optional buffers of the light-aware terms."""
 
     model_config = _STRICT
-    name: Optional[str] = None
+    name: str | None = None
     source: str
     target: str
     depth: str
     mask: str
-    normal: Optional[str] = None
-    light: Optional[str] = None
-    key: Optional[str] = None
-    fill_light: Optional[str] = None
+    normal: str | None = None
+    light: str | None = None
+    key: str | None = None
+    fill_light: str | None = None
 
 
 class DataSpec(BaseModel):
@@ -120,14 +120,14 @@ class ExperimentSpec(BaseModel):
     """The whole file; ``base``, ``grid``, ``zip`` are checked against the task's options."""
 
     model_config = _STRICT
-    name: Optional[str] = None
+    name: str | None = None
     description: str = ""
     task: Literal["fit", "fit-joint", "render"]
     data: DataSpec
     base: dict = {}
     grid: dict = {}
     zip: dict = {}
-    sample: Optional[SampleSpec] = None
+    sample: SampleSpec | None = None
 
 
 class _FitTaskBase(BaseModel):
@@ -164,18 +164,18 @@ class _FitTaskBase(BaseModel):
 #: has none (TOML has no null or tuple); None keeps the field's own default.
 _TOML_FORMS = {
     "profile": (_Profile, None),
-    "fix": (dict[str, Union[float, _Numbers, list[_Numbers]]], {}),
+    "fix": (dict[str, float | _Numbers | list[_Numbers]], {}),
     "tap_weights": (_Taps, None),
     "robust": (str, None),
     "light_terms": (str, ""),
-    "saturation": (Union[Literal["auto"], float, None], None),
-    "canvas": (Optional[list[int]], None),
+    "saturation": (Literal["auto"] | float | None, None),
+    "canvas": (list[int] | None, None),
 }
 #: FitOptions fields an experiment file does not set (filled from others).
 _NOT_IN_FILES = ("light_fixed",)
 #: The annotations of the plain fields, as options.py writes them.
 _PLAIN_TYPES = {"bool": bool, "int": int, "float": float, "str": str,
-                "float | None": Optional[float], "str | None": Optional[str], "int | None": Optional[int]}
+                "float | None": float | None, "str | None": str | None, "int | None": int | None}
 
 
 def _fit_task_fields() -> dict:
@@ -229,8 +229,8 @@ class RenderTaskOptions(BaseModel):
     sss_level: float
     correction: float
     maxdd: float
-    weights: Optional[Union[_Numbers, list[_Numbers]]] = None
-    variances: Optional[_Numbers] = None
+    weights: _Numbers | list[_Numbers] | None = None
+    variances: _Numbers | None = None
 
 
 def nearest(key: str, known) -> str:

@@ -239,7 +239,7 @@ class ResultsStore:
             self._db.close()
             self._db = None
 
-    def __enter__(self) -> "ResultsStore":
+    def __enter__(self) -> ResultsStore:
         return self
 
     def __exit__(self, *exc) -> None:

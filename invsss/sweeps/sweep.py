@@ -88,7 +88,7 @@ class _SweepLock:
         self.path = os.path.join(out, LOCK_NAME)
         self._fd = None
 
-    def __enter__(self) -> "_SweepLock":
+    def __enter__(self) -> _SweepLock:
         fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)

@@ -137,7 +137,7 @@ class Trial:
         return {**dataclasses.asdict(self), "pairs": [dict(p) for p in self.pairs]}
 
     @classmethod
-    def from_dict(cls, content: dict) -> "Trial":
+    def from_dict(cls, content: dict) -> Trial:
         return cls(**{**content, "pairs": tuple(content["pairs"])})
 
 

@@ -22,9 +22,9 @@ from ...validation import InputNotice, InvalidInputError
 from ..canvas import frame_terms, unused_note
 from ..core import Fit, FitCall, estimate_of
 from ..inputs import prepare_pairs
+from ..pigment import pigment_at
 from ..registration import Warp, align_source, align_target, align_vectors, estimate_warp, match_photometry
 from ..result import FitResult
-from ..pigment import pigment_at
 from ..vignetting import vignetting_at
 
 __all__ = ["ALIGN_RIM_PX", "WarpSensitivity", "aligned"]
@@ -223,7 +223,7 @@ class WarpSensitivity:
                     moved, moved_depth, kept = align_source(
                         source, depth, mask, Warp(warp.kind, tuple(params), warp.centre), target.shape[:2])
                     shifted = eqx.tree_at(
-                        lambda o: (o.pairs[i].source, o.pairs[i].depth, o.pairs[i].mask), objective,
+                        lambda o, i=i: (o.pairs[i].source, o.pairs[i].depth, o.pairs[i].mask), objective,
                         (jnp.asarray(moved), jnp.asarray(moved_depth), jnp.asarray(kept)))
                     sides.append(np.asarray(_explicit_residual(shifted, z, coef, offset)))
                 out.append((sides[0] - sides[1]) / (2.0 * h))
