@@ -89,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
         # Interrupted raised inside a library's import or callback can come out as
         # another exception (a C extension's failed initialisation is an ImportError):
         # once it has been raised, whatever ends the command is that signal.
-        if not stop.raised:
+        if not stop.raised or stop.signum is None:  # raised implies a signum: the second test is for mypy
             raise
         return _interrupted(stop.signum)
     finally:

@@ -20,6 +20,7 @@ import tempfile
 import threading
 import time
 import warnings
+from collections.abc import Callable
 
 import numpy as np
 
@@ -163,7 +164,8 @@ def fit_options_from(args: argparse.Namespace) -> FitOptions:
 def saturation_level(text: str, targets: list[str]) -> float | None:
     """``--saturation``: a number, 'none', or 'auto' (the ``targets``' own clipping level)."""
     level = saturation_from_text(text)
-    return shared_clipping_level(targets) if level == "auto" else level
+    # "auto" is the only text saturation_from_text returns.
+    return shared_clipping_level(targets) if isinstance(level, str) else level
 
 
 def _check_pair_counts(args: argparse.Namespace) -> int:
@@ -226,8 +228,8 @@ def _run(args: argparse.Namespace, stop: StopSignals, notices: list[str]) -> int
     with ResultDir(args.out, overwrite=args.overwrite, names=names, inputs=_input_files(args, options),
                    advice=advice) as out:
         inputs = photo_pair.photo_inputs(args.source, args.target, args.depth, args.distance, args.mask,
-                                         fix=dict(options.fix), depth_scale=args.depth_scale,
-                                         linear_codes=args.linear_codes)
+                                         fix=dict(options.fix),  # type: ignore[call-overload]  # a mapping by now
+                                         depth_scale=args.depth_scale, linear_codes=args.linear_codes)
         pairs = inputs.pairs
         if args.distance:
             # One distance holds correction and maxdd (inputs.held says at what).
@@ -350,7 +352,7 @@ def _write_fit(out: ResultDir, names: list[str], result, pairs, inputs=None,
     content["warnings"] = list(dict.fromkeys([*notices, *content.get("warnings", ())]))
     if inputs is not None and inputs.record is not None:
         content["inputs"] = inputs.record  # a distance, made masks, held parameters
-    writers = {"params.json": lambda path: write_params(path, content)}
+    writers: dict[str, Callable[..., object]] = {"params.json": lambda path: write_params(path, content)}
     for name, image in zip(names[1:], result.fitted):
         writers[name] = lambda path, image=image: write_image(path, np.asarray(image, np.float32))
     mask_notes = None if inputs is None else inputs.mask_notes  # a doubtful mask's line on the figure

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 
 #: Wall-time intervals, by what filled them: "compile" (JAX's compile events) and
 #: "trial" (the executable cache trying an entry in a child process).
-_SPANS = {"compile": [], "trial": [], "listening": False}
+#: "listening": whether the listener is registered.
+_SPANS: dict[str, Any] = {"compile": [], "trial": [], "listening": False}
 
 
 class ProgressLine:
@@ -101,11 +103,11 @@ def _listen() -> None:
 
     from ..runtime.executable_entries import TRIAL_EVENT
 
-    def listen(event, duration, **_):
+    def listen(event: str, duration_secs: float, **_: str | int) -> None:
         kind = "compile" if event.startswith("/jax/core/compile/") else "trial" if event == TRIAL_EVENT else None
         if kind is not None:
             end = time.monotonic()
-            _SPANS[kind].append((end - duration, end))  # list.append is atomic
+            _SPANS[kind].append((end - duration_secs, end))  # list.append is atomic
 
     monitoring.register_event_duration_secs_listener(listen)
     _SPANS["listening"] = True

@@ -122,7 +122,8 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
             f"but {args.image} has {image.shape[2]} channel(s)"
         )
     terms, buffers = _render_light_terms(args, extras, image)
-    out = render(image, depth, mask, params, model, tap_weights=tap_weights, light_terms=terms,
+    # render takes the NumPy arrays as they are (it converts them); its annotations say jax Array.
+    out = render(image, depth, mask, params, model, tap_weights=tap_weights, light_terms=terms,  # type: ignore[arg-type]
                  light_buffers=buffers)
     write_image(args.out, np.asarray(out, dtype=np.float32))
     height, width, channels = image.shape

@@ -148,8 +148,9 @@ def _parameter_lines(result) -> list[str]:
     )
     lines.append(f"loss {float(result.loss):.4g}   PSNR {float(result.psnr):.2f} dB   SSIM {float(result.ssim):.4f}")
     lines.append(f"gain {_format_value(result.gain)}   offset {_format_value(result.offset)}")
-    if blur_line(getattr(result, "blur", None)):
-        lines.append(blur_line(result.blur))
+    blur = blur_line(getattr(result, "blur", None))
+    if blur:
+        lines.append(blur)
     if result.mix is not None:
         lines.append(f"RGB -> grey mix {_format_value(result.mix)}")
     for k, record in enumerate(getattr(result, "alignment", ()) or ()):
@@ -267,7 +268,8 @@ def _plot_profile(ax, result) -> None:
             d = np.maximum(np.sqrt(v), 1e-9)[None, :]
             profile = (np.exp(-r[:, None] / d) + np.exp(-r[:, None] / (3 * d))) / (8 * np.pi * d * r[:, None])
         else:
-            profile = sum_of_gaussians(r, w, v)  # NumPy in and out: no compilation
+            # NumPy in and out (no compilation), where the annotations say jax Array.
+            profile = sum_of_gaussians(r, w, v)  # type: ignore[arg-type]
         profile = profile.reshape(r.size, -1)
         for c in range(profile.shape[1]):
             name = label if profile.shape[1] == 1 else f"{label}, channel {c}"

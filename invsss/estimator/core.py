@@ -109,7 +109,8 @@ def core(call: FitCall) -> FitResult:
             result = call.after_solve(problem, path, result)
     # Rebuild the parameters outside float64 mode: the caller gets arrays of their
     # own default precision, ready for render().
-    params = SSSParams(*(np.asarray(result.values[k]) for k in PARAM_NAMES))  # host arrays: no compile
+    # Host arrays on purpose (no compile), where SSSParams's fields are annotated as jax Arrays.
+    params = SSSParams(*(np.asarray(result.values[k]) for k in PARAM_NAMES))  # type: ignore[arg-type]
     return dataclasses.replace(
         result, params=params, solver=options.solver, profile=options.profile_label,
         tap_weights=options.tap_label,

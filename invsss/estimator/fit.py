@@ -128,7 +128,7 @@ def fit_pair(
     600
     """
     if light_buffers is None:
-        pair = (source, target, depth, mask)
+        pair: ImagePair | tuple = (source, target, depth, mask)
     elif isinstance(light_buffers, LightBuffers):
         pair = ImagePair(source, target, depth, mask, normal=light_buffers.normal, light=light_buffers.light,
                          key=light_buffers.key, fill_light=light_buffers.fill_light)

@@ -45,7 +45,7 @@ def check_canvas(canvas) -> tuple[int, int]:
     """
     ok = (
         isinstance(canvas, (tuple, list)) and len(canvas) == 2
-        and all(isinstance(n, numbers.Integral) and not isinstance(n, bool) and n >= 1 for n in canvas)
+        and all(isinstance(n, numbers.Integral) and not isinstance(n, bool) and int(n) >= 1 for n in canvas)
     )
     if not ok:
         raise InvalidInputError(f"canvas: expected (height, width), two integers >= 1, got {canvas!r}", field="canvas")
@@ -68,7 +68,7 @@ def _option(default, help: str, *, flag: str | None = "", parse=None, cli_defaul
     return dataclasses.field(default=default, metadata=metadata)
 
 
-def _align_kinds() -> tuple[str, ...]:
+def _align_kinds() -> dict[str, int]:
     # Imported when first needed: registration pulls in scikit-image.
     from .registration import ALIGN_KINDS
 
@@ -374,7 +374,7 @@ def _held_albedo(value) -> float | tuple[float, ...]:
     return float(w) if w.ndim == 0 else tuple(float(x) for x in w)
 
 
-def check_light_terms(terms) -> tuple[tuple[str, ...], dict[str, float]]:
+def check_light_terms(terms) -> tuple[tuple[str, ...], dict[str, float | tuple[float, ...]]]:
     """``(names, held)``: the terms in canonical order and the values of those held fixed.
 
     ``terms``: names (a sequence, or one comma-separated string; "none" or empty
@@ -394,10 +394,10 @@ def check_light_terms(terms) -> tuple[tuple[str, ...], dict[str, float]]:
         return (), {}
     if isinstance(terms, str):
         parts = [] if terms.strip() in ("", "none") else [t.strip() for t in terms.split(",")]
-        entries = {}
+        entries: dict[str, str | None] = {}
         for part in parts:
-            name, _, value = part.partition("=")
-            entries[name.strip()] = value.strip() if value else None
+            name, _, text = part.partition("=")
+            entries[name.strip()] = text.strip() if text else None
     elif hasattr(terms, "items"):
         entries = dict(terms)
     else:
@@ -412,7 +412,7 @@ def check_light_terms(terms) -> tuple[tuple[str, ...], dict[str, float]]:
             f"light_terms: unknown term(s) {', '.join(map(repr, unknown))}; expected some of "
             + ", ".join(LIGHT_TERM_NAMES)
         )
-    held = {}
+    held: dict[str, float | tuple[float, ...]] = {}
     for name, value in entries.items():
         if value is None:
             continue

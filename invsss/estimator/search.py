@@ -282,8 +282,8 @@ def active_set(problem, path, run, prefix: str = "") -> None:
         negative = (coef * np.sign(coef.sum(axis=0)) < 0) & (active > 0)
         if not negative.any():
             break
-        active = jnp.asarray(np.where(negative, 0.0, active))
-        path.objective = eqx.tree_at(lambda o: o.active, path.objective, active)
+        held_out = jnp.asarray(np.where(negative, 0.0, active))
+        path.objective = eqx.tree_at(lambda o: o.active, path.objective, held_out)
         if not path.interrupted:
             path.extend(run(path, f"{prefix}active set {round_ + 1}", path.z))
     held = np.asarray(path.objective.active) == 0

@@ -23,6 +23,8 @@ valid (H, W, C) inputs.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -241,7 +243,7 @@ def _render_kernel(image, depth, mask, params, tap_w, taps=17, strength=1.0, fol
 #: The renderer of each layout of :data:`invsss.forward.models.LAYOUTS`, called as
 #: ``f(image, depth, mask, params, tap_w, **kernel_options)`` with (H, W, C)
 #: inputs; only the kernel layout takes options.
-LAYOUT_RENDERERS = {
+LAYOUT_RENDERERS: dict[str, Callable[..., Any]] = {
     "layered": render_sog,
     "chained": render_thesis,
     "kernel": _render_kernel,
@@ -358,7 +360,8 @@ def render(
     """
     entry = get_model(model)
     check_image(image)
-    hw = tuple(np.shape(image)[:2])
+    height, width = np.shape(image)[:2]  # check_image has seen 2 or 3 axes
+    hw = (height, width)
     check_mask(mask, hw)
     check_depth(depth, hw, mask=mask)
     # Renderer-style background depth (0, inf) must not reach the model: see
@@ -392,9 +395,10 @@ def render(
             raise InvalidInputError(str(err)) from None
     depth, mask = jnp.asarray(depth, dtype), jnp.asarray(mask, dtype)
     buffers = None if light_terms is None else _light_buffers(light_terms, light_buffers, hw, mask, channels)
-    if buffers is not None and {"law", "fill"} & set(light_terms.used):
+    # buffers is None exactly when light_terms is: both tests are for mypy's sake.
+    if light_terms is not None and buffers is not None and {"law", "fill"} & set(light_terms.used):
         image = apply_law(image, mask, light_terms.law, buffers, light_terms.law_strength, light_terms.fill)
     out = _render(image, depth, mask, params, entry.name, tap_w, taps, strength, follow_surface)
-    if buffers is not None and any(t in light_terms.used for t in AFTER_BLUR):
+    if light_terms is not None and buffers is not None and any(t in light_terms.used for t in AFTER_BLUR):
         out = apply_light_terms(out, depth, mask, params, light_terms, buffers)
     return out[..., 0] if squeeze else out

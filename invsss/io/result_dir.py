@@ -400,7 +400,9 @@ class ResultDir:
 
     # ------------------------------------------------------------------ commit
 
-    def commit(self, writers: Mapping[str, Callable[[str], object]], info: Mapping | None = None) -> list[str]:
+    def commit(
+        self, writers: Mapping[str, Callable[[str], object]], info: Mapping | Callable[[], Mapping] | None = None
+    ) -> list[str]:
         """Write the result: ``writers[name](path)`` writes file ``name`` at ``path``.
 
         Every writer runs first, into a staging folder; the directory changes

@@ -50,9 +50,13 @@ import signal
 import sys
 import threading
 import time
+from typing import TYPE_CHECKING
 
 from ..validation import InvalidInputError
 from .runner import execute
+
+if TYPE_CHECKING:
+    from distributed import Client, LocalCluster
 
 __all__ = ["EXECUTORS", "LocalExecutor", "DaskExecutor", "make_executor"]
 
@@ -128,7 +132,7 @@ class LocalExecutor:
 
     def __init__(self, jobs: int = 1):
         self.jobs = _check_jobs(jobs)
-        self._pool = None
+        self._pool: concurrent.futures.ProcessPoolExecutor | None = None
 
     @property
     def in_process(self) -> bool:
@@ -156,6 +160,8 @@ class LocalExecutor:
         return "in this process" if self.in_process else f"{self.jobs} local worker processes"
 
     def submit(self, trial: dict, out: str):
+        # The sweep submits only to a pool (jobs > 1, inside "with"); jobs=1 runs in process.
+        assert self._pool is not None, "LocalExecutor.submit needs jobs > 1 and a 'with' block"
         return self._pool.submit(execute, trial, out)
 
     def wait(self, futures, timeout: float):
@@ -196,8 +202,8 @@ class DaskExecutor:
         self.jobs = None if jobs is None else _check_jobs(jobs)
         self.processes = processes
         self.in_process = False
-        self._client = None
-        self._cluster = None
+        self._client: Client | None = None
+        self._cluster: LocalCluster | None = None
 
     def __enter__(self) -> DaskExecutor:
         from distributed import Client, LocalCluster
@@ -238,6 +244,7 @@ class DaskExecutor:
     def submit(self, trial: dict, out: str):
         from ..runtime.compile_cache import cache_disabled
 
+        assert self._client is not None, "DaskExecutor.submit needs a 'with' block"
         return self._client.submit(
             _execute_on_dask_worker, trial, out, not cache_disabled(),
             key=f"invsss-trial-{trial['id']}", pure=False,

@@ -219,7 +219,8 @@ def load(path, *, max_trials: int = MAX_TRIALS) -> Experiment:
     rows = combine([grid_rows(spec.grid, name), zip_rows(spec.zip, name), sample_rows(spec.sample, name)], name)
     rows = _pair_rows(spec, rows, pairs, name)
     by_name = {p["name"]: p for p in pairs}
-    trials, seen = [], {}
+    trials: list[Trial] = []
+    seen: dict[str, int] = {}  # trial id -> index of the row that made it
     for index, row in enumerate(rows):
         label = _label(index, {k: v for k, v in row.items() if k != "pair"})
         options = resolve_options(spec.task, spec.base, row, name, label, sampled)

@@ -44,8 +44,10 @@ def _load(trial: Trial) -> list:
 
     pairs = []
     for pair in trial.pairs:
-        data = load_pair(*(os.path.join(trial.root, pair[role]) for role in ("source", "target", "depth", "mask")),
-                         depth_scale=trial.depth_scale, linear_codes=trial.linear_codes)
+        source, target, depth, mask = (
+            os.path.join(trial.root, pair[role]) for role in ("source", "target", "depth", "mask")
+        )
+        data = load_pair(source, target, depth, mask, depth_scale=trial.depth_scale, linear_codes=trial.linear_codes)
         if trial.options.get("light_terms"):
             # Only a trial with light terms reads the buffers it uses; the fit checks
             # them. The key light's image is read as the source is (one channel for
@@ -55,7 +57,8 @@ def _load(trial: Trial) -> list:
                                         linear=trial.linear_codes if role == "key" else True,
                                         grey=grey and role == "key")
                        for role in trial.buffer_roles if role in pair}
-            data = dataclasses.replace(data, **buffers)
+            # ImagePair keeps the NumPy arrays as given; its fields are annotated as jax Arrays.
+            data = dataclasses.replace(data, **buffers)  # type: ignore[arg-type]
         pairs.append(data)
     return pairs
 

@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model, field_validator
 
@@ -162,7 +162,7 @@ class _FitTaskBase(BaseModel):
 
 #: The TOML spelling (type, default) of the FitOptions fields whose Python value
 #: has none (TOML has no null or tuple); None keeps the field's own default.
-_TOML_FORMS = {
+_TOML_FORMS: dict[str, tuple[Any, Any]] = {
     "profile": (_Profile, None),
     "fix": (dict[str, float | _Numbers | list[_Numbers]], {}),
     "tap_weights": (_Taps, None),

@@ -192,7 +192,7 @@ class ResultsStore:
     def __init__(self, directory, *, readonly: bool = False, rebuilding: bool = False):
         self.directory = os.fspath(directory)
         self.path = os.path.join(self.directory, DATABASE_NAME)
-        self._db = None
+        self._db: sqlite3.Connection | None = None
         try:
             self._open(readonly, rebuilding)
         except sqlite3.Error as err:
@@ -239,6 +239,12 @@ class ResultsStore:
             self._db.close()
             self._db = None
 
+    @property
+    def _open_db(self) -> sqlite3.Connection:
+        """The connection; a store is used only between opening and :meth:`close`."""
+        assert self._db is not None, f"{self.path}: the results store is closed"
+        return self._db
+
     def __enter__(self) -> ResultsStore:
         return self
 
@@ -247,15 +253,15 @@ class ResultsStore:
 
     @_guarded
     def set_meta(self, **values) -> None:
-        with self._db:
-            self._db.executemany(
+        with self._open_db:
+            self._open_db.executemany(
                 "INSERT INTO meta (key, value) VALUES (?, ?) ON CONFLICT(key) DO UPDATE SET value = excluded.value",
                 [(k, json.dumps(v)) for k, v in values.items()],
             )
 
     def meta(self) -> dict:
         try:
-            rows = self._db.execute("SELECT key, value FROM meta").fetchall()
+            rows = self._open_db.execute("SELECT key, value FROM meta").fetchall()
         except sqlite3.OperationalError:
             return {}
         return {k: json.loads(v) for k, v in rows}
@@ -267,36 +273,36 @@ class ResultsStore:
         ``trials`` are mappings with ``id``, ``index``, ``task``, ``config``, ``axes``.
         Known ids keep their row (and status): that is what resuming means.
         """
-        with self._db:
-            before = self._db.total_changes
-            self._db.executemany(
+        with self._open_db:
+            before = self._open_db.total_changes
+            self._open_db.executemany(
                 "INSERT OR IGNORE INTO trials (id, position, task, config, axes, status) "
                 "VALUES (?, ?, ?, ?, ?, 'pending')",
                 [(t["id"], t["index"], t["task"], _dumps(t["config"]), _dumps(t["axes"])) for t in trials],
             )
-            return self._db.total_changes - before
+            return self._open_db.total_changes - before
 
     @_guarded
     def to_run(self, ids) -> list[str]:
         """The ids among ``ids`` that are not ``done``, in the given order."""
-        done = {row[0] for row in self._db.execute("SELECT id FROM trials WHERE status = 'done'")}
+        done = {row[0] for row in self._open_db.execute("SELECT id FROM trials WHERE status = 'done'")}
         return [i for i in ids if i not in done]
 
     @_guarded
     def mark_running(self, trial_id: str) -> int:
         """Mark a trial running; return its attempts so far, this one included."""
-        with self._db:
-            self._db.execute(
+        with self._open_db:
+            self._open_db.execute(
                 "UPDATE trials SET status = 'running', attempts = attempts + 1 WHERE id = ?", (trial_id,)
             )
-        row = self._db.execute("SELECT attempts FROM trials WHERE id = ?", (trial_id,)).fetchone()
+        row = self._open_db.execute("SELECT attempts FROM trials WHERE id = ?", (trial_id,)).fetchone()
         return row[0] if row else 1
 
     @_guarded
     def mark_pending(self, trial_ids) -> None:
         """Give abandoned trials back (an interrupted sweep): they run next time."""
-        with self._db:
-            self._db.executemany(
+        with self._open_db:
+            self._open_db.executemany(
                 "UPDATE trials SET status = 'pending' WHERE id = ? AND status = 'running'",
                 [(i,) for i in trial_ids],
             )
@@ -305,8 +311,8 @@ class ResultsStore:
     def record(self, outcome: dict) -> None:
         """Store a finished trial's outcome (see :func:`.runner.execute`); with
         ``attempts`` in ``outcome``, that count too (a rebuilt row)."""
-        with self._db:
-            self._db.execute(
+        with self._open_db:
+            self._open_db.execute(
                 "UPDATE trials SET status = ?, params = ?, stderr = ?, metrics = ?, warnings = ?, "
                 "timings = ?, host = ?, pid = ?, started = ?, finished = ?, error = ?, "
                 "attempts = COALESCE(?, attempts) WHERE id = ?",
@@ -322,7 +328,7 @@ class ResultsStore:
     @_guarded
     def counts(self, ids=None) -> dict:
         """``{status: count}`` over ``ids`` (default: every row)."""
-        rows = self._db.execute("SELECT id, status FROM trials").fetchall()
+        rows = self._open_db.execute("SELECT id, status FROM trials").fetchall()
         wanted = None if ids is None else set(ids)
         counts = dict.fromkeys(STATUSES, 0)
         for trial_id, status in rows:
@@ -333,7 +339,7 @@ class ResultsStore:
     @_guarded
     def rows(self) -> list[dict]:
         """Every trial as a dict, JSON columns decoded, in expansion order."""
-        cursor = self._db.execute("SELECT * FROM trials ORDER BY position, id")
+        cursor = self._open_db.execute("SELECT * FROM trials ORDER BY position, id")
         names = [d[0] for d in cursor.description]
         rows = []
         for values in cursor.fetchall():

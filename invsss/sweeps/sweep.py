@@ -86,7 +86,7 @@ class _SweepLock:
 
     def __init__(self, out: str):
         self.path = os.path.join(out, LOCK_NAME)
-        self._fd = None
+        self._fd: int | None = None
 
     def __enter__(self) -> _SweepLock:
         fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
@@ -334,7 +334,7 @@ def _drive(executor, store, out, queue, statuses, stop, progress, running) -> bo
             progress.finished(outcome, statuses.get(trial["id"]), trial.get("axes"))
         return False
     queue = list(queue)
-    in_flight = {}
+    in_flight: dict[object, dict] = {}  # the executor's future -> its trial
     told = False
     while queue or in_flight:
         while queue and len(in_flight) < executor.slots and not stop():

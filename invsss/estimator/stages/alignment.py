@@ -152,7 +152,7 @@ def _notes(options, warps, checked) -> tuple[str, ...]:
     # How far the warp moves the mask's corners from where they were: zero parameters are the identity.
     resampled = max(warp_change(w, Warp(w.kind, (0.0,) * len(w.params), w.centre), mask)
                     for w, (_, _, _, mask, _) in zip(warps, checked))
-    messages = ()
+    messages: tuple[str, ...] = ()
     if options.canvas is not None:
         messages += (unused_note(frame_terms(options)),)
     if resampled > ALIGN_SETTLED_PX:
@@ -222,8 +222,9 @@ class WarpSensitivity:
                     params[j] += sign * h
                     moved, moved_depth, kept = align_source(
                         source, depth, mask, Warp(warp.kind, tuple(params), warp.centre), target.shape[:2])
+                    # tree_at calls the lambda at once, within this iteration (B023 looks for a late call).
                     shifted = eqx.tree_at(
-                        lambda o, i=i: (o.pairs[i].source, o.pairs[i].depth, o.pairs[i].mask), objective,
+                        lambda o: (o.pairs[i].source, o.pairs[i].depth, o.pairs[i].mask), objective,  # noqa: B023
                         (jnp.asarray(moved), jnp.asarray(moved_depth), jnp.asarray(kept)))
                     sides.append(np.asarray(_explicit_residual(shifted, z, coef, offset)))
                 out.append((sides[0] - sides[1]) / (2.0 * h))
@@ -238,7 +239,7 @@ class WarpSensitivity:
             if self.stderr is not None:
                 err = [None if not np.isfinite(e) else float(e) for e in self.stderr[first:first + n]]
                 first += n
-                stderr = {"shift_px": err[:2]}
+                stderr: dict[str, list[float | None] | float | None] = {"shift_px": err[:2]}
                 if warp.kind == "similarity":
                     stderr["rotation_deg"] = None if err[2] is None else float(np.degrees(err[2]))
                     stderr["scale"] = None if err[3] is None else float(np.exp(warp.params[3]) * err[3])

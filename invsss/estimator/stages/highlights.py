@@ -49,7 +49,8 @@ def without_highlights(inner: Fit) -> Fit:
             counts.append(int(bright.sum()))
             fractions.append(counts[-1] / max(float(region.sum()), 1.0))
             keep = np.where(bright, 0.0, 1.0 if pair.fit_weight is None else np.asarray(pair.fit_weight))
-            pairs.append(dataclasses.replace(pair, fit_weight=keep if (keep * np.asarray(pair.mask)).any() else None))
+            # ImagePair keeps the NumPy weight as given; the field is annotated as a jax Array.
+            pairs.append(dataclasses.replace(pair, fit_weight=keep if (keep * np.asarray(pair.mask)).any() else None))  # type: ignore[arg-type]
         record = {
             "method": f"residual of a first fit smoothed over 1 px, brighter than the prediction by "
                       f"{HIGHLIGHT_SIGMAS:g} robust standard deviations, dilated by 1 px",

@@ -172,7 +172,8 @@ def unlike_any_medium(pairs, record) -> list[str]:
                 continue
             part = np.asarray(pair.key if strength == "law_strength" else pair.source - pair.key, np.float64)
             part = np.abs(part) * np.asarray(pair.mask, np.float64)[..., None]
-            excess = np.asarray(law_excess(pair.normal, getattr(pair, direction), albedo, nearest), np.float64)
+            # law_excess takes the NumPy albedo as it is; its annotation says jax Array.
+            excess = np.asarray(law_excess(pair.normal, getattr(pair, direction), albedo, nearest), np.float64)  # type: ignore[arg-type]
             outside += float(np.sum(part * (excess > EXCESS_TOLERANCE)))
             total += float(np.sum(part * np.ones_like(excess)))
         if total > 0 and outside / total > UNLIKE_ANY_MEDIUM_SHARE:

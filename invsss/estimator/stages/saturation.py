@@ -35,7 +35,8 @@ def unsaturated(inner: Fit) -> Fit:
                                             f"{saturation:g}", field=name)
                 messages.append(f"{name}: {count} masked pixel(s) at or above the saturation level "
                                 f"{saturation:g} (clipped) left out of the fit")
-            out.append(dataclasses.replace(pair, fit_weight=keep if count else pair.fit_weight))
+            # ImagePair keeps the NumPy weight as given; the field is annotated as a jax Array.
+            out.append(dataclasses.replace(pair, fit_weight=keep if count else pair.fit_weight))  # type: ignore[arg-type]
         result = inner(dataclasses.replace(call, pairs=out))
         return dataclasses.replace(result, warnings=tuple(messages) + tuple(result.warnings))
 
