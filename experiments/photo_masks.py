@@ -7,7 +7,7 @@ anything), each made into four pairs from the one photograph: green channel and 
 channel (two bands, as visible and 940 nm are), the colour photograph and a copy blurred
 by a Gaussian of 1.5 px, the colour photograph and its red channel, and the green
 channel and its blurred copy (one band twice: no colour and no band ratio to tell skin
-by). Reference: the faces drawn by hand in ``tests/test_photo_mask.py``. Then
+by). Reference: the faces drawn by hand in ``tests/io/_portraits.py``. Then
 ``skimage.data.camera()`` (a face in profile, which the frontal-face cascade should
 not find). Bundled pairs: each pair's own mask, source and target as the two images
 (data_synthetic/SPLIT.toml's tuning and held-out parts; the model-made pairs apart).
@@ -37,7 +37,7 @@ DATA = ROOT / "data_synthetic"
 
 
 def _tests():
-    spec = importlib.util.spec_from_file_location("test_photo_mask", ROOT / "tests" / "test_photo_mask.py")
+    spec = importlib.util.spec_from_file_location("portraits", ROOT / "tests" / "io" / "_portraits.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

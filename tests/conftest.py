@@ -87,3 +87,13 @@ def _restore_cache_variables():
             os.environ.pop(name, None)
         else:
             os.environ[name] = value
+
+
+@pytest.fixture
+def float64():
+    """JAX's float64 mode for this test alone, so that the other tests in the same worker
+    keep its float32 default: for tests compared against float64 references."""
+    import jax
+
+    with jax.enable_x64(True):
+        yield

@@ -34,7 +34,7 @@ from .pigment import num_terms
 from .uncertainty import linearise
 from .vignetting import ORDER as VIGNETTING_ORDER
 
-__all__ = ["FitProblem", "build_problem", "evaluate"]
+__all__ = ["FitProblem", "build_problem", "evaluate", "scan_losses"]
 
 
 #: Where the law's albedo starts: between the 940 nm faces' fitted 0.93-0.95 and
@@ -235,9 +235,14 @@ def _when(flag, compute):
     )
 
 
-def _scan_losses(objective):
-    """``losses(points)``: the loss at each unknown vector of a list, in order,
-    evaluated by :data:`SCAN_THREADS` threads (the start scan's evaluator)."""
+def scan_losses(objective):
+    """``losses(points)``: the loss at each unknown vector of a list, in order, in float64,
+    evaluated by :data:`SCAN_THREADS` threads (the start scan's evaluator).
+
+    ``objective`` is a :class:`FitProblem`'s; the first point is evaluated alone (it
+    may compile or load :func:`evaluate`, which the threads then share), and float64
+    mode is switched on in each thread, as it is a per-thread setting in JAX.
+    """
 
     def one(z):
         # float64 mode is a per-thread setting.
@@ -352,7 +357,7 @@ class FitProblem:
             self.starts = tuple(
                 _on_device(z)
                 for z in choose_starts(
-                    _scan_losses(self.objective), self.param, self.scales, blur0, self.z_base, options.n_starts
+                    scan_losses(self.objective), self.param, self.scales, blur0, self.z_base, options.n_starts
                 )
             )
             if nested is not None:

@@ -83,6 +83,9 @@ __all__ = [
     "filter_radius",
     "sample_counts",
     "rotation_phases",
+    "gradient_noise",
+    "downsampled",
+    "in_cache",
     "render_hdrp_like",
 ]
 
@@ -175,7 +178,7 @@ def rotation_phases(height: int, width: int, key: int) -> np.ndarray:
     return 2.0 * math.pi * (hashed & np.uint32(0x7FFFFF)).astype(np.float64) / 2.0**23
 
 
-def _gradient_noise(rows: np.ndarray, cols: np.ndarray, frame: int) -> np.ndarray:
+def gradient_noise(rows: np.ndarray, cols: np.ndarray, frame: int) -> np.ndarray:
     """Jimenez's interleaved gradient noise of pixel ``(cols, rows)`` at ``frame``, in [0, 1)."""
     x = cols + 2.083 * frame
     y = rows + 4.867 * frame
@@ -183,7 +186,7 @@ def _gradient_noise(rows: np.ndarray, cols: np.ndarray, frame: int) -> np.ndarra
     return np.mod(52.9829189 * inner, 1.0)
 
 
-def _downsampled(stack: np.ndarray, steps: int, frame: int) -> np.ndarray:
+def downsampled(stack: np.ndarray, steps: int, frame: int) -> np.ndarray:
     """One pixel of every ``2^steps`` block, picked by gradient noise: shape (h', w', k).
 
     The pick ``index`` in ``[0, 4^steps)`` moves ``index // 2^steps`` pixels along x and
@@ -192,7 +195,7 @@ def _downsampled(stack: np.ndarray, steps: int, frame: int) -> np.ndarray:
     scale = 1 << steps
     h, w, k = stack.shape
     rows, cols = np.mgrid[0:-(-h // scale), 0:-(-w // scale)].astype(np.float64)
-    index = (_gradient_noise(rows, cols, frame) * scale * scale).astype(np.int64)
+    index = (gradient_noise(rows, cols, frame) * scale * scale).astype(np.int64)
     src_r = rows.astype(np.int64) * scale + index % scale
     src_c = cols.astype(np.int64) * scale + index // scale
     inside = (src_r < h) & (src_c < w)
@@ -200,7 +203,7 @@ def _downsampled(stack: np.ndarray, steps: int, frame: int) -> np.ndarray:
     return out * inside[..., None]
 
 
-def _in_cache(rows, cols, y, x) -> np.ndarray:
+def in_cache(rows, cols, y, x) -> np.ndarray:
     """Whether sample pixel ``(y, x)`` lies in the cache of the tile of pixel ``(rows, cols)``:
     the tile's 16 x 16 pixels and 2 more on every side."""
     top = (rows // TILE) * TILE - CACHE_BORDER
@@ -378,7 +381,7 @@ def _one_frame(image, depth, mask, d, level, counts, options, key) -> np.ndarray
     phase = rotation_phases(h, w, key)[rows, cols] if options["rotate"] else np.zeros(rows.size)
     stack = np.concatenate([image, mask[..., None]], axis=-1)
     steps = options["downsample_steps"]
-    coarse = _downsampled(stack, steps, key) if steps else stack
+    coarse = downsampled(stack, steps, key) if steps else stack
     radii = np.zeros((int(n.max(initial=0)) + 1, int(n.max(initial=0))))
     for count in np.unique(n):
         radii[count, :count] = unit_radii(int(count))
@@ -396,7 +399,7 @@ def _one_frame(image, depth, mask, d, level, counts, options, key) -> np.ndarray
             y, x = np.clip(y, 0, h - 1), np.clip(x, 0, w - 1)
             read = stack[y, x] * inside[:, None]
             if steps:
-                far = ~_in_cache(rows[on], cols[on], y, x)
+                far = ~in_cache(rows[on], cols[on], y, x)
                 read[far] = coarse[y[far] >> steps, x[far] >> steps] * inside[far, None]
             z = depth[y, x]
         else:

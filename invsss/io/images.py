@@ -50,6 +50,7 @@ __all__ = [
     "JPEG_GREY_CODES",
     "clipping_level",
     "finish_pair",
+    "is_grey_rgb",
     "load_pair",
     "read_colour_pair",
     "read_image",
@@ -167,7 +168,7 @@ def _read_colour(path, linear: bool) -> tuple[np.ndarray, bool]:
             field=name,
         )
     check_image(image, name)
-    return np.ascontiguousarray(image), _is_grey_rgb(raster)
+    return np.ascontiguousarray(image), is_grey_rgb(raster)
 
 
 #: How far apart, in 8-bit codes, a JPEG's channels may lie and still be one grey.
@@ -179,7 +180,7 @@ def _read_colour(path, linear: bool) -> tuple[np.ndarray, bool]:
 JPEG_GREY_CODES = 1
 
 
-def _is_grey_rgb(raster: Raster) -> bool:
+def is_grey_rgb(raster: Raster) -> bool:
     """Whether a three-channel image's channels are identical to within the file's precision.
 
     Compared on the stored codes: integer codes exactly (a JPEG's to within

@@ -1,0 +1,1 @@
+"""Tests of invsss/forward/: the models, profiles, passes, light terms and render."""

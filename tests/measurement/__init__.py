@@ -1,0 +1,1 @@
+"""Tests of invsss/measurement/: profile measurement, sum-of-Gaussians and dipole fits."""

@@ -1,0 +1,1 @@
+"""Tests of invsss/runtime/: the compilation and executable caches, the deterministic scheduler."""

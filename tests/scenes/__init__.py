@@ -1,0 +1,1 @@
+"""Tests of invsss/scenes/ and the path-traced pairs it made."""

@@ -1,0 +1,1 @@
+"""Tests of the sweep engine, invsss/sweeps/: experiment files, trials, stores, reports."""

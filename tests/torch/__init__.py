@@ -1,0 +1,1 @@
+"""Tests of invsss/torch/: the PyTorch twin, against the JAX forward model."""
