@@ -699,7 +699,7 @@ back `truth.json`.
 
 Made by `python experiments/make_synthetic.py` (run from the repository root; about
 20 s on one CPU core). The script is seeded: running it again rewrites these files
-byte for byte on the same platform. `tests/test_synthetic_data.py` loads every scene
+byte for byte on the same platform. `tests/scripts/test_synthetic_data.py` loads every scene
 and checks that the target equals the recorded model plus noise of the recorded size.
 
 ## Files in each scene folder

@@ -10,7 +10,7 @@ fit_dipole) and the fitted sigma_s' and sigma_a are compared with the medium's.
     python experiments/profile_slab.py [--spp 256] [--medium thesis-940] [--out DIR]
 
 Too slow for CI on two cores (minutes); the CI test of the same pipeline on a
-dipole-made image is tests/test_profile_pipeline.py.
+dipole-made image is tests/measurement/test_profile_pipeline.py.
 
 Measured (Mitsuba 3.9.1 scalar_rgb, 2 CPU cores, thesis-940: sigma_s' 0.7748,
 sigma_a 0.02808 /mm), the check does NOT pass its 10 % target yet:

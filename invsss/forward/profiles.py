@@ -311,7 +311,7 @@ JENSEN_SKIN1: Mapping[str, Any] = MappingProxyType(
 # Five Gaussians fitted to the skin1 dipole above, shared variances and RGB weights, by
 # experiments/fit_profiles.py (invsss.fit_sum_of_gaussians, r in [0, 8] mm, 121
 # samples, r-weighted). Within 1.8 % of the dipole wherever it is above 1 % of its peak
-# (tests/test_profiles.py checks); the red total is 3 % low, the tail past 8 mm.
+# (tests/forward/test_profiles.py checks); the red total is 3 % low, the tail past 8 mm.
 JENSEN_SKIN1_SOG = MappingProxyType(
     {
         "variances": (0.097571, 0.293648, 0.887742, 3.107986, 14.331783),

@@ -140,7 +140,7 @@ def constant_depth_pair(source, target, distance_mm, mask=None) -> ImagePair:
     (600.0, 600.0, 80)
 
     Then ``invsss.fit_pairs([pair], fix=HELD_WITH_CONSTANT_DEPTH)`` (as
-    ``tests/test_photo_pair.py`` does) measures ``sss_level / 600``.
+    ``tests/cli/test_photo_pair.py`` does) measures ``sss_level / 600``.
     """
     source = np.asarray(source)
     if mask is None:

@@ -44,9 +44,9 @@ The result is 0/1 float32, written beside the fit as ``mask_used.png`` by ``invs
 (docs/capture.md) so that it can be inspected, edited and given back with ``--mask``;
 ``params.json`` records the rule and the checks (``inputs.pairs[k].mask``).
 
-Measured against the bundled pairs' own masks (``tests/test_skin_mask.py``,
+Measured against the bundled pairs' own masks (``tests/io/test_skin_mask.py``,
 ``experiments/twowave_fit.py --masks``) and hand-drawn faces on two portraits
-(``tests/test_photo_mask.py``): docs/capture.md, "A skin mask from the pair".
+(``tests/io/test_photo_mask.py``): docs/capture.md, "A skin mask from the pair".
 """
 
 from __future__ import annotations
