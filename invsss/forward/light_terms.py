@@ -347,7 +347,8 @@ class LightBuffers(eqx.Module):
                 if getattr(self, buffer) is None:
                     what = ("the source lit by the key light alone, shape (H, W, C)" if buffer == "key"
                             else "camera-space unit vectors, shape (H, W, 3)")
-                    raise InvalidInputError(f"{prefix}{buffer}: the {term!r} term needs this buffer ({what})")
+                    raise InvalidInputError(f"{prefix}{buffer}: the {term!r} term needs this buffer ({what})",
+                                            field=f"{prefix}{buffer}")
 
 
 def propagation_offsets(light: Float[Array, "H W 3"]) -> Float[Array, "H W 2"]:
