@@ -89,6 +89,25 @@ def _restore_cache_variables():
             os.environ[name] = value
 
 
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_after_each_file():
+    """Free the executables a test file compiled once it is done.
+
+    A test worker lives for hundreds of fits at dozens of image sizes. XLA keeps
+    each executable's machine code mapped until it is freed, about 41 memory maps
+    apiece, and a process may have 65530 (Linux's vm.max_map_count): CI's workers,
+    which kept them all, aborted in LLVM ("Unable to allocate section memory")
+    near the end of the slow tier, in whichever test came next (2026-11-27).
+    """
+    yield
+    import gc
+
+    from invsss.runtime.executable_cache import release_compiled
+
+    release_compiled()
+    gc.collect()
+
+
 @pytest.fixture
 def float64():
     """JAX's float64 mode for this test alone, so that the other tests in the same worker

@@ -44,7 +44,6 @@ import optimistix as optx
 from scipy import ndimage
 
 from ..forward.pair import fill_background_depth
-from ..runtime.compile_cache import not_persisted
 from ..validation import InvalidInputError
 
 __all__ = ["ALIGN_KINDS", "Warp", "estimate_warp", "warp_image", "align_target", "align_source", "match_photometry"]
@@ -181,11 +180,8 @@ def _residual(p, args):
 def _solve(kind, moving, reference, weight, centre, p0):
     solver = optx.LevenbergMarquardt(rtol=1e-7, atol=1e-9)
     args = (kind, jnp.asarray(moving), jnp.asarray(reference), jnp.asarray(weight), jnp.asarray(centre))
-    # Not through the persistent cache: serializing this executable aborted XLA's CPU
-    # client in CI (invsss.runtime.compile_cache.not_persisted says when).
-    with not_persisted():
-        solution = optx.least_squares(_residual, solver, jnp.asarray(p0), args=args, max_steps=200, throw=False)
-        return np.asarray(solution.value, np.float64)
+    solution = optx.least_squares(_residual, solver, jnp.asarray(p0), args=args, max_steps=200, throw=False)
+    return np.asarray(solution.value, np.float64)
 
 
 def match_photometry(image: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> np.ndarray:

@@ -43,7 +43,6 @@ nothing is written.
 
 from __future__ import annotations
 
-import contextlib
 import os
 import stat
 import threading
@@ -51,8 +50,6 @@ import warnings
 from pathlib import Path
 
 from ..validation import InvalidInputError
-
-_NOT_PERSISTED = threading.Lock()
 
 __all__ = [
     "MAX_CACHE_BYTES",
@@ -62,7 +59,6 @@ __all__ = [
     "enable_compile_cache",
     "enabled_directory",
     "make_private_folder",
-    "not_persisted",
     "ownership_problem",
     "private_folder_problem",
     "warn_once",
@@ -336,26 +332,3 @@ def enable_compile_cache(
     compilation_cache.reset_cache()
     _enabled = path
     return path
-
-
-@contextlib.contextmanager
-def not_persisted():
-    """Within the block, compilations are not written to the persistent cache.
-
-    For a function whose executable XLA's CPU client can fail to serialize: the
-    registration's optimistix least-squares solve aborted the process in
-    ``executable.serialize()`` (JAX 0.10.2) in three fresh-clone CI runs of the slow
-    tier (2026-11-27, always after the same worker's earlier tests, never alone). It
-    compiles in about a second, so it is compiled in each process instead. (JAX
-    decides once per process whether the cache is used at all, so the write is
-    skipped the way JAX skips quick compilations: by the minimum compile time.)
-    """
-    import jax
-
-    with _NOT_PERSISTED:
-        before = jax.config.jax_persistent_cache_min_compile_time_secs
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", float("inf"))
-        try:
-            yield
-        finally:
-            jax.config.update("jax_persistent_cache_min_compile_time_secs", before)

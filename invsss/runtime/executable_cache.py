@@ -58,6 +58,7 @@ this module keys, compiles, stores and loads them.
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import functools
 import hashlib
@@ -65,6 +66,7 @@ import io
 import os
 import pickle
 import threading
+import weakref
 from importlib import metadata
 from pathlib import Path
 
@@ -87,14 +89,45 @@ from .executable_entries import (
     write_atomic,
 )
 
-#: Held while this module compiles or serialises an executable. XLA's CPU client
-#: segfaulted when one thread serialised an executable while another compiled (the
-#: fit compiles its solver step in a background thread while the start scan's
-#: function is stored): three fresh-clone CI runs of the slow tier, 2026-11-27,
-#: and twice in one process running half of it. Serialising takes milliseconds.
-_XLA_CPU = threading.RLock()
+__all__ = ["MAX_EXECUTABLE_BYTES", "MAX_IN_MEMORY", "StaleStatics", "persistent_jit", "release_compiled"]
 
-__all__ = ["MAX_EXECUTABLE_BYTES", "StaleStatics", "persistent_jit"]
+#: Executables each :class:`persistent_jit` function keeps in memory (the most
+#: recently used); older ones are loaded from disk, or compiled, again when next
+#: called. XLA's CPU client maps each executable's code into the process, about
+#: 41 memory maps apiece (measured 2026-11-27, jax 0.10.2), and Linux allows a
+#: process 65530 by default (vm.max_map_count): CI's test workers, which kept
+#: every executable they compiled (about 1600 at that rate), aborted in LLVM
+#: ("Unable to allocate section memory") compiling the next one. A fit at one
+#: size uses one or two per function.
+MAX_IN_MEMORY = 16
+
+_INSTANCES: weakref.WeakSet[persistent_jit] = weakref.WeakSet()
+
+
+def release_compiled() -> None:
+    """Drop every executable this process holds in memory: every :class:`persistent_jit`
+    function's and JAX's own (:func:`jax.clear_caches`).
+
+    For a long-lived process that compiles for many image sizes (a test run, a
+    notebook): XLA keeps each executable's machine code mapped until the
+    executable is freed, and the process's memory maps are bounded
+    (:data:`MAX_IN_MEMORY`). Executables on disk stay; the next call loads or
+    compiles again.
+
+    Examples
+    --------
+    >>> import jax.numpy as jnp
+    >>> @persistent_jit
+    ... def doubled(x):
+    ...     return 2 * x
+    >>> _ = doubled(jnp.ones(3))
+    >>> release_compiled()
+    >>> doubled(jnp.ones(2)).tolist()
+    [2.0, 2.0]
+    """
+    for fun in list(_INSTANCES):
+        fun.release()
+    jax.clear_caches()
 
 #: Bound on the ``executables`` folder's size. A 224 x 224 fit's three entries
 #: take 1.7 MB.
@@ -285,10 +318,24 @@ class persistent_jit:
         self.fun = fun
         self.jitted = eqx.filter_jit(fun)
         self.traces = 0
-        self._memory: dict = {}
+        # Most recently used last; at most MAX_IN_MEMORY (see there).
+        self._memory: collections.OrderedDict = collections.OrderedDict()
         self._prepared: set = set()  # keys compiled by prepare() without the disk cache
         self._lock = threading.Lock()
         functools.update_wrapper(self, fun)
+        _INSTANCES.add(self)
+
+    def _remember(self, key, compiled) -> None:
+        self._memory[key] = compiled
+        self._memory.move_to_end(key)
+        while len(self._memory) > MAX_IN_MEMORY:
+            self._memory.popitem(last=False)
+
+    def release(self) -> None:
+        """Drop the executables this function holds in memory (not those on disk)."""
+        with self._lock:
+            self._memory.clear()
+            self._prepared.clear()
 
     @staticmethod
     def _key(args):
@@ -316,7 +363,7 @@ class persistent_jit:
             if key in self._memory or key in self._prepared:
                 return
             if folder is not None:
-                self._memory[key] = self._load_or_compile(folder, key, leaves, in_tree, static)
+                self._remember(key, self._load_or_compile(folder, key, leaves, in_tree, static))
                 return
             # filter_jit keeps what lower().compile() made for its later calls. (Its
             # wrapper has lower(), though equinox annotates it as a plain callable.)
@@ -337,7 +384,7 @@ class persistent_jit:
                 compiled = self._memory.get(key)
                 if compiled is None:
                     compiled = self._load_or_compile(folder, key, leaves, in_tree, static)
-                    self._memory[key] = compiled
+                self._remember(key, compiled)
         if compiled.loaded_from is None:
             return compiled(leaves)
         # A loaded entry's first call waits for its result: an executable that
@@ -351,7 +398,7 @@ class persistent_jit:
             with self._lock:
                 compiled = self._compile_and_store(path if _writable(path.parent) else None,
                                                    leaves, in_tree, static)
-                self._memory[key] = compiled
+                self._remember(key, compiled)
             return compiled(leaves)
         compiled.loaded_from = None
         return out
@@ -456,7 +503,7 @@ class persistent_jit:
         # loaded from its cache serialises incompletely on a CPU (the next
         # process finds functions missing). So JAX is kept from storing these
         # compilations, and then never has one of them to hand back.
-        with _never_stored(), _XLA_CPU:
+        with _never_stored():
             compiled = lowered.compile()
         return (compiled, *captured[-1])
 
@@ -469,8 +516,7 @@ class persistent_jit:
         if getattr(getattr(compiled._executable, "_unloaded_executable", None), "host_callbacks", True):
             return
         try:
-            with _XLA_CPU:
-                executable, in_tree, flat_tree = serialize_executable.serialize(compiled)
+            executable, in_tree, flat_tree = serialize_executable.serialize(compiled)
             outline = jax.tree_util.tree_unflatten(out_tree, [_Slot() for _ in range(out_tree.num_leaves)])
             data = _dumps({"executable": executable, "in_tree": in_tree, "out_tree": flat_tree,
                            "outline": outline, "out_static": out_static})
