@@ -39,7 +39,7 @@ from ..forward.params import PARAM_NAMES
 from ..forward.profiles import sum_of_gaussians
 from ..validation import InvalidInputError
 
-__all__ = ["plot_fit_report"]
+__all__ = ["UNDETERMINED", "parameter_lines", "plot_convergence", "plot_fit_report", "plot_profile", "report_figure"]
 
 _PANEL_INCHES = 2.9
 #: Resolution of the page (dots per inch), for the layout and the saved image alike.
@@ -90,7 +90,7 @@ def _format_value(value, error=None, unknown=None) -> str:
     """``902.2±3.3`` for a scalar, ``[a±e, b±f]`` (rows as tuples) for an array.
 
     ``unknown`` (bool, the value's shape) marks entries the data did not
-    determine: they print as the point estimate with :data:`_UNDETERMINED` after
+    determine: they print as the point estimate with :data:`UNDETERMINED` after
     it and no standard error (params.json writes them as null): the value the
     fitted image used, which the data would not have moved.
     """
@@ -103,7 +103,7 @@ def _format_value(value, error=None, unknown=None) -> str:
 
     def one(v, e, flag):
         if flag:
-            return f"{v:.4g}{_UNDETERMINED}"
+            return f"{v:.4g}{UNDETERMINED}"
         return f"{v:.4g}" if not np.isfinite(e) else f"{v:.4g}±{e:.2g}"
 
     cells = [[one(v, e, f) for v, e, f in zip(*row)] for row in zip(rows, errors, flags)]
@@ -113,14 +113,14 @@ def _format_value(value, error=None, unknown=None) -> str:
 
 
 #: The mark after an undetermined entry's point estimate, explained under the table.
-_UNDETERMINED = "\u2020"  # a dagger
+UNDETERMINED = "\u2020"  # a dagger
 _UNDETERMINED_NOTE = (
-    f"{_UNDETERMINED} undetermined: the data did not fix this value; it is where the fit "
+    f"{UNDETERMINED} undetermined: the data did not fix this value; it is where the fit "
     "stopped (the value the fitted image used), with no standard error, and null in params.json."
 )
 
 
-def _parameter_lines(result) -> list[str]:
+def parameter_lines(result) -> list[str]:
     """One line per parameter: value ± standard error, and what is fixed or undetermined."""
     params = result.params
     stderr = dict(result.stderr or {})
@@ -132,9 +132,9 @@ def _parameter_lines(result) -> list[str]:
         any_unknown = any_unknown or bool(unknown.any())
         flags = ["fixed"] if name in fixed else []
         if unknown.all():
-            flags.append(f"undetermined {_UNDETERMINED}")
+            flags.append(f"undetermined {UNDETERMINED}")
         elif unknown.any():
-            flags.append(f"{int(unknown.sum())} undetermined {_UNDETERMINED}")
+            flags.append(f"{int(unknown.sum())} undetermined {UNDETERMINED}")
         value = _format_value(getattr(params, name), None if name in fixed else stderr.get(name), unknown)
         lines.append(f"{name:<11} {value}" + (f"  [{', '.join(flags)}]" if flags else ""))
     if any_unknown:
@@ -210,7 +210,7 @@ _CONDITIONAL_NOTE = (
 )
 
 
-def _plot_convergence(ax, result) -> None:
+def plot_convergence(ax, result) -> None:
     """Every solve's loss curve on one axis of the fit's steps: each start in its
     own colour (the winner drawn thick), the refinement rounds in black after a
     dashed line."""
@@ -245,7 +245,7 @@ def _plot_convergence(ax, result) -> None:
         ax.legend(fontsize=7, loc="upper right")
 
 
-def _plot_profile(ax, result) -> None:
+def plot_profile(ax, result) -> None:
     """The fitted ``R(r)`` (sum of Gaussians) against the profile the fit started
     from, weights normalised to sum 1 per channel so the shapes compare."""
     variances = np.asarray(result.values["variances"], np.float64)
@@ -397,10 +397,10 @@ def plot_fit_report(result, pairs, path, mask_notes=None) -> None:
     >>> os.path.getsize(path) > 0
     True
     """
-    _report_figure(result, pairs, mask_notes).savefig(os.fspath(path), dpi=_DPI)
+    report_figure(result, pairs, mask_notes).savefig(os.fspath(path), dpi=_DPI)
 
 
-def _report_figure(result, pairs, mask_notes=None) -> Figure:
+def report_figure(result, pairs, mask_notes=None) -> Figure:
     """The page of :func:`plot_fit_report`, drawn on an Agg canvas, not yet saved."""
     pairs = [
         (p.source, p.target, p.depth, p.mask) if hasattr(p, "source") else tuple(p) for p in pairs
@@ -420,7 +420,7 @@ def _report_figure(result, pairs, mask_notes=None) -> Figure:
             f"pairs: the result has {len(fitted)} fitted image(s) but {len(pairs)} pair(s) were given"
         )
     rows = len(pairs)
-    lines = _parameter_lines(result)
+    lines = parameter_lines(result)
     # The text box grows with its lines (8 pt monospace: 0.147 in each, measured), so
     # a fit with many warnings keeps the last of them on the page.
     text_inches = max(2.3, 0.35 + 0.15 * len(lines))
@@ -440,8 +440,8 @@ def _report_figure(result, pairs, mask_notes=None) -> Figure:
     # The profile's tick labels and its ylabel sit between the two plots: they get a
     # gap of their own (1.2 in, the image panels' is 0.7 in), clear of the loss plot.
     plots = grid[rows, 0:4].subgridspec(1, 2, wspace=0.25)
-    _plot_convergence(fig.add_subplot(plots[0]), result)
-    _plot_profile(fig.add_subplot(plots[1]), result)
+    plot_convergence(fig.add_subplot(plots[0]), result)
+    plot_profile(fig.add_subplot(plots[1]), result)
 
     text = fig.add_subplot(grid[rows + 1, 0:4])
     text.axis("off")

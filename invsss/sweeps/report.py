@@ -47,7 +47,7 @@ from ..validation import InvalidInputError
 from .axes import flatten
 from .results import flat_rows
 
-__all__ = ["write_report", "format_table"]
+__all__ = ["SampleKeys", "format_table", "plot_series", "plotted_axes", "write_parquet", "write_report"]
 
 _METRICS = ("loss", "psnr", "ssim")
 _SCALARS = ("sss_level", "correction", "maxdd")
@@ -122,7 +122,7 @@ def _numeric_axes(rows: list[dict], axes: list[str]) -> list[str]:
             and len({r.get(a) for r in rows}) > 1]
 
 
-def _plotted_axes(rows: list[dict], axes: list[str]) -> list[str]:
+def plotted_axes(rows: list[dict], axes: list[str]) -> list[str]:
     """Axes with more than one value, all numbers or all text: a plot each
     (text values, such as a model's name, as categories)."""
     return [a for a in axes if a != "pair" and len({_cell(r.get(a)) for r in rows}) > 1
@@ -130,14 +130,14 @@ def _plotted_axes(rows: list[dict], axes: list[str]) -> list[str]:
 
 
 @dataclasses.dataclass(frozen=True)
-class _SampleKeys:
+class SampleKeys:
     """Which axes of the sweep's experiment file are sampled, and which of them in log space."""
 
     sampled: frozenset = frozenset()
     log: frozenset = frozenset()
 
     @classmethod
-    def of(cls, meta: dict) -> _SampleKeys:
+    def of(cls, meta: dict) -> SampleKeys:
         # The experiment's own text is in the store; an older store, or one whose
         # text no longer parses, has no sampled axes as far as the plots know.
         try:
@@ -147,7 +147,7 @@ class _SampleKeys:
         return cls(frozenset(flatten(sample.get("ranges") or {})), frozenset(sample.get("log") or ()))
 
 
-def _series(rows: list[dict], axis: str, axes: list[str], sampled) -> dict:
+def plot_series(rows: list[dict], axis: str, axes: list[str], sampled) -> dict:
     """The rows of each line of a plot against ``axis``, keyed ``(pair, others)``:
     one line per pair and per value of every other grid or zip axis (sampled axes
     change from trial to trial, so they split nothing); ``others`` says which
@@ -177,14 +177,14 @@ _LINE_STYLES = ("-", "--", ":", "-.")
 _MARKERS = ("o", "s", "^", "D", "v", "P")
 
 
-def _plot_against(plt, rows, axis, axes, keys: _SampleKeys, names, y_of, err_of, path) -> str:
+def _plot_against(plt, rows, axis, axes, keys: SampleKeys, names, y_of, err_of, path) -> str:
     """One panel per name in ``names``: ``y_of(row, name)`` against ``axis``, a line
-    (for a sampled axis or categories, points) per :func:`_series`: a colour per
+    (for a sampled axis or categories, points) per :func:`plot_series`: a colour per
     pair and a line style and marker per value of the other axes, each with its
     own legend beside the panels."""
     from matplotlib.lines import Line2D
 
-    series = _series(rows, axis, axes, keys.sampled)
+    series = plot_series(rows, axis, axes, keys.sampled)
     pairs = list(dict.fromkeys(pair for pair, _ in series))
     others = list(dict.fromkeys(other for _, other in series))
     # The colour tells the pairs apart; with one pair, the other axes' values.
@@ -282,7 +282,7 @@ def _contact_sheets(plt, rows, axes, out, folder) -> list[str]:
 
     first, second = axes[:2]
     written = []
-    for (label, _), group in _series(rows, first, [first, second, "pair"], {second}).items():
+    for (label, _), group in plot_series(rows, first, [first, second, "pair"], {second}).items():
         rows_values = sorted({r[first] for r in group})
         cols_values = sorted({r[second] for r in group})
         if max(len(rows_values), len(cols_values)) > CONTACT_SHEET_MAX:
@@ -311,7 +311,8 @@ def _contact_sheets(plt, rows, axes, out, folder) -> list[str]:
     return written
 
 
-def _write_parquet(rows: list[dict], path: str) -> None:
+def write_parquet(rows: list[dict], path: str) -> None:
+    """``rows`` (one dict per trial) as a Parquet table at ``path``, written whole."""
     import pandas
     import pyarrow
 
@@ -363,14 +364,14 @@ def write_report(out, *, plots: bool = True, parquet: bool = False) -> tuple[str
     rows, meta = flat_rows(out)
     if not rows:
         raise InvalidInputError(f"{out}: the sweep has no trials")
-    keys = _SampleKeys.of(meta)
+    keys = SampleKeys.of(meta)
     folder = os.path.join(out, "report")
     _report_folder(folder)
     written = [os.path.join(folder, "results.csv")]
     _write_csv(rows, written[0])
     if parquet:
         written.append(os.path.join(folder, "results.parquet"))
-        _write_parquet(rows, written[-1])
+        write_parquet(rows, written[-1])
     tasks: dict = {}
     for row in rows:
         tasks.setdefault(row["task"], []).append(row)
@@ -425,7 +426,7 @@ def _fitted_columns(task: str) -> tuple:
 
 
 def _task_plots(rows: list[dict], axes: list[str], task: str, out: str, folder: str,
-                keys: _SampleKeys) -> list[str]:
+                keys: SampleKeys) -> list[str]:
     """The plots of the done trials of one task (module docstring) in ``folder``."""
     done = [r for r in rows if r["status"] == "done"]
     if not done:
@@ -437,7 +438,7 @@ def _task_plots(rows: list[dict], axes: list[str], task: str, out: str, folder: 
 
     _report_folder(folder)
     written = []
-    for axis in _plotted_axes(done, axes):
+    for axis in plotted_axes(done, axes):
         written.append(_plot_metrics(plt, done, axis, axes, keys, folder))
         if task != "render":
             written.append(_plot_params(plt, done, axis, axes, keys, folder))

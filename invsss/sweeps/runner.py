@@ -31,7 +31,7 @@ from ..validation import error_line
 from .tasks import TrialInterrupted, run_task
 from .trials import Trial
 
-__all__ = ["execute", "trial_folder"]
+__all__ = ["execute", "load_trial_pairs", "trial_folder"]
 
 
 def trial_folder(out: str, trial_id: str) -> str:
@@ -39,7 +39,9 @@ def trial_folder(out: str, trial_id: str) -> str:
     return os.path.join(os.fspath(out), "trials", trial_id)
 
 
-def _load(trial: Trial) -> list:
+def load_trial_pairs(trial: Trial) -> list:
+    """The trial's pairs read from its data folder: an :class:`~invsss.ImagePair` per
+    pair, with the light buffers (normal, light, key, fill_light) its light terms read."""
     from ..io import load_pair, read_image
 
     pairs = []
@@ -108,7 +110,7 @@ def execute(trial: dict, out: str, stop=None) -> dict:
         spec = Trial.from_dict(trial)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            pairs = _load(spec)
+            pairs = load_trial_pairs(spec)
             options = _resolved(spec)
             timings["load"] = time.perf_counter() - clock
             clock = time.perf_counter()

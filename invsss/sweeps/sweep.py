@@ -45,7 +45,7 @@ from .experiment import Experiment, load
 from .runner import execute, trial_folder
 from .store import LOCK_NAME, ResultsStore, StoreError, rebuild
 
-__all__ = ["SweepSummary", "run"]
+__all__ = ["SweepLock", "SweepSummary", "run"]
 
 _POLL_SECONDS = 0.2
 
@@ -81,14 +81,14 @@ class SweepSummary:
     out: str
 
 
-class _SweepLock:
+class SweepLock:
     """An exclusive ``flock`` on ``OUT/.sweep.lock`` for the duration of a run."""
 
     def __init__(self, out: str):
         self.path = os.path.join(out, LOCK_NAME)
         self._fd: int | None = None
 
-    def __enter__(self) -> _SweepLock:
+    def __enter__(self) -> SweepLock:
         fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -267,7 +267,7 @@ def run(
     log = sys.stderr if log == "stderr" else log
     chosen = make_executor(executor, jobs, scheduler)
     start = time.monotonic()
-    with _SweepLock(out):
+    with SweepLock(out):
         if rebuild_store:
             recovered, left_out = rebuild(out, experiment)
             _Progress(log, 0, 0, 0).say(

@@ -56,7 +56,7 @@ def test_the_key_light_image_follows_a_grey_source_stored_as_rgb(tmp_path):
     """The law's key buffer must have the source's channels: one, when load_pair read a
     grey source stored as RGB as one channel (before a grey target)."""
     from invsss.cli.arguments import read_key_buffer
-    from invsss.sweeps.runner import _load
+    from invsss.sweeps.runner import load_trial_pairs
     from invsss.sweeps.trials import Trial
 
     grey_source, key = tmp_path / "source.exr", tmp_path / "key.exr"
@@ -73,7 +73,7 @@ def test_the_key_light_image_follows_a_grey_source_stored_as_rgb(tmp_path):
     roles = dict(zip(("source", "target", "depth", "mask"), files), key=key)
     trial = Trial("t", 0, "fit", {"light_terms": "law"}, ({"name": "p", **{k: os.path.basename(v) for k, v in roles.items()}},),
                   {}, str(tmp_path))
-    (loaded,), _ = notices(lambda: _load(trial))
+    (loaded,), _ = notices(lambda: load_trial_pairs(trial))
     assert loaded.source.shape == loaded.key.shape == (H, W, 1)
     # A colour image stays as it is, asked or not.
     colour = rgb_source(tmp_path)

@@ -81,7 +81,7 @@ def test_a_mask_that_is_mostly_background_is_never_a_silent_estimate(crop_files,
 
 @pytest.mark.slow
 def test_the_report_draws_the_mask_note_under_the_source():
-    from invsss.cli.report import _report_figure
+    from invsss.cli.report import report_figure
 
     rows, cols = np.mgrid[0:24, 0:24]
     source = 0.5 + 0.3 * np.sin(cols / 2.0) * np.cos(rows / 3.0)
@@ -90,8 +90,8 @@ def test_the_report_draws_the_mask_note_under_the_source():
     target = np.asarray(invsss.render(source, depth, mask, invsss.SSSParams(900.0, 0.0, 1.0, [1.0], [1.0])))
     fit = invsss.fit_pair(source, target, depth, mask, fix={"variances": [1.0]}, n_starts=1, max_steps=5)
     note = "mask: covers 95% of the frame, 12% skin"
-    texts = [t.get_text() for ax in _report_figure(fit, [(source, target, depth, mask)], [note]).axes
+    texts = [t.get_text() for ax in report_figure(fit, [(source, target, depth, mask)], [note]).axes
              for t in ax.texts]
     assert note in texts
-    plain = [t.get_text() for ax in _report_figure(fit, [(source, target, depth, mask)]).axes for t in ax.texts]
+    plain = [t.get_text() for ax in report_figure(fit, [(source, target, depth, mask)]).axes for t in ax.texts]
     assert not any(t.startswith("mask:") for t in plain)

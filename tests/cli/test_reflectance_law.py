@@ -34,9 +34,9 @@ def test_fit_recovers_an_albedo_per_channel_and_the_blur():
     # Without the law the same data give a biased blur and a worse fit.
     plain = invsss.fit_pair(source, target, depth, mask, profile=PROFILE, fix=FIX, n_starts=2)
     assert plain.psnr < fit.psnr - 5.0
-    from invsss.cli.report import _parameter_lines
+    from invsss.cli.report import parameter_lines
 
-    assert "law albedo 0.9" in "\n".join(_parameter_lines(fit))
+    assert "law albedo 0.9" in "\n".join(parameter_lines(fit))
 
 
 @pytest.mark.slow

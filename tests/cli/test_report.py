@@ -26,12 +26,12 @@ def face_fit():
 def test_report_draws_every_start_and_both_profiles(face_fit):
     from matplotlib.figure import Figure
 
-    from invsss.cli.report import _parameter_lines, _plot_convergence, _plot_profile
+    from invsss.cli.report import parameter_lines, plot_convergence, plot_profile
 
     result = face_fit
     fig = Figure()
     curve, profile = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
-    _plot_convergence(curve, result)
+    plot_convergence(curve, result)
     # One curve per solve, each over its own steps of the shared iteration axis
     # (a solve may be a single step); the dashed lines mark where rounds begin.
     drawn = [line for line in curve.get_lines() if line.get_linestyle() != "--"]
@@ -39,10 +39,10 @@ def test_report_draws_every_start_and_both_profiles(face_fit):
     assert sorted(int(x) for line in drawn for x in line.get_xdata()) == list(range(1, result.iterations + 1))
     labels = [t.get_text() for t in curve.get_legend().get_texts()]
     assert labels.count("start 1") + labels.count("start 1 (best)") == 1 and sum("(best)" in t for t in labels) == 1
-    _plot_profile(profile, result)
+    plot_profile(profile, result)
     fitted, start = profile.get_lines()
     r = np.asarray(fitted.get_xdata())
     expected = invsss.forward.profiles.sum_of_gaussians(r, np.asarray(result.values["weights"]), np.asarray(PROFILE3["variances"]))
     np.testing.assert_allclose(fitted.get_ydata(), np.maximum(np.asarray(expected), 1e-12), rtol=1e-5)
     assert not np.allclose(fitted.get_ydata(), start.get_ydata())
-    assert any("conditional on the chosen profile" in line for line in _parameter_lines(result))
+    assert any("conditional on the chosen profile" in line for line in parameter_lines(result))

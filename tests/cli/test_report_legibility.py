@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from invsss.cli.report import _UNDETERMINED, _parameter_lines, _plot_convergence, _report_figure
+from invsss.cli.report import UNDETERMINED, parameter_lines, plot_convergence, report_figure
 from invsss.estimator.result import FitResult
 from invsss.forward.params import SSSParams
 
@@ -54,7 +54,7 @@ def _convergence_axis(history, stages):
     fig = Figure(figsize=(5.0, 3.0), dpi=110)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
-    _plot_convergence(ax, _result(history, stages))
+    plot_convergence(ax, _result(history, stages))
     return ax
 
 
@@ -76,22 +76,22 @@ def test_loss_ticks_over_decades_stay_plain_powers_of_ten():
 
 
 def test_undetermined_weights_show_their_estimate_with_a_mark_and_a_note():
-    lines = _parameter_lines(_result())
+    lines = parameter_lines(_result())
     weights = next(line for line in lines if line.startswith("weights"))
     # Determined entries with their standard error; undetermined ones with the mark, none with "--".
     assert "0.1±0.079" in weights and "0.3±0.05" in weights
-    assert f"0.2{_UNDETERMINED}" in weights and f"0.15{_UNDETERMINED}" in weights and "--" not in weights
-    assert f"2 undetermined {_UNDETERMINED}" in weights
+    assert f"0.2{UNDETERMINED}" in weights and f"0.15{UNDETERMINED}" in weights and "--" not in weights
+    assert f"2 undetermined {UNDETERMINED}" in weights
     maxdd = next(line for line in lines if line.startswith("maxdd"))
-    assert maxdd.split()[1] == f"40{_UNDETERMINED}"
-    notes = [line for line in lines if line.startswith(_UNDETERMINED)]
+    assert maxdd.split()[1] == f"40{UNDETERMINED}"
+    notes = [line for line in lines if line.startswith(UNDETERMINED)]
     assert len(notes) == 1 and "undetermined" in notes[0]
 
 
 def test_a_fit_with_everything_determined_has_no_mark():
     result = _result()
     result = FitResult(**{**{f: getattr(result, f) for f in result.__dataclass_fields__}, "undetermined": ()})
-    assert not any(_UNDETERMINED in line for line in _parameter_lines(result))
+    assert not any(UNDETERMINED in line for line in parameter_lines(result))
 
 
 def test_the_profile_label_clears_its_tick_labels_and_the_loss_plot():
@@ -99,7 +99,7 @@ def test_the_profile_label_clears_its_tick_labels_and_the_loss_plot():
     y, x = np.mgrid[0:size, 0:size]
     source = (0.5 + 0.2 * np.sin(x / 2.0))[..., None]
     pair = (source, np.full((size, size, 1), 0.5), np.full((size, size), 500.0), np.ones((size, size)))
-    fig = _report_figure(_result(size=size), [pair])
+    fig = report_figure(_result(size=size), [pair])
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
     by_label = {ax.get_ylabel(): ax for ax in fig.axes}

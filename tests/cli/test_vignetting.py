@@ -37,11 +37,11 @@ def test_fitted_vignetting_recovers_the_unshaded_fit(fits):
     # The same noise is left over (PSNR differs only through the darker peak).
     assert fitted.sigma == pytest.approx(reference.sigma, rel=0.02)
     assert fits["reference"].vignetting is None and fitted.to_dict()["vignetting"] == record
-    from invsss.cli.report import _parameter_lines
+    from invsss.cli.report import parameter_lines
 
-    shown = [line for line in _parameter_lines(fitted) if line.startswith("vignetting:")]
+    shown = [line for line in parameter_lines(fitted) if line.startswith("vignetting:")]
     assert len(shown) == 1 and f"corner gain {record['corner_gain']:.3f}" in shown[0]
-    assert not any(line.startswith("vignetting:") for line in _parameter_lines(fits["reference"]))
+    assert not any(line.startswith("vignetting:") for line in parameter_lines(fits["reference"]))
 
 
 @pytest.mark.slow

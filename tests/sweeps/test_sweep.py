@@ -210,14 +210,14 @@ def test_pair_axis_per_task(root):
 def test_parquet_keeps_lists_and_writes_mixed_nestings_as_json_text(tmp_path):
     pandas = pytest.importorskip("pandas")
     pytest.importorskip("pyarrow")
-    from invsss.sweeps.report import _write_parquet
+    from invsss.sweeps.report import write_parquet
 
     # A grey target's weights are a list, an RGB target's a list per Gaussian:
     # pyarrow cannot hold both in one column ("cannot mix list and non-list").
     rows = [{"id": "a", "param.weights": [0.4, 0.6], "param.variances": [1.0, 2.0]},
             {"id": "b", "param.weights": [[0.4, 0.4, 0.4], [0.6, 0.6, 0.6]], "param.variances": [1.0, 2.0]},
             {"id": "c", "param.weights": None, "param.variances": None}]
-    _write_parquet(rows, tmp_path / "r.parquet")
+    write_parquet(rows, tmp_path / "r.parquet")
     table = pandas.read_parquet(tmp_path / "r.parquet").to_dict("records")
     assert [None if pandas.isna(r["param.weights"]) else json.loads(r["param.weights"]) for r in table] == \
         [row["param.weights"] for row in rows]
@@ -225,20 +225,20 @@ def test_parquet_keeps_lists_and_writes_mixed_nestings_as_json_text(tmp_path):
 
 
 def test_report_lines_follow_the_grid_and_sampled_and_text_axes_plot_as_such(root):
-    from invsss.sweeps.report import _SampleKeys, _plotted_axes, _series
+    from invsss.sweeps.report import SampleKeys, plotted_axes, plot_series
 
     rows = [{"pair": p, "x": x, "y": y, "model": m, "s": 0.1 * k}
             for k, (p, x, y, m) in enumerate((p, x, y, m) for p in "ab" for x in (1, 2) for y in (5, 6)
                                               for m in ("sog", "thesis"))]
     # Against x: a line per pair and per value of y and model; s (sampled) splits nothing.
-    series = _series(rows, "x", ["x", "y", "model", "s", "pair"], sampled={"s"})
+    series = plot_series(rows, "x", ["x", "y", "model", "s", "pair"], sampled={"s"})
     assert len(series) == 8 and ("a", "y=5, model=sog") in series
     assert all(sorted(r["x"] for r in group) == [1, 2] for group in series.values())
-    assert _plotted_axes(rows, ["x", "model", "pair"]) == ["x", "model"]
-    keys = _SampleKeys.of({"text": '[sample]\nmethod = "sobol"\nn = 4\nlog = ["sss_level"]\n'
+    assert plotted_axes(rows, ["x", "model", "pair"]) == ["x", "model"]
+    keys = SampleKeys.of({"text": '[sample]\nmethod = "sobol"\nn = 4\nlog = ["sss_level"]\n'
                                    'ranges.sss_level = [300.0, 1200.0]\nranges.fix.maxdd = [0.1, 1.0]\n'})
     assert keys.sampled == {"sss_level", "fix.maxdd"} and keys.log == {"sss_level"}
-    assert _SampleKeys.of({"text": "not [toml"}) == _SampleKeys()
+    assert SampleKeys.of({"text": "not [toml"}) == SampleKeys()
     # A sampled render sweep: a plot per axis, and no contact sheet of mostly empty panels.
     sample = RENDER.replace('"data/*/"', '"data/a/"').replace(
         "[grid]\nsss_level = [300, 600]\ncorrection = [0, 800]\n",

@@ -25,13 +25,13 @@ def test_the_store_is_checked_before_anything_is_written_to_it(tmp_path):
 def test_a_trial_left_running_by_a_dead_sweep_reads_as_interrupted(tmp_path):
     from invsss.sweeps.results import flat_rows
     from invsss.sweeps.store import ResultsStore
-    from invsss.sweeps.sweep import _SweepLock
+    from invsss.sweeps.sweep import SweepLock
 
     with ResultsStore(tmp_path) as store:
         store.add([{"id": "abc", "index": 0, "task": "render", "config": {}, "axes": {"x": 1}}])
         store.mark_running("abc")
     # No sweep holds the folder (killed, or its lock file never made): nothing runs it.
     assert [r["status"] for r in flat_rows(tmp_path)[0]] == ["interrupted"]
-    with _SweepLock(str(tmp_path)):
+    with SweepLock(str(tmp_path)):
         assert [r["status"] for r in flat_rows(tmp_path)[0]] == ["running"]
     assert [r["status"] for r in flat_rows(tmp_path)[0]] == ["interrupted"]
