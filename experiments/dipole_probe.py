@@ -117,7 +117,7 @@ class Medium:
 def ray_directions(config, shape, within=(0.0, 0.0)) -> np.ndarray:
     """Camera-space directions (H, W, 3; not unit, depth 1) of the rays through every
     pixel's centre moved by ``within`` = (rows, cols) pixels."""
-    from invsss.scenes.render import camera_points
+    from invsss.scenes.path_tracing import camera_points
 
     return camera_points(config, np.ones(shape), within)
 
@@ -149,7 +149,7 @@ def predictions(pair, radius: int) -> dict:
     the other lights', each (H, W): ``{"standard": (key, fill), "directional": (key, fill)}``."""
     info = pair["info"]
     from invsss.scenes import parse_config
-    from invsss.scenes.render import camera_points
+    from invsss.scenes.path_tracing import camera_points
 
     config = parse_config(info["config"])
     medium = Medium(float(info["medium"]["sigma_s_prime"][0]), float(info["medium"]["sigma_a"][0]))

@@ -313,7 +313,7 @@ def area_light_gains(pair, fit, keep, samples: int = 9) -> dict:
     fit has the law and a light is an area light."""
     from invsss.forward.light_terms import reflectance_law
     from invsss.scenes import parse_config
-    from invsss.scenes.render import camera_points, camera_pose
+    from invsss.scenes.path_tracing import camera_points, camera_pose
 
     if not fit.light_terms or fit.light_terms.get("law") is None:
         return {}
@@ -486,7 +486,7 @@ def key_through_thin_parts(folder) -> tuple[np.ndarray, np.ndarray]:
 
     from invsss.scenes import load_config
     from invsss.scenes.mitsuba_scene import import_mitsuba, scene_dict
-    from invsss.scenes.render import object_ply, render_aovs
+    from invsss.scenes.path_tracing import object_ply, render_aovs
 
     mi = import_mitsuba("scalar_rgb")
     with scene_folder(), tempfile.TemporaryDirectory(prefix="layers-probe-") as scratch:

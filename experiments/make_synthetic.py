@@ -955,7 +955,7 @@ def add_fill_light(name: str, out: Path) -> None:
     from invsss.io import read_image, write_image
     from invsss.io.result_dir import MANIFEST_NAME
     from invsss.scenes import parse_config
-    from invsss.scenes.render import fill_light_directions
+    from invsss.scenes.path_tracing import fill_light_directions
 
     folder = out / name
     config = parse_config(json.loads((folder / "scene.json").read_text())["config"], "scene.json")

@@ -49,7 +49,7 @@ import numpy as np
 import invsss
 from invsss.scenes import parse_config
 from invsss.scenes.mitsuba_scene import import_mitsuba, load_mesh_ply, scene_dict
-from invsss.scenes.render import _grey_media, render_scene
+from invsss.scenes.path_tracing import _grey_media, render_scene
 
 from photo_robustness import eight_bit_srgb, shot_noise, vignette
 

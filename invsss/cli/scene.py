@@ -59,7 +59,7 @@ def _warp_from_params(path: str):
 def run(args: argparse.Namespace, stop: StopSignals) -> int:
     # Imported here: the scene code needs Mitsuba, which the other commands do not.
     from ..scenes import load_config
-    from ..scenes.render import SCENE_FILES, render_scene, scene_writers
+    from ..scenes.path_tracing import SCENE_FILES, render_scene, scene_writers
 
     config = load_config(args.config)
     if args.warp is not None:

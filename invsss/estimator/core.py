@@ -2,7 +2,7 @@
 
 :class:`FitCall` is what a stage receives; :func:`core` is the stage inside all
 others: build the problem (:func:`~.problem.build_problem`), solve it
-(:func:`~.search.solve`) and report (:func:`~.summary.summarise`).
+(:func:`~.search.solve_problem`) and report (:func:`~.summary.summarise`).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from .options import FitOptions
 from .parametrisation import by_unknown
 from .problem import build_problem
 from .result import FitResult
-from .search import solve
+from .search import solve_problem
 from .solve import NOISE_TOL, SCREEN_TOL, compile_solver, make_solver
 from .summary import mean_psnr, summarise
 
@@ -103,7 +103,7 @@ def core(call: FitCall) -> FitResult:
     problem = build_problem(call.pairs, options, call.start, compiling.start, nested=call.nested)
     with jax.enable_x64(True):
         steps = Steps(call.progress, call.stop, problem.to_loss)
-        path = solve(problem, options, steps, compiling.wait)
+        path = solve_problem(problem, options, steps, compiling.wait)
         result = summarise(problem, path, call.single, steps, call.nuisance)
         if call.after_solve is not None:
             result = call.after_solve(problem, path, result)

@@ -18,7 +18,7 @@ The fit, step by step (each step its own module):
 5. standard errors and undetermined parameters (:mod:`.uncertainty`), PSNR, SSIM
    and a misalignment check (:mod:`.diagnostics`), all in a :class:`FitResult`.
 
-Steps 1 and 2 are :func:`build_problem` (:mod:`.problem`), 3 and 4 :func:`.search.solve`,
+Steps 1 and 2 are :func:`build_problem` (:mod:`.problem`), 3 and 4 :func:`.search.solve_problem`,
 5 :func:`.summary.summarise`; :func:`.core.core` runs them in order. The options
 that change *what* is fitted are stages around it (:mod:`.stages`), composed in
 one place, :func:`fit_stages`: the targets' clipped pixels left out (``saturation``),

@@ -1,6 +1,6 @@
 """The solve: starts, robust rounds and the active set, on a built problem.
 
-:func:`solve` takes a :class:`~.problem.FitProblem` and returns the
+:func:`solve_problem` takes a :class:`~.problem.FitProblem` and returns the
 :class:`SolvePath` it reached: steps 3 and 4 of the fit
 (:mod:`invsss.estimator.fit`). It knows nothing of the stages around it
 (alignment, highlights, light terms, saturation): those call the whole fit.
@@ -31,7 +31,7 @@ from .solve import (
 from .summary import entry_name
 from .uncertainty import block_index
 
-__all__ = ["SolvePath", "active_set", "choose_basin", "residuals_at", "solve"]
+__all__ = ["SolvePath", "active_set", "choose_basin", "residuals_at", "solve_problem"]
 
 _ROBUST_ROUNDS = 2
 
@@ -78,7 +78,7 @@ class SolvePath:
         self.interrupted = record.interrupted
 
 
-def solve(problem, options, steps, before_first_step=None) -> SolvePath:
+def solve_problem(problem, options, steps, before_first_step=None) -> SolvePath:
     """Multi-start, robust reweighting and the active set (steps 3 and 4 of
     :mod:`invsss.estimator.fit`).
 

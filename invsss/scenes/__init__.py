@@ -21,7 +21,7 @@ __all__ = [
 def __getattr__(name: str):
     # The renderer needs Mitsuba: import it on first use only.
     if name in ("render_scene", "write_scene", "SceneRender", "light_directions", "camera_points"):
-        from . import render
+        from . import path_tracing
 
-        return getattr(render, name)
+        return getattr(path_tracing, name)
     raise AttributeError(f"module 'invsss.scenes' has no attribute {name!r}")

@@ -85,7 +85,7 @@ def test_scene_command_writes_a_pair_folder(tmp_path, capsys):
 
 
 def test_a_scene_with_a_second_light_writes_its_direction_for_the_fill_term(tmp_path):
-    from invsss.scenes.render import light_directions
+    from invsss.scenes.path_tracing import light_directions
 
     text = _TOML.format(camera_extra="fov = 20.0") + """
 [[lights]]

@@ -18,7 +18,7 @@ import pytest
 import invsss
 from invsss.estimator.diagnostics import masked_psnr
 from invsss.scenes import load_config, parse_config
-from invsss.scenes.render import SCENE_FILES, light_directions
+from invsss.scenes.path_tracing import SCENE_FILES, light_directions
 from invsss.scenes.split import read_split
 from tests import ROOT
 

@@ -65,7 +65,7 @@ def test_the_pigment_darkens_source_and_target_alike_on_a_flat_lit_patch():
     """Rendered with and without contrast (strength 1 and 0), the source's ratio is the
     pigment's transmittance, and the target loses as much on average: the layer absorbs
     on the way in and out."""
-    from invsss.scenes.render import render_scene
+    from invsss.scenes.path_tracing import render_scene
 
     with_pigment = render_scene(parse_config(_config(1.0), "scene"))
     without = render_scene(parse_config(_config(0.0), "scene"))

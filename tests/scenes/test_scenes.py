@@ -263,7 +263,7 @@ def test_light_directions_point_from_the_surface_to_the_light():
     # Rebuild each pixel centre's surface point from the camera's definition
     # (_pixel_rays, with one sample at the pixel centre) and the depth, and compare
     # its direction towards the point light with the light buffer.
-    from invsss.scenes.render import light_directions
+    from invsss.scenes.path_tracing import light_directions
 
     config = _config()
     depth = np.full((config.camera.height, config.camera.width), 250.0)
@@ -281,7 +281,7 @@ def test_light_directions_point_from_the_surface_to_the_light():
 def test_light_directions_follow_the_principal_point():
     # A principal point moved by whole pixels moves the picture by as many: the
     # buffer of the moved camera at (row + 2, col - 3) is the original's at (row, col).
-    from invsss.scenes.render import light_directions
+    from invsss.scenes.path_tracing import light_directions
 
     config = _config()
     moved = parse_config({**config.model_dump(), "camera": {**config.camera.model_dump(),
