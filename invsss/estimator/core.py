@@ -24,7 +24,7 @@ from .search import solve_problem
 from .solve import NOISE_TOL, SCREEN_TOL, compile_solver, make_solver
 from .summary import mean_psnr, summarise
 
-__all__ = ["Fit", "FitCall", "Steps", "core", "estimate_of", "psnr_on_mask"]
+__all__ = ["Fit", "FitCall", "Solved", "Start", "Steps", "core", "estimate_of", "psnr_on_mask", "report"]
 
 
 class Steps:
@@ -51,12 +51,53 @@ class Steps:
 
 
 @dataclasses.dataclass(frozen=True)
+class Start:
+    """Where a fit starts: natural values of its free parameters.
+
+    Attributes
+    ----------
+    values : dict
+        Natural values (:func:`estimate_of` gives a fit's), as
+        :func:`~.problem.build_problem` takes them.
+    with_scan : bool
+        False: the solve starts there instead of scanning (a neighbourhood known
+        from an earlier fit of nearly the same pair). True: the scan runs and this
+        start is kept among its best (a contained model's estimate, every added
+        term at its identity, so the fit ends at or below that model's loss).
+    """
+
+    values: dict
+    with_scan: bool = False
+
+
+@dataclasses.dataclass(frozen=True)
+class Solved:
+    """A solved problem, before it is reported: what :func:`report` and the
+    stages' reports read (the problem, its solve path and the steps taken)."""
+
+    problem: object
+    path: object
+    steps: Steps
+    single: bool
+
+
+def report(solved: Solved, nuisance=None) -> FitResult:
+    """The plain report of a solved problem (:func:`~.summary.summarise`).
+
+    ``nuisance`` (an aligned fit's warp sensitivity) adds unknowns estimated
+    outside the solve to the covariance. A stage that changes the report wraps
+    the report it was given and passes ``nuisance`` on.
+    """
+    return summarise(solved.problem, solved.path, solved.single, solved.steps, nuisance)
+
+
+@dataclasses.dataclass(frozen=True)
 class FitCall:
     """One call of a fit stage: the pairs, the options and the run's callbacks.
 
     A stage (:mod:`.stages`) takes the stage inside it and returns a function of a
     ``FitCall``; it passes the call on changed (fewer pixels, another
-    registration, a start) and never re-enters the whole fit.
+    registration, a start, a report of its own) and never re-enters the whole fit.
 
     Attributes
     ----------
@@ -66,17 +107,13 @@ class FitCall:
     options : FitOptions
     progress, stop : callable or None
         As for :func:`invsss.fit_pair`.
-    nuisance : WarpSensitivity or None
-        An aligned fit's warp, counted in the final fit's covariance.
-    start : dict or None
-        Natural values that replace the start scan (:func:`build_problem`).
-    nested : dict or None
-        The contained model's estimate, every added term at its identity: a start
-        the fit keeps among its best (:func:`build_problem`).
-    after_solve : callable or None
-        ``after_solve(problem, path, result) -> FitResult``, called on the solved
-        problem before the parameters are rebuilt (the light terms measure what
-        each term adds there).
+    start : Start or None
+        Where the solve starts (:class:`Start`); None: the start scan alone.
+    report : callable
+        ``report(solved) -> FitResult``: how the solved problem becomes the
+        result. :func:`report` by default; a stage that adds to the report (the
+        warp's sensitivity, the light terms' comparison with the plain fit)
+        wraps the one it was given.
     """
 
     pairs: Sequence
@@ -84,10 +121,8 @@ class FitCall:
     options: FitOptions
     progress: Callable | None = None
     stop: Callable | None = None
-    nuisance: object = None
-    start: dict | None = None
-    nested: dict | None = None
-    after_solve: Callable | None = None
+    start: Start | None = None
+    report: Callable[..., FitResult] = report
 
 
 #: A fit stage's type: a FitCall in, a FitResult out.
@@ -100,13 +135,13 @@ def core(call: FitCall) -> FitResult:
     left to them."""
     options = call.options
     compiling = SolverCompilation(options)
-    problem = build_problem(call.pairs, options, call.start, compiling.start, nested=call.nested)
+    start = call.start
+    problem = build_problem(call.pairs, options, None if start is None or start.with_scan else start.values,
+                            compiling.start, nested=start.values if start is not None and start.with_scan else None)
     with jax.enable_x64(True):
         steps = Steps(call.progress, call.stop, problem.to_loss)
         path = solve_problem(problem, options, steps, compiling.wait)
-        result = summarise(problem, path, call.single, steps, call.nuisance)
-        if call.after_solve is not None:
-            result = call.after_solve(problem, path, result)
+        result = call.report(Solved(problem, path, steps, call.single))
     # Rebuild the parameters outside float64 mode: the caller gets arrays of their
     # own default precision, ready for render().
     # Host arrays on purpose (no compile), where SSSParams's fields are annotated as jax Arrays.

@@ -9,6 +9,7 @@ final fit's (:class:`WarpSensitivity`).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import warnings
 
 import equinox as eqx
@@ -20,7 +21,7 @@ from ...forward.pair import ImagePair
 from ...forward.screen_space import render
 from ...validation import InputNotice, InvalidInputError
 from ..canvas import frame_terms, unused_note
-from ..core import Fit, FitCall, estimate_of
+from ..core import Fit, FitCall, Start, estimate_of
 from ..inputs import prepare_pairs
 from ..pigment import pigment_at
 from ..registration import Warp, align_source, align_target, align_vectors, estimate_warp, match_photometry
@@ -65,7 +66,7 @@ def aligned(inner: Fit, rounds: Fit) -> Fit:
             rough = dataclasses.replace(own_size, n_starts=1, max_steps=min(options.max_steps, ALIGN_ROUND_STEPS))
             trial = rounds(dataclasses.replace(call, pairs=_resampled(checked, prepared, warps), options=rough,
                                                start=previous))
-            previous = estimate_of(trial)
+            previous = Start(estimate_of(trial))
             if trial.interrupted:
                 return dataclasses.replace(trial, alignment=tuple(w.to_dict() for w in warps))
             refined = _refined_warps(trial, checked, prepared, warps, options)
@@ -74,8 +75,9 @@ def aligned(inner: Fit, rounds: Fit) -> Fit:
             if moved < ALIGN_SETTLED_PX:
                 break
         sensitivity = WarpSensitivity(checked, warps)
+        # The warp's uncertainty goes into the covariance: the report is given it.
         result = inner(dataclasses.replace(call, pairs=_resampled(checked, prepared, warps), options=own_size,
-                                           nuisance=sensitivity))
+                                           report=functools.partial(call.report, nuisance=sensitivity)))
         messages = result.warnings + _notes(options, warps, checked)
         return dataclasses.replace(result, alignment=sensitivity.records(), warnings=messages)
 

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import dataclasses
-import functools
 
 import jax
 import numpy as np
 
 from ...forward.light_terms import AFTER_BLUR, law_excess
-from ..core import Fit, FitCall, estimate_of, psnr_on_mask
+from ..core import Fit, FitCall, Start, estimate_of, psnr_on_mask
 from ..options import FitOptions
 from ..parametrisation import LIGHT_UNKNOWNS
 from ..problem import evaluate
@@ -42,13 +41,18 @@ def with_light_terms(inner: Fit) -> Fit:
 
     def fit(call: FitCall) -> FitResult:
         options = call.options
-        if not options.light_terms or call.start is not None:
+        if not options.light_terms or (call.start is not None and not call.start.with_scan):
             return inner(call)
         plain = inner(dataclasses.replace(call, options=plain_model(options)))
         if plain.interrupted:
             return plain
-        compare = functools.partial(against_plain, plain=plain)
-        return inner(dataclasses.replace(call, nested={**estimate_of(plain), **IDENTITY}, after_solve=compare))
+
+        def compared(solved, **given):
+            # The report it was given (the warp's sensitivity, say), then the comparison.
+            return against_plain(solved.problem, solved.path, call.report(solved, **given), plain)
+
+        return inner(dataclasses.replace(call, start=Start({**estimate_of(plain), **IDENTITY}, with_scan=True),
+                                         report=compared))
 
     return fit
 
