@@ -648,12 +648,8 @@ def read_pair_folder(pair_dir: str):
 
 def _compare(pair_dirs, title: str, settings: dict) -> None:
     """Each pair fitted with the CLI defaults under each of ``settings`` (name ->
-    ``{invsss.estimator.search constant: value}``, and ``"options"``: fit options),
-    in one process; a short warm-up fit per pair and setting comes first so that no
-    column pays for compilation."""
-    import invsss.estimator.search as fit_module
-
-    defaults = {k: getattr(fit_module, k) for values in settings.values() for k in values if k != "options"}
+    fit options), in one process; a short warm-up fit per pair and setting comes
+    first so that no column pays for compilation."""
     print(f"bench_fit {title}: fit_pair with the CLI defaults; "
           f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}")
     first = next(iter(settings))
@@ -666,10 +662,7 @@ def _compare(pair_dirs, title: str, settings: dict) -> None:
         pair = read_pair_folder(pair_dir)
         results = {}
         for name, values in settings.items():
-            options = values.get("options", {})
-            for key, value in {**defaults, **values}.items():
-                if key != "options":
-                    setattr(fit_module, key, value)
+            options = values
             fit_pair(pair.source, pair.target, pair.depth, pair.mask, max_steps=2, **options)  # compile this setting
             t0 = time.perf_counter()
             results[name] = result = fit_pair(pair.source, pair.target, pair.depth, pair.mask, **options)
@@ -687,8 +680,6 @@ def _compare(pair_dirs, title: str, settings: dict) -> None:
                      for k in ("sss_level", "correction")]
             print(f"{os.path.basename(pair_dir.rstrip('/')):22s} {name:12s} {result.iterations:5d} {seconds:8.2f} "
                   f"{cells[0]:>16s} {cells[1]:>16s} {chi2:15.2f} {moved:10.2f}", flush=True)
-    for key, value in defaults.items():
-        setattr(fit_module, key, value)
     print("all: " + "; ".join(f"{k}: {n} steps, {t:.1f} s" for k, (n, t) in totals.items()))
     for name in list(settings)[1:]:
         print(f"{name} / {first}: steps {totals[name][0] / totals[first][0]:.2f}, "
@@ -698,16 +689,16 @@ def _compare(pair_dirs, title: str, settings: dict) -> None:
 def stopping(pair_dirs) -> None:
     """The stall test of invsss.estimator.solve off and on."""
     _compare(pair_dirs, "--stopping (stall test off / on)", {
-        "stall off": {"STALL_TOL": None, "SCREEN_STALL_TOL": None},
-        "stall on": {},
+        "stall off": {"stall_test": False},
+        "stall on": {"stall_test": True},
     })
 
 
 def jacobian(pair_dirs) -> None:
     """The solvers' Jacobian by forward mode and by forward differences."""
     _compare(pair_dirs, "--jacobian (forward mode / forward differences)", {
-        "forward-mode": {"options": {"solver_jacobian": "forward-mode"}},
-        "differences": {"options": {"solver_jacobian": "differences"}},
+        "forward-mode": {"solver_jacobian": "forward-mode"},
+        "differences": {"solver_jacobian": "differences"},
     })
 
 

@@ -109,6 +109,10 @@ class FitOptions:
         How the solvers differentiate the blur: by forward differences (the
         default, 0.64-0.77 of forward mode's time per step) or by forward mode.
         The standard errors use forward mode either way.
+    stall_test : bool
+        Stop a solve when its accepted losses stall within the noise (the
+        default); False runs each solve to its own convergence test or
+        ``max_steps`` (experiments/bench_fit.py --stopping compares the two).
     tap_weights : {"jimenez", "thesis"} or 7 numbers, optional
         Default "thesis" for the thesis model, else "jimenez".
     robust : {"pseudo-huber", "cauchy"} or None
@@ -216,6 +220,9 @@ class FitOptions:
     solver_jacobian: str = _option(
         "differences", "the solvers' Jacobian of the blur: 'differences' (forward differences) or "
         "'forward-mode' (exact, slower)", flag=None)
+    stall_test: bool = _option(
+        True, "stop a solve whose accepted losses stall within the noise (invsss.estimator.solve.stalled)",
+        flag=None)
     tap_weights: object = _option(None, "the 7 tap weights: a set's name or 7 numbers", flag=None)
     robust: str | None = _option("pseudo-huber", "robust loss (pseudo-huber, cauchy or none)", flag=None)
     align: str = _option(
@@ -264,7 +271,7 @@ class FitOptions:
         if self.align not in ("none", *ALIGN_KINDS):
             raise InvalidInputError(f"align: expected one of none, {', '.join(ALIGN_KINDS)}, got {self.align!r}",
                                     field="align")
-        for name in ("vignetting", "highlights"):
+        for name in ("vignetting", "highlights", "stall_test"):
             if not isinstance(getattr(self, name), bool):
                 raise InvalidInputError(f"{name}: expected true or false, got {getattr(self, name)!r}", field=name)
         if self.saturation is not None:

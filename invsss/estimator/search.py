@@ -105,7 +105,7 @@ def solve_problem(problem, options, steps, before_first_step=None) -> SolvePath:
     def run(on, label, z0, with_solver=solver, arrived=None, max_steps=None, state=None):
         # ``on``: the SolvePath whose objective (robust weights, active set) is solved.
         steps.begin(label)
-        stall = SCREEN_STALL_TOL if with_solver is screen else STALL_TOL
+        stall = (SCREEN_STALL_TOL if with_solver is screen else STALL_TOL) if options.stall_test else None
         return run_solver(with_solver, on.objective, z0, max_steps or options.max_steps, steps,
                           steps.stop_requested, arrived, NOISE_TOL, stall, options.solver_jacobian, state)
 
