@@ -27,11 +27,10 @@ import numpy as np
 from ..estimator import FitInterrupted
 from ..estimator.blur_width import blur_line
 from ..estimator.fit import run_fit
-from ..estimator.option_text import saturation_from_text
 from ..estimator.options import FitOptions
 from ..forward.pair import ImagePair
 from ..forward.params import DEPTH_UNITS
-from ..io import photo_pair, shared_clipping_level, write_image, write_params
+from ..io import photo_pair, resolved_saturation, write_image, write_params
 from ..io.result_dir import ResultDir, ResultWriteError
 from ..runtime.interrupts import StopSignals
 from ..validation import InputNotice, InvalidInputError, one_line
@@ -139,16 +138,14 @@ def add_fit_option_arguments(parser: argparse.ArgumentParser) -> None:
 
 def fit_options_from(args: argparse.Namespace) -> FitOptions:
     """The :class:`FitOptions` of a parsed command line, checked before any file is
-    read. ``--saturation auto`` gives None here: :func:`run` resolves it from the
-    targets' files (:func:`~invsss.io.shared_clipping_level`) once the output
+    read. ``--saturation auto`` stays ``"auto"`` here: :func:`run` resolves it from
+    the targets' files (:func:`~invsss.io.resolved_saturation`) once the output
     directory is locked."""
     values = {}
     for field, flag in _fit_option_fields():
         value = getattr(args, field.name)
         parse = field.metadata["parse"]
         values[field.name] = value if parse is None else parse(value, flag)
-    if values.get("saturation") == "auto":
-        values["saturation"] = None
     if values.get("profile") == "auto":
         # Two photographs at one distance resolve a blur of a pixel or two: one
         # Gaussian is what they determine (docs/capture.md); --profile asks for more.
@@ -159,13 +156,6 @@ def fit_options_from(args: argparse.Namespace) -> FitOptions:
         # FitOptions names the field; the user typed its flag.
         flags = {field.name: flag for field, flag in _fit_option_fields()}
         raise (err.named(flags[err.field]) if err.field in flags else err) from None
-
-
-def saturation_level(text: str, targets: list[str]) -> float | None:
-    """``--saturation``: a number, 'none', or 'auto' (the ``targets``' own clipping level)."""
-    level = saturation_from_text(text)
-    # "auto" is the only text saturation_from_text returns.
-    return shared_clipping_level(targets) if isinstance(level, str) else level
 
 
 def _check_pair_counts(args: argparse.Namespace) -> int:
@@ -235,8 +225,8 @@ def _run(args: argparse.Namespace, stop: StopSignals, notices: list[str]) -> int
             # One distance holds correction and maxdd (inputs.held says at what).
             options = dataclasses.replace(options, fix=inputs.fix)
         pairs = _with_light_buffers(pairs, args)
-        if args.saturation == "auto":
-            options = dataclasses.replace(options, saturation=saturation_level("auto", args.target))
+        # "auto" is the targets' own clipping level: their files know it.
+        options = dataclasses.replace(options, saturation=resolved_saturation(options.saturation, args.target))
         # The report needs matplotlib (0.3-0.4 s to import, seconds while it builds
         # its font cache); import it beside the fit, whose solver steps leave the
         # interpreter free while XLA computes. Not a daemon: a process that ends

@@ -143,13 +143,15 @@ class FitOptions:
         standard deviations of the residual (smoothed over 1 px; dilated by 1 px)
         are excluded from the comparison and the pair is fitted again. Reported in
         :attr:`FitResult.highlights`.
-    saturation : float, optional
+    saturation : float, "auto" or None
         The target's clipping level (in the target's units, e.g. the decoded value
         of an 8-bit file's code 255): masked pixels with any channel at or above it
         are left out of the comparison, and their count is in
         :attr:`FitResult.warnings`. A clipped pixel reads darker than the light that
         reached it; about a hundred of them (0.4 % of a face) moved a photograph's
-        fit to a basin with sss_level 50 % high.
+        fit to a basin with sss_level 50 % high. ``"auto"``: the targets' own level,
+        which their files know (:func:`invsss.io.resolved_saturation` gives it; the
+        command line and sweeps resolve it before the fit); None: no level.
     light_terms : sequence of {"shift", "grazing", "incidence", "law", "fill"}, a mapping, or a string
         Add the light-aware terms of docs/model.md, section 8, to the blur: a
         shift of the scattered light away from the light (``kappa``, mm), a
@@ -235,7 +237,7 @@ class FitOptions:
     highlights: bool = _option(
         False, "refit with the specular highlights of a first fit's residual left out (for photographs "
         "without cross-polarisation; their count goes into params.json)", action="store_true")
-    saturation: float | None = _option(
+    saturation: float | str | None = _option(
         None, "the targets' clipping level in their decoded units: masked pixels at or above it are left "
         "out of the fit, and their count is a warning in params.json. 'auto': 1.0, the top code, when every "
         "target is an 8- or 16-bit file, and no level for float targets (EXR); 'none': keep every pixel",
@@ -274,10 +276,11 @@ class FitOptions:
         for name in ("vignetting", "highlights", "stall_test"):
             if not isinstance(getattr(self, name), bool):
                 raise InvalidInputError(f"{name}: expected true or false, got {getattr(self, name)!r}", field=name)
-        if self.saturation is not None:
+        if self.saturation is not None and self.saturation != "auto":
             level = self.saturation
             if isinstance(level, bool) or not isinstance(level, numbers.Real) or not np.isfinite(level) or level <= 0:
-                raise InvalidInputError(f"saturation: expected a number > 0 or None, got {level!r}", field="saturation")
+                raise InvalidInputError(f"saturation: expected a number > 0, 'auto' or None, got {level!r}",
+                                        field="saturation")
             object.__setattr__(self, "saturation", float(level))
         terms, held = check_light_terms(self.light_terms)
         if self.light_fixed:

@@ -13,7 +13,7 @@ first seven are re-exported here.
 
 from .colour import linear_to_srgb, srgb_to_linear
 from .depth import read_depth
-from .images import clipping_level, load_pair, read_image, shared_clipping_level
+from .images import clipping_level, load_pair, read_image, resolved_saturation, shared_clipping_level
 from .masks import read_mask
 from .params_file import PARAMS_KEYS, PARAMS_OPTIONAL_KEYS, read_params, write_params
 from .rasters import IMAGE_EXTENSIONS, image_extension
@@ -30,6 +30,7 @@ __all__ = [
     "read_image",
     "read_mask",
     "read_params",
+    "resolved_saturation",
     "shared_clipping_level",
     "write_image",
     "write_params",

@@ -54,6 +54,7 @@ __all__ = [
     "load_pair",
     "read_colour_pair",
     "read_image",
+    "resolved_saturation",
     "shared_clipping_level",
 ]
 
@@ -253,6 +254,23 @@ def clipping_level(path) -> float | None:
     finally:
         image_input.close()
     return 1.0 if basetype in (oiio.UINT8, oiio.UINT16) else None
+
+
+def resolved_saturation(level, target_paths) -> float | None:
+    """A fit's ``saturation`` with ``"auto"`` replaced by the targets' own level.
+
+    ``"auto"`` becomes :func:`shared_clipping_level` of ``target_paths``; a number
+    or None is returned as it is. The command line and sweeps call this before
+    the fit: the fit itself sees only arrays, which do not say how they were coded.
+
+    Examples
+    --------
+    >>> resolved_saturation(0.9, [])
+    0.9
+    >>> print(resolved_saturation(None, ["anything.png"]))
+    None
+    """
+    return shared_clipping_level(target_paths) if level == "auto" else level
 
 
 def shared_clipping_level(paths) -> float | None:

@@ -69,10 +69,10 @@ def _resolved(trial: Trial) -> dict:
     """The trial's options with ``saturation = "auto"`` replaced by its targets' clipping level."""
     if trial.options.get("saturation") != "auto":
         return trial.options
-    from ..io import shared_clipping_level
+    from ..io import resolved_saturation
 
-    level = shared_clipping_level([os.path.join(trial.root, pair["target"]) for pair in trial.pairs])
-    return {**trial.options, "saturation": level}
+    targets = [os.path.join(trial.root, pair["target"]) for pair in trial.pairs]
+    return {**trial.options, "saturation": resolved_saturation("auto", targets)}
 
 
 def execute(trial: dict, out: str, stop=None) -> dict:

@@ -13,7 +13,7 @@ import pytest
 
 import invsss
 from invsss.cli import main
-from invsss.cli.fit import saturation_level
+from invsss.io import resolved_saturation
 from tests.forward._clipped_card import SHAPE
 from tests.io._clipped_card import card_on_disk
 from tests.io._pair_files import pair_args
@@ -68,10 +68,10 @@ def test_saturation_auto_sets_no_level_when_a_target_holds_floats(tmp_path):
     paths, _ = card_on_disk(tmp_path, ".png")
     exr = tmp_path / "card_target.exr"
     with pytest.warns(invsss.InputNotice, match=rf"saturation auto: no clipping level set, as a float target \({exr}\)"):
-        assert saturation_level("auto", [str(paths["target"]), str(exr)]) is None
-    assert saturation_level("auto", [str(paths["target"])] * 2) == 1.0
-    assert saturation_level("0.5", [str(exr)]) == 0.5
-    assert saturation_level("none", [str(paths["target"])]) is None
+        assert resolved_saturation("auto", [str(paths["target"]), str(exr)]) is None
+    assert resolved_saturation("auto", [str(paths["target"])] * 2) == 1.0
+    assert resolved_saturation(0.5, [str(exr)]) == 0.5
+    assert resolved_saturation(None, [str(paths["target"])]) is None
 
 
 def test_a_bad_saturation_word_is_a_one_line_error(tmp_path):

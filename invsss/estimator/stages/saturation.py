@@ -22,6 +22,11 @@ def unsaturated(inner: Fit) -> Fit:
         saturation = call.options.saturation
         if saturation is None:
             return inner(call)
+        if saturation == "auto":
+            raise InvalidInputError(
+                "saturation: 'auto' is the targets' own clipping level, which only their files know; give the "
+                "level (1.0 for 8- or 16-bit targets decoded to [0, 1]) or None, or resolve it from the files "
+                "with invsss.io.resolved_saturation", field="saturation")
         prepared = prepare_pairs(call.pairs)
         out, messages = [], []
         for i, pair in enumerate(prepared):

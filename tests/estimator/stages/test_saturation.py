@@ -35,7 +35,7 @@ def test_clipped_pixels_are_left_out_and_counted():
 @pytest.mark.parametrize("level", [0.0, -1.0, float("nan"), "high", True])
 def test_a_bad_saturation_level_is_a_one_line_error(level):
     source, target, depth, mask, _ = clipped_card()
-    with pytest.raises(invsss.InvalidInputError, match="^saturation: expected a number > 0 or None"):
+    with pytest.raises(invsss.InvalidInputError, match="^saturation: expected a number > 0, 'auto' or None"):
         invsss.fit_pair(source, target, depth, mask, profile=PROFILE, fix=FIX, saturation=level)
 
 
@@ -43,3 +43,12 @@ def test_a_level_below_every_pixel_leaves_nothing_to_fit():
     source, target, depth, mask, _ = clipped_card()
     with pytest.raises(invsss.InvalidInputError, match="^target: every masked pixel is at or above"):
         invsss.fit_pair(source, target, depth, mask, profile=PROFILE, fix=FIX, saturation=1e-9)
+
+
+def test_auto_is_an_option_value_that_arrays_alone_cannot_resolve():
+    # "auto" is one value from the option table to the stage: the targets' own level,
+    # which their files know (invsss.io.resolved_saturation); arrays do not say it.
+    assert invsss.FitOptions(saturation="auto").saturation == "auto"
+    source, target, depth, mask, _ = clipped_card()
+    with pytest.raises(invsss.InvalidInputError, match="^saturation: 'auto' is the targets' own clipping level"):
+        invsss.fit_pair(source, target, depth, mask, profile=PROFILE, fix=FIX, saturation="auto")
