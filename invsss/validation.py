@@ -52,6 +52,9 @@ class InvalidInputError(ValueError):
         such as ``"light_buffers.key"``), where the message starts with it.
         Callers that show the input under another name (the command line shows
         a flag or a file's path) use :meth:`named`, never the message's text.
+    path : str, optional
+        The file the error is about, where there is one (an output that cannot
+        be written, a pair's file the command line read for a role).
 
     Examples
     --------
@@ -64,20 +67,23 @@ class InvalidInputError(ValueError):
     'mask.png: mask is empty'
     """
 
-    def __init__(self, message, *, field: str | None = None):
+    def __init__(self, message, *, field: str | None = None, path: str | None = None):
         super().__init__(message)
         self.field = field
+        self.path = None if path is None else str(path)
 
-    def named(self, label: str) -> InvalidInputError:
+    def named(self, label: str, path: str | None = None) -> InvalidInputError:
         """The same error with its field shown as ``label``; itself when it has no field.
 
-        The result keeps ``field``, the library's name.
+        The result keeps ``field``, the library's name, and takes ``path`` (the
+        file behind the label) when one is given.
 
         Examples
         --------
         >>> err = InvalidInputError("no skin in the mask", field="pairs[1].mask")
-        >>> str(err.named("cheek.png (pairs[1].mask)"))
-        'cheek.png (pairs[1].mask): no skin in the mask'
+        >>> shown = err.named("cheek.png (pairs[1].mask)", "cheek.png")
+        >>> str(shown), shown.field, shown.path
+        ('cheek.png (pairs[1].mask): no skin in the mask', 'pairs[1].mask', 'cheek.png')
         """
         if self.field is None:
             return self
@@ -85,7 +91,7 @@ class InvalidInputError(ValueError):
         # Messages start with their field by convention; one that does not is
         # still shown under the label rather than left under the library's name.
         rest = text[len(self.field):] if text.startswith(self.field) else f": {text}"
-        named = InvalidInputError(label + rest)
+        named = InvalidInputError(label + rest, path=self.path if path is None else path)
         named.field = self.field
         return named
 

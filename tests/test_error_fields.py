@@ -54,3 +54,12 @@ def test_an_error_without_a_field_is_left_as_it_is():
     assert err.named("--saturation") is err
     assert isinstance(err, ValueError)
 
+
+
+def test_an_error_about_a_file_carries_its_path(tmp_path):
+    from invsss.io import write_image
+
+    missing = tmp_path / "no_such_folder" / "out.exr"
+    with pytest.raises(InvalidInputError) as caught:
+        write_image(str(missing), np.zeros((2, 2, 3), np.float32))
+    assert caught.value.path == str(missing)

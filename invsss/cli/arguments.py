@@ -35,7 +35,7 @@ def check_output_path(path: str) -> None:
     image_extension(path, "output")
     directory = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(directory):
-        raise InvalidInputError(f"{path}: cannot write, directory {directory} does not exist", field=path)
+        raise InvalidInputError(f"{path}: cannot write, directory {directory} does not exist", path=path)
 
 
 def model_choice(args: argparse.Namespace, extras: dict) -> tuple[str, object]:
@@ -51,7 +51,7 @@ def read_light_buffer(path, flag: str, shape):
     if buffer.shape != (*shape, 3):
         raise InvalidInputError(
             f"{path}: expected a 3-channel image of the source's size {shape} for --{flag}, got shape {buffer.shape}",
-            field=path,
+            path=path,
         )
     return buffer
 
@@ -67,7 +67,7 @@ def read_key_buffer(path, source, linear_codes: bool):
     if key.shape != wanted:
         raise InvalidInputError(
             f"{path}: expected an image of the source's size and channels {wanted} for --key, got shape {key.shape}",
-            field=path,
+            path=path,
         )
     return key
 

@@ -289,17 +289,17 @@ def _with_file_names(err: InvalidInputError, args: argparse.Namespace, count: in
     """An estimator's error names a pair's role (``target``, ``pairs[1].mask``) in its
     ``field``; the user typed a file, so show its path: ``nir.png (target): ...``. A
     light-term buffer is shown as the flag that gives it (``--light: ...``)."""
-    shown = {}
+    shown, paths = {}, {}
     for role in ("source", "target", "depth", "mask"):
         for i, path in enumerate(getattr(args, role, None) or ()):
             name = role if count == 1 else f"pairs[{i}].{role}"
-            shown[name] = f"{path} ({name})"
+            shown[name], paths[name] = f"{path} ({name})", path
     for buffer in ("normal", "light", "key", "fill_light"):
         flag = "--" + buffer.replace("_", "-")
         shown["light_buffers." + buffer] = flag
         shown.update({f"pairs[{i}].{buffer}": flag + ("" if count == 1 else f" (pairs[{i}].{buffer})")
                       for i in range(count)})
-    return err.named(shown[err.field]) if err.field in shown else err
+    return err.named(shown[err.field], paths.get(err.field)) if err.field in shown else err
 
 
 def _input_files(args: argparse.Namespace, options: FitOptions) -> list[tuple[str, str]]:

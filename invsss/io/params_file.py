@@ -280,14 +280,14 @@ def _check_result_complete(path: str) -> None:
         raise InvalidInputError(
             f"{path}: belongs to an incomplete result (the run that wrote it was "
             "interrupted); re-run it",
-            field=path,
+            path=path,
         )
     if state == "damaged":
         # Not an interruption (manifests are written atomically): the file was changed.
         raise InvalidInputError(
             f"{path}: its result's manifest {os.path.join(directory, MANIFEST_NAME)} is damaged "
             "(not a JSON object), so whether the result is whole is unknown; re-run it",
-            field=path,
+            path=path,
         )
 
 

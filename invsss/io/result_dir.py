@@ -248,7 +248,7 @@ class ResultDir:
         """Create if needed, lock, and check the directory; raise before any work."""
         path = self.path
         if os.path.exists(path) and not os.path.isdir(path):
-            raise InvalidInputError(f"{path}: expected an output directory, but a file of that name exists", field=path)
+            raise InvalidInputError(f"{path}: expected an output directory, but a file of that name exists", path=path)
         if not os.path.isdir(path):
             try:
                 os.makedirs(path)
@@ -257,7 +257,7 @@ class ResultDir:
             except OSError as err:
                 raise InvalidInputError(
                     f"{path}: cannot create the output directory ({err.strerror})",
-                    field=path,
+                    path=path,
                 ) from None
             else:
                 self._created = True
@@ -361,7 +361,7 @@ class ResultDir:
             raise InvalidInputError(
                 f"{path}: already holds {what.get(state, 'a result')} ({listed or MANIFEST_NAME}); "
                 f"pass {self.option} to replace it{kept}, or choose another output directory",
-                field=path,
+                path=path,
             )
         # Staging folders of a run that was killed mid-commit: nobody else can own
         # them while we hold the lock.

@@ -39,7 +39,7 @@ def _atomic_target(path: str):
     """Yield a temporary sibling of ``path``; on success it replaces ``path``."""
     directory, base = os.path.split(os.path.abspath(path))
     if not os.path.isdir(directory):
-        raise InvalidInputError(f"{path}: cannot write, directory {directory} does not exist", field=path)
+        raise InvalidInputError(f"{path}: cannot write, directory {directory} does not exist", path=path)
     ext = os.path.splitext(base)[1]
     # Same directory (so os.replace is a rename on one file system) and the same
     # extension (OpenImageIO picks the format from it); hidden while incomplete.
