@@ -36,11 +36,12 @@ the solvers.
 
 ``--stopping PAIR_DIR [PAIR_DIR ...]`` fits each pair folder with the command
 line's defaults twice, without and with the stall test of
-:mod:`invsss.estimator.solve` (``STALL_TOL``, ``SCREEN_STALL_TOL``), and prints
+:mod:`invsss.estimator.solve` (the fit option ``stall_test``), and prints
 the steps, the time, ``sss_level`` and ``correction`` with their standard
 errors, and how much chi^2 the stall test left untaken. ``--jacobian PAIR_DIR
 [PAIR_DIR ...]`` does the same for the solvers' Jacobian, forward mode against
-forward differences (:class:`invsss.estimator.solve.DenseJacobian`).
+forward differences (the fit option ``solver_jacobian``;
+:class:`invsss.estimator.solve.DenseJacobian`).
 
 ``--canvas PAIR_DIR`` fits three crops of a pair (its full size and two smaller
 ones that keep the mask off their last row and column) one after another in a
