@@ -244,6 +244,9 @@ def main() -> None:
     parser.add_argument("--breakdown-child", metavar="CACHE_DIR", default=None, help=argparse.SUPPRESS)
     parser.add_argument("--cold-only", action="store_true",
                         help="--breakdown: only the cold process (its fit and a second fit in it)")
+    parser.add_argument("--light-terms", metavar="TERMS", default="",
+                        help="--breakdown: fit these light terms (e.g. shift,law) with the pair folder's "
+                             "buffers; the plain fit inside the term fit is its own row")
     parser.add_argument("--canvas", metavar="PAIR_DIR", default=None,
                         help="three crops of a pair fitted at their own sizes and on one canvas")
     parser.add_argument("--canvas-child", metavar="ON", default=None, help=argparse.SUPPRESS)
@@ -265,10 +268,10 @@ def main() -> None:
         canvas(args.canvas)
         return
     if args.breakdown_child is not None:
-        breakdown_child(args.breakdown, args.breakdown_child)
+        breakdown_child(args.breakdown, args.breakdown_child, args.light_terms)
         return
     if args.breakdown is not None:
-        breakdown(args.breakdown, cold_only=args.cold_only)
+        breakdown(args.breakdown, cold_only=args.cold_only, light_terms=args.light_terms)
         return
 
     scene = make_scene(args.size)
@@ -378,7 +381,7 @@ def _solve_label(solver, objective, z0, max_steps, on_step=None, *rest, **option
     return "solve: " + label.rstrip("0123456789").strip()
 
 
-def breakdown_child(pair_dir: str, cache_dir: str) -> None:
+def breakdown_child(pair_dir: str, cache_dir: str, light_terms: str = "") -> None:
     """One process: import, read, fit twice; print the stages as JSON."""
     from jax import monitoring
 
@@ -420,7 +423,11 @@ def breakdown_child(pair_dir: str, cache_dir: str) -> None:
                     lambda objective, z, flag: "evaluate + linearise" if bool(flag) else "evaluate")
     stages.wrap(summary_module, "gauss_newton_uncertainty", "covariance")
     stages.wrap(core_module, "summarise", "report (all)")
-
+    if light_terms:
+        # The term fit runs the plain model's fit first (estimator.stages.light_terms):
+        # each innermost fit is a row of its own.
+        stages.wrap(fit_module, "core", lambda call: "core: " + ("with the terms" if call.options.light_terms
+                                                                 else "plain model"))
     import invsss.estimator.solve as solve_module
 
     steps = {"dispatch": 0.0, "wait": 0.0, "between": 0.0, "loop": 0.0, "n": 0, "last": None}
@@ -461,6 +468,14 @@ def breakdown_child(pair_dir: str, cache_dir: str) -> None:
 
     t0 = time.perf_counter()
     pair = _pair_source(pair_dir)
+    terms = {}
+    if light_terms:
+        from invsss import LightBuffers, read_image
+
+        found = {name: os.path.join(pair_dir, f"{name}.exr") for name in ("normal", "light", "key", "fill_light")}
+        buffers = {name: read_image(path, linear=True, grey=name == "key" and pair.source.shape[-1] == 1)
+                   for name, path in found.items() if os.path.exists(path)}
+        terms = {"light_terms": light_terms, "light_buffers": LightBuffers(**buffers)}
     reading = time.perf_counter() - t0
     runs = []
     for _ in range(2):
@@ -470,7 +485,7 @@ def breakdown_child(pair_dir: str, cache_dir: str) -> None:
         spans.clear()
         steps.update(dispatch=0.0, wait=0.0, between=0.0, loop=0.0, n=0, last=None)
         t0 = time.perf_counter()
-        result = fit_module.fit_pair(pair.source, pair.target, pair.depth, pair.mask)
+        result = fit_module.fit_pair(pair.source, pair.target, pair.depth, pair.mask, **terms)
         total = time.perf_counter() - t0
         runs.append({
             "fit": total, "stages": dict(stages.seconds), "counts": dict(stages.counts),
@@ -497,8 +512,9 @@ def _pair_source(pair_dir: str):
     return read_pair_folder(pair_dir)
 
 
-def _child_run(pair_dir: str, cache_dir: str) -> dict:
-    command = [sys.executable, __file__, "--breakdown", pair_dir, "--breakdown-child", cache_dir]
+def _child_run(pair_dir: str, cache_dir: str, light_terms: str = "") -> dict:
+    command = [sys.executable, __file__, "--breakdown", pair_dir, "--breakdown-child", cache_dir,
+               "--light-terms", light_terms]
     env = {k: v for k, v in os.environ.items() if k != "INVSSS_NO_CACHE"}
     done = subprocess.run(command, capture_output=True, text=True, env=env)
     if done.returncode != 0:
@@ -507,14 +523,14 @@ def _child_run(pair_dir: str, cache_dir: str) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def breakdown(pair_dir: str, cold_only: bool = False) -> None:
+def breakdown(pair_dir: str, cold_only: bool = False, light_terms: str = "") -> None:
     """Cold process, second fit in it, warm-cache process, verified-cache process: one table."""
     with tempfile.TemporaryDirectory(prefix="invsss-bench-cache-") as cache:
-        cold = _child_run(pair_dir, cache)
+        cold = _child_run(pair_dir, cache, light_terms)
         columns = {"cold": (cold, cold["runs"][0]), "2nd fit": (cold, cold["runs"][1])}
         if not cold_only:
-            warm = _child_run(pair_dir, cache)
-            verified = _child_run(pair_dir, cache)
+            warm = _child_run(pair_dir, cache, light_terms)
+            verified = _child_run(pair_dir, cache, light_terms)
             columns.update({"warm cache": (warm, warm["runs"][0]), "verified": (verified, verified["runs"][0])})
     stage_names = []
     for _, run in columns.values():
@@ -524,7 +540,8 @@ def breakdown(pair_dir: str, cold_only: bool = False) -> None:
         functions += [k for k in run["compiles"] if k not in functions]
 
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    print(f"bench_fit --breakdown {pair_dir}: fit_pair with the CLI defaults; {os.cpu_count()} CPUs, "
+    with_terms = f" and --light-terms {light_terms}" if light_terms else ""
+    print(f"bench_fit --breakdown {pair_dir}: fit_pair with the CLI defaults{with_terms}; {os.cpu_count()} CPUs, "
           f"load average {load:.1f}; JAX device {cold.get('device')}; "
           f"steps ahead: {'yes' if cold.get('ahead') else 'no'}; seconds (calls)")
     header = f"{'stage':<34}" + "".join(f"{name:>16}" for name in columns)
