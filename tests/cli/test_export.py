@@ -4,22 +4,10 @@ from __future__ import annotations
 
 import json
 
-import pytest
-
-from invsss import write_params
 from invsss.cli import main
 from invsss.io.export import export_params
 from tests.io._hlsl import parse_hlsl
-
-
-@pytest.fixture
-def params_file(tmp_path):
-    path = tmp_path / "params.json"
-    # Numbers that float32 would round: the export must carry the file's values.
-    write_params(path, {"sss_level": 612.345678901, "correction": 2.0, "maxdd": 0.1,
-                        "weights": [0.25, 0.75], "variances": [0.123456789012, 1.5],
-                        "model": "thesis", "loss": 0.5})
-    return path
+from tests.io._params_files import params_file  # noqa: F401 (fixture)
 
 
 def test_cli_export_to_stdout_and_file(params_file, tmp_path, capsys):

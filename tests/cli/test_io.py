@@ -4,11 +4,10 @@ and by the estimator, each once."""
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
 import invsss
+from tests.forward._notices import input_notices
 from tests.io._scene_files import H, W, fitted_params_file, scene_files
 
 
@@ -28,21 +27,14 @@ def test_cli_render_warns_once_about_filled_values(tmp_path, capsys):
                    "using its point estimate"]
 
 
-def _mask_notices(func) -> list[str]:
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        func()
-    return [str(w.message) for w in caught if issubclass(w.category, invsss.InputNotice)]
-
-
 def test_a_mask_over_the_whole_frame_is_noted_by_load_pair_and_the_estimator(tmp_path):
     from invsss.estimator.inputs import prepare_pair
 
     paths = scene_files(tmp_path)  # its mask is all ones
-    notes = _mask_notices(lambda: invsss.load_pair(*(paths[k] for k in ("source", "target", "depth", "mask"))))
+    notes = input_notices(lambda: invsss.load_pair(*(paths[k] for k in ("source", "target", "depth", "mask"))))
     assert notes == [f"{paths['mask']}: covers 100% of the frame; it likely includes background "
                      "(the mask should select skin only)"]
     image, depth = np.ones((H, W, 3)), np.full((H, W), 500.0)
-    notes = _mask_notices(lambda: prepare_pair(image, image, depth, np.ones((H, W))))
+    notes = input_notices(lambda: prepare_pair(image, image, depth, np.ones((H, W))))
     assert len(notes) == 1 and notes[0].startswith("mask: covers 100%")
-    assert _mask_notices(lambda: prepare_pair(image, image, depth, None)) == []  # None: every pixel, asked for
+    assert input_notices(lambda: prepare_pair(image, image, depth, None)) == []  # None: every pixel, asked for

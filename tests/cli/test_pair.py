@@ -9,20 +9,11 @@ import numpy as np
 import invsss
 from invsss.estimator.inputs import prepare_pairs
 from invsss.forward.pair import ImagePair
-
-H, W = 6, 8
-
-
-def _arrays(target_channels=3):
-    rng = np.random.default_rng(0)
-    mask = np.zeros((H, W))
-    mask[1:5, 2:6] = 1.0
-    target_shape = (H, W) if target_channels is None else (H, W, target_channels)
-    return rng.random((H, W, 3)), rng.random(target_shape), np.full((H, W), 500.0), mask
+from tests.forward._pair_arrays import pair_arrays
 
 
 def test_load_pair_and_the_estimator_share_one_type(tmp_path):
-    source, target, depth, mask = (a.astype(np.float32) for a in _arrays())
+    source, target, depth, mask = (a.astype(np.float32) for a in pair_arrays())
     paths = [tmp_path / n for n in ("s.exr", "t.exr", "d.npy", "m.npy")]
     invsss.write_image(paths[0], source)
     invsss.write_image(paths[1], target)

@@ -15,23 +15,10 @@ import pytest
 import invsss
 from invsss.cli import main
 from invsss.scenes import load_config, parse_config
+from tests.scenes._scene_configs import sphere_config
 
 mitsuba = pytest.importorskip("mitsuba", reason='the scene tests need pip install "invsss[scenes]"')
 
-CAMERA = {"position": [0.0, 0.0, 300.0], "look_at": [0.0, 0.0, 0.0], "fov": 20.0}
-POINT_LIGHT = {"type": "point", "position": [150.0, 150.0, 300.0], "intensity": 1e5}
-
-
-def _config(**changes):
-    content = {
-        "object": {"primitive": "sphere", "radius": 40.0},
-        "camera": {**CAMERA, "width": 32, "height": 32},
-        "lights": [POINT_LIGHT],
-        "medium": {"preset": "thesis-940"},
-        "spp": 2,
-    }
-    content.update(changes)
-    return parse_config(content, "test scene")
 
 
 _TOML = """\
@@ -163,7 +150,7 @@ def test_misspelt_key_is_one_line_naming_it_and_the_nearest_key(tmp_path, capsys
     # Strict numbers: true is not 1.
     bad_light = {"type": "point", "position": [0.0, 0.0, 1.0], "intensity": True}
     with pytest.raises(invsss.InvalidInputError, match=r"^s: lights\[0\]\.intensity: expected a number"):
-        parse_config({**_config().model_dump(), "lights": [bad_light]}, "s")
+        parse_config({**sphere_config().model_dump(), "lights": [bad_light]}, "s")
     assert load_config(_write_toml(tmp_path)).camera.fov == 20.0
 
 

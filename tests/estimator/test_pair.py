@@ -8,20 +8,11 @@ import pytest
 
 from invsss.estimator.inputs import prepare_pair, prepare_pairs
 from invsss.validation import InvalidInputError, check_pair
-
-H, W = 6, 8
-
-
-def _arrays(target_channels=3):
-    rng = np.random.default_rng(0)
-    mask = np.zeros((H, W))
-    mask[1:5, 2:6] = 1.0
-    target_shape = (H, W) if target_channels is None else (H, W, target_channels)
-    return rng.random((H, W, 3)), rng.random(target_shape), np.full((H, W), 500.0), mask
+from tests.forward._pair_arrays import H, W, pair_arrays
 
 
 def test_tuples_still_work_and_keep_a_2d_target_2d():
-    source, target, depth, mask = _arrays(target_channels=None)
+    source, target, depth, mask = pair_arrays(target_channels=None)
     with jax.enable_x64(True):
         (data,) = prepare_pairs([(source, target, depth, mask)])
         (no_mask,) = prepare_pairs([(source, target, depth)])
@@ -31,14 +22,14 @@ def test_tuples_still_work_and_keep_a_2d_target_2d():
 
 def test_objects_that_merely_look_like_pairs_are_refused():
     class Lookalike:
-        source, target, depth, mask = _arrays()
+        source, target, depth, mask = pair_arrays()
 
     with pytest.raises(InvalidInputError, match=r"pairs\[0\]: expected .* invsss.ImagePair, got Lookalike"):
         prepare_pairs([Lookalike()])
 
 
 def test_check_pair_names_the_input_that_is_wrong():
-    source, target, depth, mask = _arrays()
+    source, target, depth, mask = pair_arrays()
     names = {"source": "s.exr", "target": "t.exr", "depth": "d.npy", "mask": "m.png"}
     with pytest.raises(InvalidInputError, match=r"^d.npy: expected 6x8 pixels to match s.exr, got 6x7 \(every image of a pair is on one pixel grid"):
         check_pair(source, target, depth[:, :-1], mask, names)

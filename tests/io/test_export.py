@@ -10,9 +10,10 @@ import jax
 import numpy as np
 import pytest
 
-from invsss import InvalidInputError, SSSParams, render, write_params
+from invsss import InvalidInputError, SSSParams, render
 from invsss.io.export import export_params, shader_constants, to_hlsl, to_json
 from tests.io._hlsl import parse_hlsl
+from tests.io._params_files import params_file  # noqa: F401 (fixture)
 
 
 @pytest.fixture
@@ -227,16 +228,6 @@ def test_invalid_arguments(kwargs, match):
 
 
 # ------------------------------------------------------------------------- files
-
-
-@pytest.fixture
-def params_file(tmp_path):
-    path = tmp_path / "params.json"
-    # Numbers that float32 would round: the export must carry the file's values.
-    write_params(path, {"sss_level": 612.345678901, "correction": 2.0, "maxdd": 0.1,
-                        "weights": [0.25, 0.75], "variances": [0.123456789012, 1.5],
-                        "model": "thesis", "loss": 0.5})
-    return path
 
 
 def test_export_params_reads_model_from_file_and_writes(params_file, tmp_path):

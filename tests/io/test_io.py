@@ -14,6 +14,7 @@ import pytest
 import invsss
 from invsss.io import linear_to_srgb, srgb_to_linear
 from invsss.validation import InvalidInputError
+from tests.forward._notices import input_notices
 from tests.io._scene_files import H, W, fitted_params_file, scene_files
 
 
@@ -522,13 +523,6 @@ def test_dropping_a_translucent_alpha_is_noted(tmp_path, rgb):
         np.testing.assert_array_equal(invsss.read_image(cut), rgb)
 
 
-def _mask_notices(func) -> list[str]:
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        func()
-    return [str(w.message) for w in caught if issubclass(w.category, invsss.InputNotice)]
-
-
 def test_grey_rgb_mismatch_names_the_target_file(tmp_path):
     paths = scene_files(tmp_path, target_channels=3)
     grey = tmp_path / "grey_source.exr"
@@ -556,10 +550,10 @@ def test_an_image_read_back_can_be_written_again(tmp_path, rgb):
 
 def test_a_jpeg_target_is_noted_by_load_pair(tmp_path):
     paths = scene_files(tmp_path)
-    notes = _mask_notices(lambda: invsss.load_pair(*(paths[k] for k in ("source", "target", "depth", "mask"))))
+    notes = input_notices(lambda: invsss.load_pair(*(paths[k] for k in ("source", "target", "depth", "mask"))))
     assert not any("JPEG" in n for n in notes)
     paths["target"] = tmp_path / "target.jpg"
     invsss.write_image(paths["target"], np.full((H, W), 0.5, np.float32))
-    notes = _mask_notices(lambda: invsss.load_pair(*(paths[k] for k in ("source", "target", "depth", "mask"))))
+    notes = input_notices(lambda: invsss.load_pair(*(paths[k] for k in ("source", "target", "depth", "mask"))))
     jpeg = [n for n in notes if "JPEG" in n]
     assert len(jpeg) == 1 and jpeg[0].startswith(f"{paths['target']}: a JPEG target: ")

@@ -21,21 +21,7 @@ from invsss.scenes.media import dipole_fit_to_thesis_profile
 mitsuba = pytest.importorskip("mitsuba", reason='the scene tests need pip install "invsss[scenes]"')
 from invsss.scenes import render_scene  # noqa: E402  (needs Mitsuba)
 from tests import ROOT
-
-CAMERA = {"position": [0.0, 0.0, 300.0], "look_at": [0.0, 0.0, 0.0], "fov": 20.0}
-POINT_LIGHT = {"type": "point", "position": [150.0, 150.0, 300.0], "intensity": 1e5}
-
-
-def _config(**changes):
-    content = {
-        "object": {"primitive": "sphere", "radius": 40.0},
-        "camera": {**CAMERA, "width": 32, "height": 32},
-        "lights": [POINT_LIGHT],
-        "medium": {"preset": "thesis-940"},
-        "spp": 2,
-    }
-    content.update(changes)
-    return parse_config(content, "test scene")
+from tests.scenes._scene_configs import CAMERA, POINT_LIGHT, sphere_config
 
 
 def _pixel_rays(config, n: int = 8):
@@ -72,7 +58,7 @@ def _pixel_rays(config, n: int = 8):
 @pytest.mark.slow
 def test_depth_of_tilted_plane_is_analytic_eye_z():
     tilt = -35.0
-    config = _config(object={"primitive": "slab", "size": [2000.0, 2000.0, 200.0],
+    config = sphere_config(object={"primitive": "slab", "size": [2000.0, 2000.0, 200.0],
                              "pose": {"rotate": [tilt, 0.0, 0.0]}},
                      camera={**CAMERA, "width": 32, "height": 24})
     result = render_scene(config)
@@ -99,7 +85,7 @@ def test_mask_and_coverage_match_the_silhouette_minus_occluder(camera):
     radius = 40.0
     stripe = {"center": [0.0, 20.0, 100.0], "normal": [0.0, 0.0, 1.0], "along": [1.0, 0.0, 0.0],
               "width": 10.0, "length": 300.0, "count": 1, "duty": 0.5}
-    config = _config(occluders=[stripe], camera=camera)
+    config = sphere_config(occluders=[stripe], camera=camera)
     result = render_scene(config)
     origin, directions, (right, up, forward) = _pixel_rays(config, n=16)
     # Sphere about the origin: a ray hits it where its distance to the centre is < radius.
@@ -147,7 +133,7 @@ def test_flat_slab_target_and_source_reflect_the_same_energy(medium, spp):
     # Lit at 30 degrees, seen at 20 degrees: not the straight-down, uniform-sky
     # set-up the source albedo was calibrated in.
     light, view = np.radians(30.0), np.radians(20.0)
-    config = _config(
+    config = sphere_config(
         object={"primitive": "slab", "size": [2000.0, 2000.0, 300.0]},
         camera={"position": [300.0 * np.sin(view), 0.0, 300.0 * np.cos(view)], "look_at": [0.0, 0.0, 0.0],
                 "fov": 4.0, "width": 24, "height": 24},
@@ -167,17 +153,17 @@ def test_flat_slab_target_and_source_reflect_the_same_energy(medium, spp):
 
 
 def test_index_matched_boundary_converges_faster():
-    rough, matched = (render_scene(_config(spp=16, medium={"preset": "thesis-940", "boundary": boundary}))
+    rough, matched = (render_scene(sphere_config(spp=16, medium={"preset": "thesis-940", "boundary": boundary}))
                       for boundary in ("rough-dielectric", "index-matched"))
     relative = [r.info["noise"]["noise_rms"] / float(r.target[r.mask > 0].mean()) for r in (rough, matched)]
     assert relative[1] < relative[0] / 3, relative
     assert matched.info["medium"]["eta"] == 1.0 and matched.info["medium"]["roughness"] is None
     with pytest.raises(invsss.InvalidInputError, match="medium: an index-matched boundary has eta 1"):
-        _config(medium={"sigma_s_prime": 1.0, "sigma_a": 0.1, "eta": 1.4, "boundary": "index-matched"})
+        sphere_config(medium={"sigma_s_prime": 1.0, "sigma_a": 0.1, "eta": 1.4, "boundary": "index-matched"})
 
 
 def test_two_seeds_give_the_stated_noise():
-    first, second = (render_scene(_config(spp=16, seed=seed)) for seed in (0, 1))
+    first, second = (render_scene(sphere_config(spp=16, seed=seed)) for seed in (0, 1))
     on = first.mask > 0
     measured = np.sqrt(np.mean((first.target - second.target)[on] ** 2))
     # Each target's noise_rms is the noise of its mean; independent, they add in quadrature.
@@ -194,14 +180,14 @@ def test_two_seeds_give_the_stated_noise():
 def test_a_camera_that_sees_no_skin_is_one_line():
     away = {**CAMERA, "look_at": [0.0, 0.0, 600.0], "width": 8, "height": 8}
     with pytest.raises(invsss.InvalidInputError, match="^camera: sees no skin"):
-        render_scene(_config(camera=away))
+        render_scene(sphere_config(camera=away))
 
 
 def test_key_is_the_source_lit_by_the_first_light_alone():
     fill = {**POINT_LIGHT, "position": [-200.0, -50.0, 250.0], "intensity": 6e4}
     camera = {**CAMERA, "width": 12, "height": 12}
-    both = render_scene(_config(lights=[POINT_LIGHT, fill], camera=camera, spp=16), target=False)
-    alone = render_scene(_config(lights=[POINT_LIGHT], camera=camera, spp=16), target=False)
+    both = render_scene(sphere_config(lights=[POINT_LIGHT, fill], camera=camera, spp=16), target=False)
+    alone = render_scene(sphere_config(lights=[POINT_LIGHT], camera=camera, spp=16), target=False)
     # The same spp and seed: the key pass is the one-light source, sample for sample.
     np.testing.assert_array_equal(both.key, alone.source)
     np.testing.assert_array_equal(alone.key, alone.source)
@@ -213,7 +199,7 @@ def test_key_is_the_source_lit_by_the_first_light_alone():
 
 def test_coloured_light_gives_rgb_even_for_a_grey_medium():
     light = {**POINT_LIGHT, "intensity": [1e5, 5e4, 2e4]}
-    result = render_scene(_config(lights=[light], camera={**CAMERA, "width": 8, "height": 8}))
+    result = render_scene(sphere_config(lights=[light], camera={**CAMERA, "width": 8, "height": 8}))
     assert result.source.shape == (8, 8, 3)
     red, green, blue = result.source[result.mask > 0].mean(axis=0)
     assert red > green > blue
@@ -221,7 +207,7 @@ def test_coloured_light_gives_rgb_even_for_a_grey_medium():
 
 @pytest.mark.slow
 def test_chromatic_medium_gives_rgb_with_an_albedo_per_channel():
-    config = _config(medium={"preset": "jensen-skin1"}, spp=8, camera={**CAMERA, "width": 16, "height": 16})
+    config = sphere_config(medium={"preset": "jensen-skin1"}, spp=8, camera={**CAMERA, "width": 16, "height": 16})
     result = render_scene(config)
     assert result.target.shape == (16, 16, 3) and result.source.shape == (16, 16, 3)
     value = result.info["source_albedo"]["value"]
@@ -265,7 +251,7 @@ def test_light_directions_point_from_the_surface_to_the_light():
     # its direction towards the point light with the light buffer.
     from invsss.scenes.path_tracing import light_directions
 
-    config = _config()
+    config = sphere_config()
     depth = np.full((config.camera.height, config.camera.width), 250.0)
     depth[:3] = 0.0  # nothing seen
     origin, directions, (right, up, forward) = _pixel_rays(config, n=1)
@@ -283,7 +269,7 @@ def test_light_directions_follow_the_principal_point():
     # buffer of the moved camera at (row + 2, col - 3) is the original's at (row, col).
     from invsss.scenes.path_tracing import light_directions
 
-    config = _config()
+    config = sphere_config()
     moved = parse_config({**config.model_dump(), "camera": {**config.camera.model_dump(),
                                                             "principal_offset_px": [2.0, -3.0]}}, "test scene")
     depth = 250.0 + np.random.default_rng(0).uniform(0.0, 20.0, (config.camera.height, config.camera.width))
@@ -299,13 +285,13 @@ def test_with_warp_refuses_a_warp_no_camera_move_makes():
 
     shear = Warp("affine", (0.5, 0.5, 0.0, 0.02, 0.0, 0.0), (16.0, 16.0))
     with pytest.raises(invsss.InvalidInputError, match="affine warp is not a camera move"):
-        _config().with_warp(shear)
+        sphere_config().with_warp(shear)
 
 
 def test_with_warp_keeps_the_camera_where_the_warp_is_the_identity():
     from invsss.estimator.registration import Warp
 
-    config = _config()
+    config = sphere_config()
     same = config.with_warp(Warp("similarity", (0.0, 0.0, 0.0, 0.0), (10.0, 20.0))).camera
     np.testing.assert_allclose(same.up, config.camera.frame()[2], atol=1e-12)
     assert same.principal_offset_px == [0.0, 0.0]
@@ -332,7 +318,7 @@ def test_with_warp_keeps_the_camera_where_the_warp_is_the_identity():
 ])
 def test_face_and_bump_keys_are_checked_in_one_line(object_, message):
     with pytest.raises(invsss.InvalidInputError) as err:
-        _config(object=object_)
+        sphere_config(object=object_)
     assert str(err.value).count("\n") == 0
     assert str(err.value).startswith(f"test scene: {message}")
 
@@ -361,7 +347,7 @@ def test_procedural_face_is_closed_deterministic_and_has_its_parts():
 
 
 def test_face_primitive_renders_and_scene_json_pins_its_mesh():
-    config = _config(object={"primitive": "face", "cell": 9.0, "ears": False, "wrinkles": False},
+    config = sphere_config(object={"primitive": "face", "cell": 9.0, "ears": False, "wrinkles": False},
                      camera={"position": [0.0, 0.0, 600.0], "look_at": [0.0, 0.0, 0.0], "fov": 24.0,
                              "width": 16, "height": 16},
                      lights=[{"type": "directional", "direction": [0.0, 0.0, -1.0], "irradiance": 1.0}])
@@ -385,8 +371,8 @@ def test_bumps_tilt_the_shading_normals_and_leave_the_surface():
         trimesh.creation.icosphere(subdivisions=4, radius=40.0).export(path)
         sphere_mesh["mesh"] = path
         camera = {**CAMERA, "width": 24, "height": 24}
-        plain = render_scene(_config(object=sphere_mesh, camera=camera), target=False)
-        bumped = render_scene(_config(object={**sphere_mesh, "bumps": 30.0}, camera=camera), target=False)
+        plain = render_scene(sphere_config(object=sphere_mesh, camera=camera), target=False)
+        bumped = render_scene(sphere_config(object={**sphere_mesh, "bumps": 30.0}, camera=camera), target=False)
     np.testing.assert_array_equal(plain.mask, bumped.mask)
     np.testing.assert_allclose(plain.depth, bumped.depth, atol=1e-3)
     inside = plain.coverage > 0.999
@@ -399,8 +385,8 @@ def test_bumps_tilt_the_shading_normals_and_leave_the_surface():
 def test_buffers_cell_renders_the_buffers_from_a_coarser_head():
     camera = {"position": [0.0, 0.0, 650.0], "look_at": [0.0, 0.0, 0.0], "fov": 24.0, "width": 16, "height": 16}
     face = {"primitive": "face", "cell": 10.0, "ears": False, "wrinkles": False}
-    same = render_scene(_config(object=face, camera=camera), target=False)
-    coarse = render_scene(_config(object={**face, "buffers_cell": 20.0}, camera=camera), target=False)
+    same = render_scene(sphere_config(object=face, camera=camera), target=False)
+    coarse = render_scene(sphere_config(object={**face, "buffers_cell": 20.0}, camera=camera), target=False)
     # scene.json records both heads; the buffers' has fewer triangles.
     assert coarse.info["mesh"] == same.info["mesh"] and "buffers_mesh" not in same.info
     assert coarse.info["buffers_mesh"]["cell_mm"] == 20.0
@@ -422,8 +408,8 @@ def test_face_normals_shade_with_the_triangles_own_normals():
         ball.export(path)
         camera = {**CAMERA, "width": 24, "height": 24}
         mesh = {"mesh": path, "mm_per_unit": 1.0}
-        smooth = render_scene(_config(object=mesh, camera=camera), target=False)
-        flat = render_scene(_config(object={**mesh, "face_normals": True}, camera=camera), target=False)
+        smooth = render_scene(sphere_config(object=mesh, camera=camera), target=False)
+        flat = render_scene(sphere_config(object={**mesh, "face_normals": True}, camera=camera), target=False)
     np.testing.assert_array_equal(smooth.mask, flat.mask)
     inside = smooth.coverage > 0.999
     def on_a_facet(render):
