@@ -379,12 +379,13 @@ class persistent_jit:
             compiled = self._memory.get(key)
         except TypeError:  # an unhashable static argument: filter_jit says so precisely
             return self.jitted(*args)
-        if compiled is None:
-            with self._lock:
+        with self._lock:
+            if compiled is None:
                 compiled = self._memory.get(key)
                 if compiled is None:
                     compiled = self._load_or_compile(folder, key, leaves, in_tree, static)
-                self._remember(key, compiled)
+            # Used now: the last to leave memory (popitem removes the least recent).
+            self._remember(key, compiled)
         if compiled.loaded_from is None:
             return compiled(leaves)
         # A loaded entry's first call waits for its result: an executable that

@@ -21,21 +21,25 @@ def _maps() -> int:
         return sum(1 for _ in maps)
 
 
-def test_a_function_keeps_its_most_recent_executables_and_reloads_older_ones(cache_dir):  # noqa: F811
-    cache_dir()
+def test_a_function_keeps_its_most_recently_used_executables_and_reloads_older_ones(cache_dir):  # noqa: F811
+    folder = cache_dir() / "executables"
 
     @persistent_jit
     def shifted(x):
         return jnp.cumsum(jnp.sin(x), axis=0) + 1.0
 
-    sizes = range(2, MAX_IN_MEMORY + 5)
-    for n in sizes:
+    shifted(jnp.ones((3, 3)))
+    for entry in folder.glob("*.executable"):
+        entry.unlink()  # from here only memory holds it: leaving memory would mean compiling again
+    others = range(4, MAX_IN_MEMORY + 8)
+    for n in others:
         shifted(jnp.ones((n, 3)))
-    assert shifted.traces == len(sizes)
+        shifted(jnp.ones((3, 3)))  # used after every other: never the least recently used
+    assert shifted.traces == 1 + len(others)
     assert len(shifted._memory) == MAX_IN_MEMORY
-    # The oldest size left memory but not the disk: loaded again, not traced again.
-    assert shifted(jnp.ones((2, 3))).shape == (2, 3)
-    assert shifted.traces == len(sizes)
+    # The least recently used left memory but not the disk: loaded again, not traced again.
+    assert shifted(jnp.ones((4, 3))).shape == (4, 3)
+    assert shifted.traces == 1 + len(others)
 
 
 def test_release_compiled_gives_the_code_memory_back(cache_dir):  # noqa: F811
