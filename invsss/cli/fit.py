@@ -225,8 +225,8 @@ def _run(args: argparse.Namespace, stop: StopSignals, notices: list[str]) -> int
             # One distance holds correction and maxdd (inputs.held says at what).
             options = dataclasses.replace(options, fix=inputs.fix)
         pairs = _with_light_buffers(pairs, args)
-        # "auto" is the targets' own clipping level: their files know it.
-        options = dataclasses.replace(options, saturation=resolved_saturation(options.saturation, args.target))
+        if options.saturation == "auto":  # the targets' own level: their files know it
+            options = dataclasses.replace(options, saturation=resolved_saturation("auto", args.target))
         # The report needs matplotlib (0.3-0.4 s to import, seconds while it builds
         # its font cache); import it beside the fit, whose solver steps leave the
         # interpreter free while XLA computes. Not a daemon: a process that ends
