@@ -53,6 +53,12 @@ source clamped there while the target holds light scattered in from outside the 
 Neither option changes the table without it. The pair at 0.29 mm a pixel,
 ``data_synthetic/twowave_fine`` (held out, docs/scenes.md), is fitted with
 ``--pair data_synthetic/twowave_fine``.
+
+``--transfer`` (issue 47) prints, instead of the fits above, the extra blur each route sees
+band by band in spatial frequency, measured from the clean images without a model (the
+least-squares transfer: the cross-spectrum over the source's power in each band, Hann
+window, jackknife errors over angular sectors), and the same bands for the kernels fitted
+with each of ``--transfer-profiles`` (docs/capture.md, "What the two routes agree on").
 """
 
 from __future__ import annotations
@@ -234,6 +240,146 @@ def run(args) -> None:
         print_one_gaussian_table(single_rows)
 
 
+#: Radial frequency bands (cycles per pixel) of the ``--transfer`` table: from a few
+#: periods across a 112 px frame to where the near-infrared target's noise takes over.
+TRANSFER_BANDS = (0.005, 0.02, 0.04, 0.06, 0.09, 0.13, 0.2, 0.3)
+#: Angular sectors of the half plane left out one at a time for the standard errors.
+TRANSFER_SECTORS = 8
+
+
+def _spectra(images: dict, shape) -> tuple[dict, np.ndarray, np.ndarray]:
+    """Each image's Hann-windowed spectrum (mean removed: the frame's edges and its mean
+    would swamp the lowest band), the radial frequency and a half-plane sector per bin."""
+    height, width = shape
+    window = np.outer(np.hanning(height), np.hanning(width))
+    spectra = {name: np.fft.fft2((image - image.mean()) * window) for name, image in images.items()}
+    fy, fx = np.meshgrid(np.fft.fftfreq(height), np.fft.fftfreq(width), indexing="ij")
+    # k and -k carry conjugate values: sectors over the half plane keep each pair together.
+    angle = np.mod(np.arctan2(fy, fx), np.pi)
+    sector = np.minimum((angle / np.pi * TRANSFER_SECTORS).astype(int), TRANSFER_SECTORS - 1)
+    return spectra, np.hypot(fy, fx), sector
+
+
+def band_transfer(spectra: dict, frequency, keep, pairs, bands=TRANSFER_BANDS) -> np.ndarray:
+    """The least-squares transfer from source to target in each band, as ratios of routes.
+
+    ``pairs`` is a tuple of routes, each a tuple of ``(source, target)`` names whose
+    transfers multiply (a ``-1`` third element divides): the photo route is one pair, the
+    render route's extra blur the near-infrared pair over the visible one. Returns
+    ``(bands - 1, routes)``, each column divided by its first band: the routes' gains
+    differ, their shapes are what is compared.
+    """
+    rows = []
+    for low, high in zip(bands[:-1], bands[1:]):
+        inside = (frequency >= low) & (frequency < high) & keep
+        row = []
+        for route in pairs:
+            value = 1.0
+            for source, target, power in route:
+                a, b = spectra[source][inside], spectra[target][inside]
+                value *= (np.sum(b * np.conj(a)).real / np.sum(np.abs(a) ** 2)) ** power
+            row.append(value)
+        rows.append(row)
+    rows = np.asarray(rows)
+    return rows / rows[0]
+
+
+def transfer_with_errors(spectra, frequency, sector, pairs, bands=TRANSFER_BANDS):
+    """:func:`band_transfer` over the whole plane, its jackknife standard errors over the
+    sectors, and the same two for the first route over the second (``(bands - 1,)``)."""
+    whole = band_transfer(spectra, frequency, np.ones_like(frequency, bool), pairs, bands)
+    left_out = np.stack([band_transfer(spectra, frequency, sector != j, pairs, bands)
+                         for j in range(TRANSFER_SECTORS)])
+    n = TRANSFER_SECTORS
+
+    def jackknife(values):
+        return np.sqrt((n - 1) / n * np.sum((values - values.mean(axis=0)) ** 2, axis=0))
+
+    ratio = whole[:, 0] / whole[:, 1]
+    return whole, jackknife(left_out), ratio, jackknife(left_out[:, :, 0] / left_out[:, :, 1])
+
+
+def kernel_transfer(weights, sigmas_px, frequency, power=None, bands=TRANSFER_BANDS) -> np.ndarray:
+    """A fitted sum of Gaussians' transfer in each band, divided by its first band (the
+    measured transfers' normalisation). A measured band is the mean of the transfer over
+    its bins weighted by the source's power there; ``power`` (the source's ``|FFT|^2``,
+    the frequencies' shape) weights these the same way (None: uniformly)."""
+    weights, sigmas_px = np.asarray(weights, float), np.asarray(sigmas_px, float)
+    power = np.ones_like(frequency) if power is None else np.asarray(power, float)
+    values = []
+    for low, high in zip(bands[:-1], bands[1:]):
+        inside = (frequency >= low) & (frequency < high)
+        gaussians = np.exp(-2.0 * np.pi**2 * np.outer(frequency[inside] ** 2, sigmas_px**2))
+        values.append(float(np.average(gaussians @ weights, weights=power[inside])))
+    values = np.asarray(values)
+    return values / values[0]
+
+
+def fitted_kernel_px(result, distance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised weights and sigmas (px) of a fit at one ``distance`` (correction held at
+    0, so each Gaussian's sigma is ``sqrt(v) sss_level / distance`` pixels)."""
+    params = result.params
+    scale = float(params.sss_level) / distance
+    w = np.asarray(params.weights, np.float64).reshape(len(params.variances), -1)[:, 0]
+    return w / w.sum(), np.sqrt(np.asarray(params.variances, np.float64)) * scale
+
+
+def transfer(args) -> None:
+    """``--transfer``: the extra blur each route sees, band by band, measured from the
+    images without a model, and the fitted kernels' transfers in the same bands."""
+    folder = Path(args.pair)
+    vis, nir = read_folder(folder / "visible"), read_folder(folder / "nir")
+    images = {"vis_source": vis["source"][..., 0], "vis_target": vis["target"][..., 0],
+              "nir_source": nir["source"][..., 0], "nir_target": nir["target"][..., 0]}
+    images = {name: np.asarray(image, np.float64) for name, image in images.items()}
+    spectra, frequency, sector = _spectra(images, images["vis_target"].shape)
+    routes = ((("vis_target", "nir_target", 1),),
+              (("nir_source", "nir_target", 1), ("vis_source", "vis_target", -1)))
+    whole, errors, ratio, ratio_errors = transfer_with_errors(spectra, frequency, sector, routes)
+    focal = float(vis["info"]["focal_px"])
+    mask = without_border(vis["mask"], args.border) if args.border else vis["mask"]
+    skin = vis["mask"] > 0.5
+    distance = float(np.round(np.median(vis["depth"][skin]), -1))
+    mm_per_px = distance / focal
+    fitted = {}
+    for profile in args.transfer_profiles.split(","):
+        photo = fit_profile(images["vis_target"], images["nir_target"], mask, distance, focal, profile, args.starts)
+        render_vis = fit_profile(images["vis_source"], images["vis_target"], mask, distance, focal, profile,
+                                 args.starts)
+        render_nir = fit_profile(images["nir_source"], images["nir_target"], mask, distance, focal, profile,
+                                 args.starts)
+        power = {name: np.abs(spectrum) ** 2 for name, spectrum in spectra.items()}
+        fitted[profile] = (
+            kernel_transfer(*fitted_kernel_px(photo, distance), frequency, power["vis_target"]),
+            kernel_transfer(*fitted_kernel_px(render_nir, distance), frequency, power["nir_source"])
+            / kernel_transfer(*fitted_kernel_px(render_vis, distance), frequency, power["vis_source"]))
+    print(f"pair {folder}: the extra blur's transfer, each route divided by its first band "
+          f"(Hann window, jackknife over {TRANSFER_SECTORS} sectors; {mm_per_px:.3f} mm a pixel at "
+          f"--distance {distance:g}; fits with --border {args.border})")
+    header = ("| band (cycles/px) | (cycles/mm) | photo, measured | render, measured | photo / render | "
+              + " | ".join(f"photo, fitted `{p}` | render, fitted `{p}`" for p in fitted) + " |")
+    print(header)
+    print("|" + "---|" * header.count(" | ") + "---|")
+    for i, (low, high) in enumerate(zip(TRANSFER_BANDS[:-1], TRANSFER_BANDS[1:])):
+        cells = [f"{low:.3f}-{high:.3f}", f"{low / mm_per_px:.2f}-{high / mm_per_px:.2f}",
+                 f"{whole[i, 0]:.3f} ± {errors[i, 0]:.3f}", f"{whole[i, 1]:.3f} ± {errors[i, 1]:.3f}",
+                 f"{ratio[i]:.3f} ± {ratio_errors[i]:.3f}"]
+        for photo_t, render_t in fitted.values():
+            cells += [f"{photo_t[i]:.3f}", f"{render_t[i]:.3f}"]
+        print("| " + " | ".join(cells) + " |")
+    sys.stdout.flush()
+
+
+def fit_profile(source, target, mask, distance, focal, profile, starts):
+    """The photo route's fit of ``target`` from ``source`` at one distance with ``profile``."""
+    pair = constant_depth_pair(source[..., None].astype(np.float32), target[..., None].astype(np.float32),
+                               distance, mask)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return invsss.fit_pairs([pair], profile=profile, fix=HELD_WITH_CONSTANT_DEPTH, n_starts=starts,
+                                focal_px=focal)
+
+
 def without_border(mask: np.ndarray, border: int) -> np.ndarray:
     """``mask`` with its outer ``border`` pixels (each side of the frame) set to 0."""
     inner = np.zeros_like(mask)
@@ -365,10 +511,18 @@ def main() -> None:
                         "scene.json) and the render route with one Gaussian, at the distance")
     parser.add_argument("--border", type=int, default=0, metavar="PX",
                         help="leave the outer PX pixels of the frame out of every mask (default 0: none)")
+    parser.add_argument("--transfer", action="store_true",
+                        help="the extra blur's transfer band by band, measured from the images for both routes, "
+                        "against the fitted kernels' (clean renders only) instead")
+    parser.add_argument("--transfer-profiles", default="single", metavar="NAMES",
+                        help="profiles (names or JSON files, separated by ',') whose fitted kernels --transfer "
+                        "adds (default single)")
     args = parser.parse_args()
     use_deterministic_scheduler()
     if args.masks:
         masks()
+    elif args.transfer:
+        transfer(args)
     else:
         run(args)
 

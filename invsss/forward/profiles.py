@@ -474,9 +474,19 @@ SINGLE_GAUSSIAN = MappingProxyType(
     {"variances": (1.0,), "weights": (1.0,), "source": "one Gaussian, its scale to be fitted"}
 )
 
+#: A sharp core (a tenth of the Gaussian's width: under a pixel wherever the Gaussian
+#: spans a few) and one Gaussian, their weights and the scale to be fitted. The extra
+#: blur between a visible and a 940 nm image of path-traced skin keeps about half its
+#: contrast at every scale the pixels resolve, which one Gaussian cannot describe
+#: (docs/capture.md, "What the two routes agree on"). Needs a blur of several pixels.
+CORE_AND_GAUSSIAN = MappingProxyType(
+    {"variances": (0.01, 1.0), "weights": (0.5, 0.5),
+     "source": "a sharp core and one Gaussian, their weights and scale to be fitted"}
+)
+
 _NAMED_PROFILES = MappingProxyType(
     {"thesis-nir": THESIS_NIR_940, "deon-skin": DEON_SKIN_RGB, "jensen-skin1": JENSEN_SKIN1_SOG,
-     "single": SINGLE_GAUSSIAN}
+     "single": SINGLE_GAUSSIAN, "core-gaussian": CORE_AND_GAUSSIAN}
 )
 #: Names :func:`load_profile` knows (besides JSON file paths).
 PROFILE_NAMES = tuple(_NAMED_PROFILES)
@@ -490,7 +500,8 @@ def load_profile(name_or_path) -> SumOfGaussians:
     name_or_path : str or os.PathLike
         ``"thesis-nir"`` (thesis Table 5.1, weights (5,)), ``"deon-skin"`` (d'Eon &
         Luebke, weights (6, 3)), ``"jensen-skin1"`` (a 5-Gaussian fit of Jensen's skin1
-        dipole, weights (5, 3)), ``"single"`` (one Gaussian of 1 mm^2), or the path of a JSON file
+        dipole, weights (5, 3)), ``"single"`` (one Gaussian of 1 mm^2), ``"core-gaussian"`` (a
+        sharp core and a Gaussian, weights (2,)), or the path of a JSON file
         ``{"weights": [...], "variances": [...], "source": "..."}``.
 
     Raises
