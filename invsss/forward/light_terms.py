@@ -41,6 +41,27 @@ key, normal and light buffers)
 
     ``b = 0`` (the default) is the identity: the law on the key light alone.
 
+``transmission`` (a tint ``tau``, one or one per channel, and a ``thickness_scale`` ``k``,
+1/mm; needs the thickness, key_irradiance, normal and light buffers)
+    Light that crosses a thin part (an ear, a nostril's wing) from the key light
+    behind it reaches points the key light does not light. The engines add it to
+    the diffuse lighting before their blur, as HDRP does (its Lit shader's
+    ``EvaluateTransmission`` and ``ComputeTransmittanceDisney``): the key light's
+    irradiance times the albedo ``E`` (``key_irradiance``: the source lit by the key
+    light alone, unshadowed, on a surface facing it), a wrapped cosine of the back
+    side, and the transmittance of Burley's profile through the thickness ``t``
+    (mm, the distance the key light travels inside the skin):
+
+        S' = S + m tau T(k t) v(-n . l) E,
+        T(x) = (exp(-x) + 3 exp(-x / 3)) / 4,
+        v(x) = clip((x + W) / (1 + W)^2, 0, 1),   W = cos(75 deg)
+
+    ``T`` is HDRP's ``ComputeTransmittanceDisney`` with ``S t = k t`` (its shape
+    parameter ``S = 1 / d`` times the remapped thickness: ``k`` is the thickness
+    remap's slope over the profile's ``d``) and its volume albedo, a quarter of the
+    tint, written as ``tau / 4``; ``v`` is its wrapped lighting of the back side
+    (``TRANSMISSION_WRAP_LIGHT``, 15 degrees of wrap). ``tau = 0`` is the identity.
+
 The other three act on the blurred image:
 
 ``shift`` (``kappa``, scene units, needs the light buffer)
@@ -116,14 +137,35 @@ __all__ = [
     "light_transport",
     "apply_light_terms",
     "apply_law",
+    "TRANSMISSION_WRAP",
+    "burley_transmittance",
+    "wrapped_back_lighting",
+    "transmitted_source",
+    "apply_transmission",
 ]
 
 #: The terms, in the order of docs/model.md, section 8, with the buffers each needs.
+#: ``transmission`` is rendered (:func:`invsss.render`) but not yet fitted, so it is
+#: not among them (issue 48).
 LIGHT_TERM_NAMES = ("shift", "grazing", "incidence", "law", "fill")
 #: The fields of :class:`LightTerms` (a params file's ``light_terms`` keys that set them).
 LIGHT_TERM_FIELDS = (*LIGHT_TERM_NAMES, "law_strength")
 NEEDED_BUFFERS = {"shift": ("light",), "grazing": ("normal",), "incidence": ("normal", "light"),
-                  "law": ("key", "normal", "light"), "fill": ("key", "normal", "fill_light")}
+                  "law": ("key", "normal", "light"), "fill": ("key", "normal", "fill_light"),
+                  "transmission": ("thickness", "key_irradiance", "normal", "light")}
+#: What each buffer holds, for the error that names a missing one.
+BUFFER_MEANINGS = {
+    "normal": "camera-space unit vectors, shape (H, W, 3)",
+    "light": "camera-space unit vectors, shape (H, W, 3)",
+    "fill_light": "camera-space unit vectors, shape (H, W, 3)",
+    "key": "the source lit by the key light alone, shape (H, W, C)",
+    "key_irradiance": "the albedo times the key light's unshadowed irradiance on a surface facing it, shape (H, W, C)",
+    "thickness": "the distance in mm the key light travels inside the skin, shape (H, W)",
+}
+
+#: HDRP's ``TRANSMISSION_WRAP_LIGHT``, ``cos(pi / 2 - pi / 12)``: the back side's
+#: cosine is wrapped by 15 degrees, so that thin parts seen edge-on still pass light.
+TRANSMISSION_WRAP = float(np.cos(np.pi / 2 - np.pi / 12))
 #: The terms applied to the blurred image (``law`` and ``fill`` change the source instead).
 AFTER_BLUR = ("shift", "grazing", "incidence")
 
@@ -172,6 +214,14 @@ class LightTerms(eqx.Module):
         ``b``: how much of the other lights' part of the source follows the law
         with the same albedo (0, the default: they stay Lambertian, the identity;
         1: the law). Needs ``law``.
+    transmission : float or array of shape (C,)
+        ``tau``: the tint of the light transmitted from the key light through the
+        thickness, one for every channel or one per source channel, >= 0 (0, the
+        default, is the identity); HDRP's transmission tint.
+    thickness_scale : float
+        ``k`` (1/mm): the thickness buffer's millimetres in units of the
+        transmittance's length, > 0 (1, the default); HDRP's thickness remap slope
+        over its profile's ``d``.
 
     Examples
     --------
@@ -184,6 +234,8 @@ class LightTerms(eqx.Module):
     ()
     >>> LightTerms(law=0.9, fill=1.0).used            # the law on every light
     ('law', 'fill')
+    >>> LightTerms(transmission=[0.8, 0.3, 0.1]).used  # light through thin parts, red-tinted
+    ('transmission',)
     """
 
     shift: Float[Array, ""] = eqx.field(converter=float_array, default=0.0)
@@ -192,6 +244,8 @@ class LightTerms(eqx.Module):
     law: Float[Array, "*C"] | None = eqx.field(converter=_albedo_or_none, default=None)
     law_strength: Float[Array, ""] = eqx.field(converter=float_array, default=1.0)
     fill: Float[Array, ""] = eqx.field(converter=float_array, default=0.0)
+    transmission: Float[Array, "*C"] = eqx.field(converter=float_array, default=0.0)
+    thickness_scale: Float[Array, ""] = eqx.field(converter=float_array, default=1.0)
 
     @property
     def used(self) -> tuple[str, ...]:
@@ -202,6 +256,9 @@ class LightTerms(eqx.Module):
         on = [t for t in AFTER_BLUR if nonzero(getattr(self, t))]
         if self.law is not None:
             on += [t for t, strength in (("law", self.law_strength), ("fill", self.fill)) if nonzero(strength)]
+        tint = self.transmission
+        if not is_concrete(tint) or np.any(np.asarray(tint) != 0.0):
+            on.append("transmission")
         return tuple(on)
 
     def check(self, name: str = "light_terms") -> None:
@@ -225,6 +282,20 @@ class LightTerms(eqx.Module):
                     f"{name}.law: expected an albedo in (0, 1), or one per channel, got {w.tolist()!r}",
                     field=f"{name}.law",
                 )
+        if is_concrete(self.transmission):
+            tau = np.asarray(self.transmission, np.float64)
+            if tau.ndim > 1 or not np.all(np.isfinite(tau)) or np.any(tau < 0.0):
+                raise InvalidInputError(
+                    f"{name}.transmission: expected a tint >= 0, or one per channel, got {tau.tolist()!r}",
+                    field=f"{name}.transmission",
+                )
+        if is_concrete(self.thickness_scale):
+            k = np.asarray(self.thickness_scale, np.float64)
+            if k.ndim != 0 or not np.isfinite(k) or k <= 0.0:
+                raise InvalidInputError(
+                    f"{name}.thickness_scale: expected one number > 0 (1/mm), got {k.tolist()!r}",
+                    field=f"{name}.thickness_scale",
+                )
         if self.law is None and (not is_concrete(self.fill) or float(self.fill) != 0.0):
             raise InvalidInputError(
                 f"{name}.fill: the law on the other lights uses the law's albedo; give law too (an albedo in (0, 1))",
@@ -239,6 +310,10 @@ class LightTerms(eqx.Module):
             out["law_strength"] = float(self.law_strength)
             if float(self.fill) != 0.0:
                 out["fill"] = float(self.fill)
+        tau = np.asarray(self.transmission, np.float64)
+        if np.any(tau != 0.0):
+            out["transmission"] = float(tau) if tau.ndim == 0 else tau.tolist()
+            out["thickness_scale"] = float(self.thickness_scale)
         return out
 
 
@@ -268,7 +343,29 @@ def _check_unit_vectors(array, shape, mask, name: str):
     return safe / np.linalg.norm(safe, axis=-1, keepdims=True)
 
 
-def _check_key(array, shape, channels, name: str, mask=None):
+def _check_thickness(array, shape, mask, name: str):
+    try:
+        a = np.asarray(array, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"{name}: expected an array of numbers, got {type(array).__name__}",
+                                field=name) from None
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[..., 0]
+    if a.shape != tuple(shape):
+        raise InvalidInputError(f"{name}: expected shape {tuple(shape)} (mm per pixel), got {np.shape(array)}",
+                                field=name)
+    on = np.asarray(mask) > 0
+    values = a[on]
+    if not np.all(np.isfinite(values)):
+        raise InvalidInputError(f"{name}: NaN or infinite thickness on the mask (expected mm >= 0)", field=name)
+    if values.size and float(values.min()) < 0.0:
+        raise InvalidInputError(f"{name}: expected a thickness >= 0 mm on the mask, got {float(values.min()):g}",
+                                field=name)
+    # Off the mask the term is multiplied by 0, but a NaN there would still poison it.
+    return np.where(np.isfinite(a) & (a >= 0.0), a, 0.0)
+
+
+def _check_key(array, shape, channels, name: str, mask=None, meaning="the key light's part of the source"):
     try:
         a = np.asarray(array, dtype=np.float64)
     except (TypeError, ValueError):
@@ -280,7 +377,7 @@ def _check_key(array, shape, channels, name: str, mask=None):
     if a.ndim != 3 or a.shape[:2] != tuple(shape) or (wanted and a.shape != wanted):
         expected = wanted or (*shape, "C")
         raise InvalidInputError(
-            f"{name}: expected shape {expected} (the key light's part of the source), got {np.shape(array)}",
+            f"{name}: expected shape {expected} ({meaning}), got {np.shape(array)}",
             field=name,
         )
     on = np.ones(a.shape[:2], bool) if mask is None else np.asarray(mask) > 0
@@ -310,6 +407,15 @@ class LightBuffers(eqx.Module):
         Unit vectors from the surface point towards the other lights (the
         ``fill`` term): one direction standing for every light but the key, such
         as the strongest of them; ``invsss scene`` writes the second light's.
+    thickness : array, shape (H, W) or (H, W, 1), optional
+        The distance in mm the key light travels inside the skin before it
+        reaches the seen point, >= 0 (the ``transmission`` term): what a shadow
+        map gives, or a baked thickness map in mm; 0 where the point faces the
+        light. ``invsss scene`` writes it as ``thickness.exr``.
+    key_irradiance : array, shape (H, W, C) or (H, W), optional
+        The albedo times the key light's irradiance on a surface facing it, with
+        no shadow, in the source's units (the ``transmission`` term): where the key
+        light reaches a point, ``key = key_irradiance * max(n . l, 0)``.
 
     Examples
     --------
@@ -324,6 +430,8 @@ class LightBuffers(eqx.Module):
     light: Float[Array, "H W 3"] | None = None
     key: Float[Array, "H W C"] | None = None
     fill_light: Float[Array, "H W 3"] | None = None
+    thickness: Float[Array, "H W"] | None = None
+    key_irradiance: Float[Array, "H W C"] | None = None
 
     def checked(self, shape, mask, prefix: str = "light_buffers.", channels: int | None = None) -> LightBuffers:
         """Validated, normalised float64 NumPy copies for an image of ``shape`` (H, W).
@@ -338,6 +446,10 @@ class LightBuffers(eqx.Module):
             None if self.key is None else _check_key(self.key, shape, channels, f"{prefix}key", mask),
             None if self.fill_light is None else _check_unit_vectors(self.fill_light, shape, mask,
                                                                      f"{prefix}fill_light"),
+            None if self.thickness is None else _check_thickness(self.thickness, shape, mask, f"{prefix}thickness"),
+            None if self.key_irradiance is None else _check_key(self.key_irradiance, shape, channels,
+                                                                f"{prefix}key_irradiance", mask,
+                                                                meaning=BUFFER_MEANINGS["key_irradiance"]),
         )
 
     def require(self, terms, prefix: str = "light_buffers.") -> None:
@@ -345,10 +457,9 @@ class LightBuffers(eqx.Module):
         for term in terms:
             for buffer in NEEDED_BUFFERS[term]:
                 if getattr(self, buffer) is None:
-                    what = ("the source lit by the key light alone, shape (H, W, C)" if buffer == "key"
-                            else "camera-space unit vectors, shape (H, W, 3)")
-                    raise InvalidInputError(f"{prefix}{buffer}: the {term!r} term needs this buffer ({what})",
-                                            field=f"{prefix}{buffer}")
+                    raise InvalidInputError(
+                        f"{prefix}{buffer}: the {term!r} term needs this buffer ({BUFFER_MEANINGS[buffer]})",
+                        field=f"{prefix}{buffer}")
 
 
 def propagation_offsets(light: Float[Array, "H W 3"]) -> Float[Array, "H W 2"]:
@@ -577,3 +688,77 @@ def apply_law(image, mask, albedo, buffers: LightBuffers, strength=1.0, fill=0.0
                       jnp.asarray(albedo, dtype), jnp.asarray(strength, dtype),
                       None if skip_fill else jnp.asarray(buffers.fill_light, dtype),
                       None if skip_fill else jnp.asarray(fill, dtype))
+
+
+def burley_transmittance(x):
+    """``T(x) = (exp(-x) + 3 exp(-x / 3)) / 4``: the share of Burley's normalised profile
+    that crosses a slab ``x`` profile lengths thick (1 at ``x = 0``).
+
+    HDRP's ``ComputeTransmittanceDisney`` with its volume albedo's factor of a quarter
+    taken in: the integral over the far side's plane of the profile at the 3D
+    distance, ``int 2 pi r R(sqrt(r^2 + t^2)) dr`` with ``R`` Burley's ``(exp(-r/d) +
+    exp(-r/(3d))) / (8 pi d r)`` and ``x = t / d``.
+    """
+    third = jnp.exp(-x / 3.0)
+    return 0.25 * third * (third * third + 3.0)
+
+
+def wrapped_back_lighting(normal: Float[Array, "H W 3"], light: Float[Array, "H W 3"]) -> Float[Array, "H W"]:
+    """``clip((-n . l + W) / (1 + W)^2, 0, 1)``, ``W`` = :data:`TRANSMISSION_WRAP`: the
+    cosine of the key light on the back side, wrapped (0 where the light meets the
+    front within 75 degrees of the normal)."""
+    back = -jnp.sum(normal * light, axis=-1)
+    return jnp.clip((back + TRANSMISSION_WRAP) / (1.0 + TRANSMISSION_WRAP) ** 2, 0.0, 1.0)
+
+
+def transmitted_source(source, mask, tint, scale, thickness, key_irradiance, back_lighting):
+    """``S + m tau T(k t) v E``: the source the blur spreads under the ``transmission``
+    term (``back_lighting`` is :func:`wrapped_back_lighting`). The traced core that
+    :func:`apply_transmission` and the estimator share.
+
+    Shapes: ``source`` and ``key_irradiance`` (H, W, C); ``mask``, ``thickness`` and
+    ``back_lighting`` (H, W); ``tint`` () or (C,); ``scale`` ().
+    """
+    transmitted = burley_transmittance(scale * thickness) * back_lighting * mask
+    return source + jnp.atleast_1d(tint) * key_irradiance * transmitted[..., None]
+
+
+def apply_transmission(image, mask, terms: LightTerms, buffers: LightBuffers):
+    """Add the ``transmission`` term's light to a source before :func:`invsss.render` blurs it.
+
+    Parameters
+    ----------
+    image : array, shape (H, W, C)
+        The source (Lambertian).
+    mask : array, shape (H, W)
+    terms : LightTerms
+        Its ``transmission`` (the tint) and ``thickness_scale``.
+    buffers : LightBuffers
+        With ``thickness`` (H, W), ``key_irradiance`` (H, W, C), ``normal`` and ``light``.
+
+    Returns
+    -------
+    array, shape (H, W, C)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from invsss.forward.light_terms import LightBuffers, LightTerms, apply_transmission
+    >>> n = np.zeros((1, 2, 3)); n[..., 2] = 1.0          # facing the camera
+    >>> l = -n                                            # the key light straight behind
+    >>> buffers = LightBuffers(n, l, thickness=np.zeros((1, 2)), key_irradiance=np.ones((1, 2, 1)))
+    >>> out = apply_transmission(np.zeros((1, 2, 1)), np.ones((1, 2)), LightTerms(transmission=0.5), buffers)
+    >>> round(float(out[0, 0, 0]), 4)                     # 0.5 T(0) (1 + W) / (1 + W)^2
+    0.3972
+    """
+    image = jnp.asarray(image)
+    dtype = image.dtype
+    thickness = jnp.asarray(buffers.thickness, dtype)
+    if thickness.ndim == 3:
+        thickness = thickness[..., 0]
+    key_irradiance = jnp.asarray(buffers.key_irradiance, dtype)
+    if key_irradiance.ndim == 2:
+        key_irradiance = key_irradiance[..., None]
+    back = wrapped_back_lighting(jnp.asarray(buffers.normal, dtype), jnp.asarray(buffers.light, dtype))
+    return transmitted_source(image, jnp.asarray(mask, dtype), jnp.asarray(terms.transmission, dtype),
+                              jnp.asarray(terms.thickness_scale, dtype), thickness, key_irradiance, back)

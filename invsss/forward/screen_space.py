@@ -34,7 +34,7 @@ from jaxtyping import Array, Float
 
 from ..validation import InvalidInputError, check_depth, check_image, check_mask, is_concrete
 from .burley_screen_space import check_burley_distances, render_burley
-from .light_terms import AFTER_BLUR, LightBuffers, LightTerms, apply_law, apply_light_terms
+from .light_terms import AFTER_BLUR, LightBuffers, LightTerms, apply_law, apply_light_terms, apply_transmission
 from .models import MODEL_NAMES, get_model, resolve_tap_weights
 from .pair import fill_background_depth
 from .params import SSSParams, check_plausible
@@ -278,6 +278,12 @@ def _light_buffers(terms, buffers, hw, mask, channels) -> LightBuffers:
             f"light_terms.law: expected one albedo or one per image channel ({channels}), "
             f"got {np.shape(terms.law)[0]}"
         )
+    if np.ndim(terms.transmission) == 1 and np.shape(terms.transmission)[0] not in (1, channels):
+        raise InvalidInputError(
+            f"light_terms.transmission: expected one tint or one per image channel ({channels}), "
+            f"got {np.shape(terms.transmission)[0]}",
+            field="light_terms.transmission",
+        )
     if not is_concrete(mask):
         return buffers
     return buffers.checked(hw, mask, channels=channels)
@@ -324,8 +330,10 @@ def render(
         with the identity (scalar or per channel), and the follow-surface factor
         ``k`` in ``lerp(sample, centre, clamp(k |d_s - d_c|, 0, 1))`` (0 disables it).
     light_terms : LightTerms, optional
-        The light-aware terms of docs/model.md, section 8: ``law`` changes the
-        image before the blur (:func:`invsss.forward.light_terms.apply_law`), the others
+        The light-aware terms of docs/model.md, section 8: ``law`` and
+        ``transmission`` change the image before the blur
+        (:func:`invsss.forward.light_terms.apply_law`,
+        :func:`invsss.forward.light_terms.apply_transmission`), the others
         the blurred image (:func:`invsss.forward.light_terms.apply_light_terms`).
     light_buffers : LightBuffers, optional
         Their per-pixel buffers; required with ``light_terms``, and a term that is
@@ -398,6 +406,9 @@ def render(
     # buffers is None exactly when light_terms is: both tests are for mypy's sake.
     if light_terms is not None and buffers is not None and {"law", "fill"} & set(light_terms.used):
         image = apply_law(image, mask, light_terms.law, buffers, light_terms.law_strength, light_terms.fill)
+    if light_terms is not None and buffers is not None and "transmission" in light_terms.used:
+        # As HDRP's Lit shader: the transmitted light joins the diffuse lighting that the blur spreads.
+        image = apply_transmission(image, mask, light_terms, buffers)
     out = _render(image, depth, mask, params, entry.name, tap_w, taps, strength, follow_surface)
     if light_terms is not None and buffers is not None and any(t in light_terms.used for t in AFTER_BLUR):
         out = apply_light_terms(out, depth, mask, params, light_terms, buffers)

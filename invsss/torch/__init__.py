@@ -57,6 +57,8 @@ from .burley_screen_space import render_burley
 from .light_terms import (
     apply_law,
     apply_light_terms,
+    apply_transmission,
+    burley_transmittance,
     chandrasekhar_h,
     grazing_field,
     incidence_field,
@@ -64,6 +66,7 @@ from .light_terms import (
     propagation_offsets,
     reflectance_law,
     shift_image,
+    wrapped_back_lighting,
 )
 from .params import SSSParams
 from .passes import TAP_OFFSETS, TAP_WEIGHTS, directional_pass, sample_along, tap_spread, tap_weights
@@ -83,6 +86,9 @@ __all__ = [
     "SSSParams",
     "apply_light_terms",
     "apply_law",
+    "apply_transmission",
+    "burley_transmittance",
+    "wrapped_back_lighting",
     "chandrasekhar_h",
     "reflectance_law",
     "law_source",

@@ -10,11 +10,12 @@ from __future__ import annotations
 import torch
 from kornia.geometry.transform import remap
 
-from ..forward.light_terms import LAW_TRUST
+from ..forward.light_terms import LAW_TRUST, TRANSMISSION_WRAP
 from .stretch import stretch_factors
 
 __all__ = ["propagation_offsets", "grazing_field", "incidence_field", "chandrasekhar_h", "law_trust", "reflectance_law",
-           "law_source", "shift_image", "light_transport", "apply_light_terms", "apply_law"]
+           "law_source", "shift_image", "light_transport", "apply_light_terms", "apply_law", "burley_transmittance",
+           "wrapped_back_lighting", "apply_transmission"]
 
 
 def propagation_offsets(light: torch.Tensor) -> torch.Tensor:
@@ -111,3 +112,22 @@ def apply_light_terms(blurred, depth, mask, params, shift=0.0, grazing_gain=0.0,
     field = None if normal is None else grazing_field(normal)
     incidence = None if normal is None or light is None else incidence_field(normal, light)
     return light_transport(blurred, mask, stretch, shift, grazing_gain, offsets, field, incidence_gain, incidence)
+
+
+def burley_transmittance(x: torch.Tensor) -> torch.Tensor:
+    """``(exp(-x) + 3 exp(-x / 3)) / 4`` elementwise: Burley's profile through ``x`` profile lengths."""
+    return 0.25 * (torch.exp(-x) + 3.0 * torch.exp(-x / 3.0))
+
+
+def wrapped_back_lighting(normal: torch.Tensor, light: torch.Tensor) -> torch.Tensor:
+    """(H, W, 3) normals and light directions -> (H, W) ``clip((-n . l + W) / (1 + W)^2, 0, 1)``."""
+    back = -(normal * light).sum(dim=-1)
+    return ((back + TRANSMISSION_WRAP) / (1.0 + TRANSMISSION_WRAP) ** 2).clamp(0.0, 1.0)
+
+
+def apply_transmission(image, mask, tint, scale, thickness, key_irradiance, normal, light) -> torch.Tensor:
+    """Twin of :func:`invsss.forward.light_terms.apply_transmission` with the terms and buffers as
+    tensors: ``image`` and ``key_irradiance`` (H, W, C), ``mask`` and ``thickness`` (H, W),
+    ``normal`` and ``light`` (H, W, 3), ``tint`` () or (C,), ``scale`` ()."""
+    transmitted = burley_transmittance(scale * thickness) * wrapped_back_lighting(normal, light) * mask
+    return image + torch.atleast_1d(tint) * key_irradiance * transmitted[..., None]
