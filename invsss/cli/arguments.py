@@ -56,7 +56,7 @@ def read_light_buffer(path, flag: str, shape):
     return buffer
 
 
-def read_key_buffer(path, source, linear_codes: bool):
+def read_key_buffer(path, source, linear_codes: bool, flag: str = "--key"):
     """A --key image (the source lit by the key light alone), read as the source is,
     of the source's size and channels."""
     source = np.asarray(source)
@@ -66,10 +66,24 @@ def read_key_buffer(path, source, linear_codes: bool):
     key = key if key.ndim == 3 else key[..., None]
     if key.shape != wanted:
         raise InvalidInputError(
-            f"{path}: expected an image of the source's size and channels {wanted} for --key, got shape {key.shape}",
+            f"{path}: expected an image of the source's size and channels {wanted} for {flag}, got shape {key.shape}",
             path=path,
         )
     return key
+
+
+def read_thickness_buffer(path, shape):
+    """A --thickness buffer (mm the key light travels inside the skin), read as linear
+    floats, one channel of the image's size."""
+    buffer = read_image(path, linear=True, grey=True)
+    buffer = buffer[..., 0] if buffer.ndim == 3 and buffer.shape[-1] == 1 else buffer
+    if buffer.shape != tuple(shape):
+        raise InvalidInputError(
+            f"{path}: expected a 1-channel image of the source's size {shape} for --thickness (mm), "
+            f"got shape {buffer.shape}",
+            path=path,
+        )
+    return buffer
 
 
 def add_no_cache_argument(parser) -> None:

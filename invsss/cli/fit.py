@@ -34,7 +34,7 @@ from ..io import photo_pair, resolved_saturation, write_image, write_params
 from ..io.result_dir import ResultDir, ResultWriteError
 from ..runtime.interrupts import StopSignals
 from ..validation import InputNotice, InvalidInputError, one_line
-from .arguments import add_no_cache_argument, read_key_buffer, read_light_buffer
+from .arguments import add_no_cache_argument, read_key_buffer, read_light_buffer, read_thickness_buffer
 from .progress import ProgressLine, compile_seconds, trial_seconds
 
 #: The flags that give one file per pair.
@@ -96,6 +96,14 @@ def add_parser(subparsers) -> None:
                         help="camera-space unit vectors towards the other lights (one direction standing "
                         "for every light but the key), float EXR or NPY (H, W, 3), for the 'fill' light "
                         "term (repeat per pair; 'invsss scene' writes the second light's as fill_light.exr)")
+    parser.add_argument("--thickness", action="append", default=[], metavar="FILE",
+                        help="mm the key light travels inside the skin to reach each pixel (0 where the "
+                        "surface faces it), float EXR or NPY (H, W), for the 'transmission' light term "
+                        "(repeat per pair; 'invsss scene' writes it as thickness.exr)")
+    parser.add_argument("--key-irradiance", action="append", default=[], metavar="FILE",
+                        help="the albedo times the key light's unshadowed irradiance on a surface facing "
+                        "it, the source's size and channels, read as the source is, for the "
+                        "'transmission' light term (repeat per pair; 'invsss scene' writes key_irradiance.exr)")
     parser.add_argument(
         "--linear-codes",
         action="store_true",
@@ -172,9 +180,10 @@ def _check_pair_counts(args: argparse.Namespace) -> int:
 
 
 def _with_light_buffers(pairs, args):
-    """The pairs with the --normal, --light, --key and --fill-light buffers attached (the
-    vectors read as linear floats, the key as the source is)."""
-    for flag in ("light", "normal", "key", "fill_light"):
+    """The pairs with the --normal, --light, --key, --fill-light, --thickness and
+    --key-irradiance buffers attached (the vectors and the thickness read as linear floats,
+    the key and the key irradiance as the source is)."""
+    for flag in ("light", "normal", "key", "fill_light", "thickness", "key_irradiance"):
         given = getattr(args, flag)
         if given and len(given) != len(pairs):
             raise InvalidInputError(
@@ -186,8 +195,12 @@ def _with_light_buffers(pairs, args):
         key = read_key_buffer(args.key[k], pair.source, args.linear_codes) if args.key else None
         fill = (read_light_buffer(args.fill_light[k], "fill-light", pair.mask.shape) if args.fill_light
                 else None)
+        thickness = read_thickness_buffer(args.thickness[k], pair.mask.shape) if args.thickness else None
+        irradiance = (read_key_buffer(args.key_irradiance[k], pair.source, args.linear_codes, "--key-irradiance")
+                      if args.key_irradiance else None)
         out.append(ImagePair(pair.source, pair.target, pair.depth, pair.mask, normal=normal, light=light, key=key,
-                             fill_light=fill, inputs_noted=pair.inputs_noted))
+                             fill_light=fill, inputs_noted=pair.inputs_noted, thickness=thickness,
+                             key_irradiance=irradiance))
     return out
 
 
@@ -294,7 +307,7 @@ def _with_file_names(err: InvalidInputError, args: argparse.Namespace, count: in
         for i, path in enumerate(getattr(args, role, None) or ()):
             name = role if count == 1 else f"pairs[{i}].{role}"
             shown[name], paths[name] = f"{path} ({name})", path
-    for buffer in ("normal", "light", "key", "fill_light"):
+    for buffer in ("normal", "light", "key", "fill_light", "thickness", "key_irradiance"):
         flag = "--" + buffer.replace("_", "-")
         shown["light_buffers." + buffer] = flag
         shown.update({f"pairs[{i}].{buffer}": flag + ("" if count == 1 else f" (pairs[{i}].{buffer})")
@@ -304,7 +317,7 @@ def _with_file_names(err: InvalidInputError, args: argparse.Namespace, count: in
 
 def _input_files(args: argparse.Namespace, options: FitOptions) -> list[tuple[str, str]]:
     """``(flag, path)`` of every file the fit reads, for :class:`ResultDir` to keep safe."""
-    flags = (*_PAIR_FLAGS, "light", "normal", "key", "fill_light")
+    flags = (*_PAIR_FLAGS, "light", "normal", "key", "fill_light", "thickness", "key_irradiance")
     given = [(f"--{flag.replace('_', '-')}", path) for flag in flags for path in getattr(args, flag, None) or ()]
     if isinstance(options.profile, (str, os.PathLike)) and os.path.isfile(options.profile):
         given.append(("--profile", os.fspath(options.profile)))

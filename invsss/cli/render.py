@@ -21,6 +21,7 @@ from .arguments import (
     model_choice,
     read_key_buffer,
     read_light_buffer,
+    read_thickness_buffer,
 )
 
 
@@ -63,6 +64,12 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--fill-light", metavar="FILE",
                         help="camera-space unit vectors towards the other lights, float EXR or NPY "
                         "(H, W, 3): needed when PARAMS holds a fitted 'fill' light term")
+    parser.add_argument("--thickness", metavar="FILE",
+                        help="mm the key light travels inside the skin, float EXR or NPY (H, W): needed when "
+                        "PARAMS holds a fitted 'transmission' light term")
+    parser.add_argument("--key-irradiance", metavar="FILE",
+                        help="the albedo times the key light's unshadowed irradiance, the image's size and "
+                        "channels: needed when PARAMS holds a fitted 'transmission' light term")
     parser.add_argument("--no-light-terms", action="store_true",
                         help="render the blur alone, leaving out the light terms PARAMS may hold")
     add_model_arguments(parser)
@@ -90,8 +97,10 @@ def _render_light_terms(args, extras, image):
                     f"{args.params}: holds the {term!r} light term, which needs --{flag.replace('_', '-')} "
                     f"(or --no-light-terms to render without the light terms)"
                 )
-            if flag == "key" and flag not in buffers:
-                buffers[flag] = read_key_buffer(path, image, args.linear_codes)
+            if flag in ("key", "key_irradiance") and flag not in buffers:
+                buffers[flag] = read_key_buffer(path, image, args.linear_codes, "--" + flag.replace("_", "-"))
+            elif flag == "thickness" and flag not in buffers:
+                buffers[flag] = read_thickness_buffer(path, shape)
             elif flag not in buffers:
                 buffers[flag] = read_light_buffer(path, flag.replace("_", "-"), shape)
     return terms, LightBuffers(**buffers)

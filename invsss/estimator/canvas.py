@@ -88,7 +88,8 @@ def pad_pair(pair: ImagePair, canvas: tuple[int, int]) -> ImagePair:
     return ImagePair(
         put(pair.source), put(pair.target), put(pair.depth), put(pair.mask, 0.0), target_ndim=pair.target_ndim,
         fit_weight=put(pair.fit_weight, 0.0), normal=put(pair.normal), light=put(pair.light), key=put(pair.key),
-        fill_light=put(pair.fill_light), inputs_noted=pair.inputs_noted,
+        fill_light=put(pair.fill_light), inputs_noted=pair.inputs_noted, thickness=put(pair.thickness),
+        key_irradiance=put(pair.key_irradiance),
     )
 
 

@@ -131,7 +131,8 @@ def fit_pair(
         pair: ImagePair | tuple = (source, target, depth, mask)
     elif isinstance(light_buffers, LightBuffers):
         pair = ImagePair(source, target, depth, mask, normal=light_buffers.normal, light=light_buffers.light,
-                         key=light_buffers.key, fill_light=light_buffers.fill_light)
+                         key=light_buffers.key, fill_light=light_buffers.fill_light,
+                         thickness=light_buffers.thickness, key_irradiance=light_buffers.key_irradiance)
     else:
         raise InvalidInputError(f"light_buffers: expected an invsss.LightBuffers, got {type(light_buffers).__name__}")
     return run_fit([pair], True, _options(options, keywords), progress, stop)

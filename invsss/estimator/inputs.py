@@ -29,14 +29,16 @@ def _check_fit_weight(fit_weight, shape, mask, name: str):
 
 
 def prepare_pair(source, target, depth, mask=None, *, fit_weight=None, normal=None, light=None, key=None,
-                 fill_light=None, name: str = "", inputs_noted: bool = False) -> ImagePair:
+                 fill_light=None, thickness=None, key_irradiance=None, name: str = "",
+                 inputs_noted: bool = False) -> ImagePair:
     """Validate one pair and convert it to float64 (call under ``jax.enable_x64``).
 
     ``mask=None`` fits every pixel. ``name`` prefixes the input names in errors.
     ``inputs_noted`` skips the notices about the inputs (a pair from
     :func:`invsss.load_pair` has had them, on the depth as read).
-    ``normal``, ``light``, ``key`` and ``fill_light`` are the optional buffers of the light-aware
-    terms (:class:`invsss.LightBuffers`), checked (and the vectors normalised) here.
+    ``normal``, ``light``, ``key``, ``fill_light``, ``thickness`` and ``key_irradiance`` are the
+    optional buffers of the light-aware terms (:class:`invsss.LightBuffers`), checked (and the
+    vectors normalised) here.
 
     Examples
     --------
@@ -55,19 +57,20 @@ def prepare_pair(source, target, depth, mask=None, *, fit_weight=None, normal=No
     if fit_weight is not None:
         fit_weight = _check_fit_weight(fit_weight, np.shape(mask), mask, f"{name}fit_weight")
     channels = np.shape(source)[2] if np.ndim(source) == 3 else 1
-    buffers = LightBuffers(normal, light, key, fill_light).checked(np.shape(mask), mask, prefix=name,
-                                                                   channels=channels)
+    buffers = LightBuffers(normal, light, key, fill_light, thickness, key_irradiance).checked(
+        np.shape(mask), mask, prefix=name, channels=channels)
     return ImagePair(source, target, depth, mask, fit_weight=fit_weight, normal=buffers.normal,
                      light=buffers.light, key=buffers.key, fill_light=buffers.fill_light,
+                     thickness=buffers.thickness, key_irradiance=buffers.key_irradiance,
                      inputs_noted=True).as_float64()
 
 
 def _unpack(pair, index: int):
     if isinstance(pair, ImagePair):
         return (pair.source, pair.target, pair.depth, pair.mask, pair.fit_weight, pair.normal, pair.light,
-                pair.key, pair.fill_light, pair.inputs_noted)
+                pair.key, pair.fill_light, pair.thickness, pair.key_irradiance, pair.inputs_noted)
     if isinstance(pair, (tuple, list)) and len(pair) in (3, 4):
-        return (*pair, *(None,) * (9 - len(pair)), False)
+        return (*pair, *(None,) * (11 - len(pair)), False)
     raise InvalidInputError(
         f"pairs[{index}]: expected a (source, target, depth, mask) tuple or an "
         f"invsss.ImagePair, got {type(pair).__name__}"
@@ -80,9 +83,11 @@ def prepare_pairs(pairs) -> tuple[ImagePair, ...]:
         raise InvalidInputError("pairs: expected a non-empty sequence of (source, target, depth, mask)")
     prepared = []
     for i, p in enumerate(pairs):
-        source, target, depth, mask, fit_weight, normal, light, key, fill_light, checked = _unpack(p, i)
+        (source, target, depth, mask, fit_weight, normal, light, key, fill_light, thickness, key_irradiance,
+         checked) = _unpack(p, i)
         prepared.append(prepare_pair(source, target, depth, mask, fit_weight=fit_weight, normal=normal, light=light,
-                                     key=key, fill_light=fill_light, name=f"pairs[{i}]." if len(pairs) > 1 else "",
+                                     key=key, fill_light=fill_light, thickness=thickness,
+                                     key_irradiance=key_irradiance, name=f"pairs[{i}]." if len(pairs) > 1 else "",
                                      inputs_noted=checked))
     out = tuple(prepared)
     layouts = {p.channels for p in out}

@@ -34,6 +34,8 @@ from ..forward.light_terms import (
     light_transport,
     lit_source,
     propagation_offsets,
+    transmitted_source,
+    wrapped_back_lighting,
 )
 from ..forward.stretch import stretch_factors
 from .basis import basis_images
@@ -49,19 +51,26 @@ _AFTER_BLUR = tuple(LIGHT_UNKNOWNS[term] for term in AFTER_BLUR)
 #: The unknowns the blurred basis images depend on (the grey mix apart: the blur is
 #: linear in the image); the others act after the blur.
 _BLURRED_BY = ("sss_level", "correction", "maxdd", "variances", "weights", LIGHT_UNKNOWNS["law"],
-               LIGHT_UNKNOWNS["law_strength"], LIGHT_UNKNOWNS["fill"])
+               LIGHT_UNKNOWNS["law_strength"], LIGHT_UNKNOWNS["fill"], LIGHT_UNKNOWNS["transmission"],
+               LIGHT_UNKNOWNS["thickness_scale"])
 
 
 def _lit_source(pair, natural):
-    """The pair with the ``law`` term (and ``fill``, when its strength is among the
-    natural values) applied to its source (docs/model.md, section 8), when ``w`` is
-    among the natural values: the blur of the changed source is the model's, and
-    the difference Jacobian sees ``w`` as it sees any blur parameter."""
-    if "law" not in natural:
+    """The pair with the terms that change the source applied to it (docs/model.md,
+    section 8): the ``law`` (and ``fill``, when its strength is among the natural
+    values) when ``w`` is among them, then the ``transmission`` when its tint is. The
+    blur of the changed source is the model's, and the difference Jacobian sees their
+    unknowns as it sees any blur parameter."""
+    if "law" not in natural and "transmission" not in natural:
         return pair
-    fill = natural.get("fill_strength")
-    lit = lit_source(pair.source, pair.key, pair.mask, pair.normal, pair.light, natural["law"],
-                     natural["law_strength"], None if fill is None else pair.fill_light, fill)
+    lit = pair.source
+    if "law" in natural:
+        fill = natural.get("fill_strength")
+        lit = lit_source(lit, pair.key, pair.mask, pair.normal, pair.light, natural["law"],
+                         natural["law_strength"], None if fill is None else pair.fill_light, fill)
+    if "transmission" in natural:
+        lit = transmitted_source(lit, pair.mask, natural["transmission"], natural["thickness_scale"], pair.thickness,
+                                 pair.key_irradiance, wrapped_back_lighting(pair.normal, pair.light))
     return eqx.tree_at(lambda p: p.source, pair, lit)
 
 

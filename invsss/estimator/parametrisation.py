@@ -42,6 +42,9 @@ law            ``sigmoid(ref + z)``, one per source   ``logit(0.9)``: an albedo
                                                      section 8
 law_strength   ``z``                                 0 (Lambert: the plain model)
 fill_strength  ``z``                                 0 (the other lights Lambertian)
+transmission   ``z``, one per source channel          0 (no transmitted light)
+thickness_     ``ref * exp(z)``                      one over the median thickness
+scale                                                behind the key light's terminator
 =============  ====================================  ===============================
 
 ``softplus`` keeps the correction non-negative while letting it approach 0
@@ -93,7 +96,8 @@ GAUGES = ("variances", "sss_level", "depth")
 #: the law contains the fit without it); ``fill``, the law on the other lights, has
 #: a strength of its own and shares the albedo.
 LIGHT_UNKNOWNS = {"shift": "light_shift", "grazing": "grazing", "incidence": "incidence", "law": "law",
-                  "law_strength": "law_strength", "fill": "fill_strength"}
+                  "law_strength": "law_strength", "fill": "fill_strength", "transmission": "transmission",
+                  "thickness_scale": "thickness_scale"}
 
 
 
@@ -112,7 +116,10 @@ def by_unknown(entries: dict) -> dict:
 #: Blocks that are ``ref * z`` with 0 a value like any other (no fall-off, no
 #: shift, no gain): the vignetting coefficients and the light terms but the law
 #: (an albedo in (0, 1), a logit block).
-SCALED_BLOCKS = ("vignetting", "pigment", *(name for term, name in LIGHT_UNKNOWNS.items() if term != "law"))
+SCALED_BLOCKS = ("vignetting", "pigment",
+                 *(name for term, name in LIGHT_UNKNOWNS.items() if term not in ("law", "thickness_scale")))
+#: Blocks that are ``ref * exp(z)``: positive, their uncertainty relative.
+_LOG_BLOCKS = ("sss_level", "maxdd", "variances", "thickness_scale")
 _SCALARS = ("sss_level", "correction", "maxdd")
 
 
@@ -280,7 +287,7 @@ class Parametrisation(eqx.Module):
         out = dict(self.values)
         for name, u in self.split(z).items():
             ref = self.reference[name] if xp is jnp else np.asarray(self.reference[name])
-            if name in ("sss_level", "maxdd", "variances"):
+            if name in _LOG_BLOCKS:
                 out[name] = ref * xp.exp(u)
             elif name == "correction":
                 out[name] = ref * _softplus(u, xp)
@@ -302,7 +309,7 @@ class Parametrisation(eqx.Module):
         for name, shape in self.blocks:
             x = np.asarray(natural[name], np.float64)
             ref = np.asarray(self.reference[name], np.float64)
-            if name in ("sss_level", "maxdd", "variances"):
+            if name in _LOG_BLOCKS:
                 u = np.log(x / ref)
             elif name == "correction":
                 u = softplus_inverse(np.maximum(x / ref, 1e-12))

@@ -168,11 +168,39 @@ def _build(pairs, roles, fixed, profile_w, profile_v, scales, vignetting=False, 
         blocks.append(("fill_strength", ()))
         start["fill_strength"] = 1.0
         reference["fill_strength"] = 1.0
+    if "transmission" in light_terms and "transmission" not in light_fixed:
+        # One tint per source channel (HDRP's transmission tint is a colour), 0 the
+        # identity. The scan starts with it on, half the key light through; the
+        # plain fit's start has it at 0.
+        blocks.append(("transmission", (c_src,)))
+        start["transmission"] = np.full(c_src, TRANSMISSION_START)
+        reference["transmission"] = 1.0
+    if "transmission" in light_terms and "thickness_scale" not in light_fixed:
+        blocks.append(("thickness_scale", ()))
+        reference["thickness_scale"] = thickness_reference(pairs)
+        start["thickness_scale"] = reference["thickness_scale"]
     param = Parametrisation(
         tuple(blocks), {k_: _on_device(v) for k_, v in reference.items()}, values
     )
     natural0 = {name: start.get(name, reference[name]) for name, _ in blocks}
     return param, param.unknowns(natural0)
+
+
+#: Where the transmission's tint starts in the scan (its identity, 0, is the plain fit's start).
+TRANSMISSION_START = 0.5
+#: Below this thickness (mm) the key light meets the surface itself: the scale's
+#: reference is taken from the thicker part behind the terminator.
+THIN_MM = 0.5
+
+
+def thickness_reference(pairs) -> float:
+    """The thickness scale's reference ``k``: one over the median thickness (mm) of the
+    masked pixels that the key light reaches only through the skin, so that ``k t``
+    is about 1 there at the start (1/mm when no pixel is behind the terminator)."""
+    behind = [np.asarray(p.thickness)[(np.asarray(p.mask) > 0) & (np.asarray(p.thickness) > THIN_MM)]
+              for p in pairs if p.thickness is not None]
+    values = np.concatenate(behind) if behind else np.zeros(0)
+    return 1.0 / float(np.median(values)) if values.size else 1.0
 
 
 def _on_device(x) -> jax.Array:

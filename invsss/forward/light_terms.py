@@ -145,11 +145,9 @@ __all__ = [
 ]
 
 #: The terms, in the order of docs/model.md, section 8, with the buffers each needs.
-#: ``transmission`` is rendered (:func:`invsss.render`) but not yet fitted, so it is
-#: not among them (issue 48).
-LIGHT_TERM_NAMES = ("shift", "grazing", "incidence", "law", "fill")
+LIGHT_TERM_NAMES = ("shift", "grazing", "incidence", "law", "fill", "transmission")
 #: The fields of :class:`LightTerms` (a params file's ``light_terms`` keys that set them).
-LIGHT_TERM_FIELDS = (*LIGHT_TERM_NAMES, "law_strength")
+LIGHT_TERM_FIELDS = (*LIGHT_TERM_NAMES, "law_strength", "thickness_scale")
 NEEDED_BUFFERS = {"shift": ("light",), "grazing": ("normal",), "incidence": ("normal", "light"),
                   "law": ("key", "normal", "light"), "fill": ("key", "normal", "fill_light"),
                   "transmission": ("thickness", "key_irradiance", "normal", "light")}

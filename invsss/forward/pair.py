@@ -52,6 +52,11 @@ class ImagePair(eqx.Module):
         The source lit by the key light alone (the ``law`` term; None without it).
     fill_light : array, shape (H, W, 3), or None
         Camera-space unit vectors towards the other lights (the ``fill`` term).
+    thickness : array, shape (H, W), or None
+        The distance in mm the key light travels inside the skin (the
+        ``transmission`` term).
+    key_irradiance : array, shape (H, W, C), or None
+        The albedo times the key light's unshadowed irradiance (the ``transmission`` term).
     inputs_noted : bool, static
         True when :func:`invsss.load_pair` has already given the notices about the
         inputs as read, naming the files (background in the mask,
@@ -80,13 +85,15 @@ class ImagePair(eqx.Module):
     key: Float[Array, "H W C"] | None = None
     fill_light: Float[Array, "H W 3"] | None = None
     inputs_noted: bool = eqx.field(static=True, default=False)
+    thickness: Float[Array, "H W"] | None = None
+    key_irradiance: Float[Array, "H W C"] | None = None
 
     @property
     def light_buffers(self):
         """The pair's buffers of the light-aware terms as an :class:`invsss.LightBuffers`."""
         from .light_terms import LightBuffers
 
-        return LightBuffers(self.normal, self.light, self.key, self.fill_light)
+        return LightBuffers(self.normal, self.light, self.key, self.fill_light, self.thickness, self.key_irradiance)
 
     @property
     def residual_weight(self) -> Float[Array, "H W"]:
@@ -117,6 +124,8 @@ class ImagePair(eqx.Module):
             None if self.key is None else _as_hwc64(self.key),
             _float64_or_none(self.fill_light),
             self.inputs_noted,
+            _float64_or_none(self.thickness),
+            None if self.key_irradiance is None else _as_hwc64(self.key_irradiance),
         )
 
 

@@ -49,6 +49,15 @@ def light_constants(light_terms) -> dict:
             f"light_terms: expected an invsss.LightTerms or a mapping, got {type(light_terms).__name__}",
             field="light_terms",
         )
+    transmission = (light_terms.transmission if isinstance(light_terms, LightTerms)
+                    else light_terms.get("transmission", 0.0))
+    if np.any(np.asarray(transmission, np.float64) != 0.0):
+        # Refused rather than dropped: a shader without it would render the fit's image without that light.
+        raise InvalidInputError(
+            "light_terms.transmission: the reference shader does not implement the transmission term yet "
+            "(issue 48); export the profile alone, or refit without it",
+            field="light_terms.transmission",
+        )
     # Checked as LightTerms, written from the given numbers: LightTerms holds
     # JAX's default float32 outside x64, which would round them.
     shift, grazing, incidence = (float(np.asarray(v, np.float64)) for v in after)

@@ -103,11 +103,17 @@ def _resampled(checked, prepared, warps) -> list[ImagePair]:
             inner = None
         # The key light's part of the source moves with the source.
         key = None if pair.key is None else align_source(pair.key, depth, mask, warp, target.shape[:2])[0]
+        # So do the transmission's buffers, which belong to the source's pixels.
+        key_irradiance = (None if pair.key_irradiance is None
+                          else align_source(pair.key_irradiance, depth, mask, warp, target.shape[:2])[0])
+        thickness = (None if pair.thickness is None
+                     else align_source(np.asarray(pair.thickness)[..., None], depth, mask, warp,
+                                       target.shape[:2])[0][..., 0])
         out.append(ImagePair(moved, target[..., 0] if ndim == 2 else target, moved_depth, kept,
                              fit_weight=inner, normal=align_vectors(pair.normal, warp, target.shape[:2]),
                              light=align_vectors(pair.light, warp, target.shape[:2]), key=key,
                              fill_light=align_vectors(pair.fill_light, warp, target.shape[:2]),
-                             inputs_noted=True))
+                             inputs_noted=True, thickness=thickness, key_irradiance=key_irradiance))
     return out
 
 

@@ -18,8 +18,10 @@ __all__ = ["against_plain", "plain_model", "term_bounds", "unlike_any_medium", "
 
 
 #: Every light term's unknown at its identity (docs/model.md, section 8): no
-#: shift, no gain, the law at strength 0 on every light (its albedo then does nothing).
-IDENTITY = {"light_shift": 0.0, "grazing": 0.0, "incidence": 0.0, "law_strength": 0.0, "fill_strength": 0.0}
+#: shift, no gain, the law at strength 0 on every light (its albedo then does nothing),
+#: no transmitted light (its thickness scale then does nothing).
+IDENTITY = {"light_shift": 0.0, "grazing": 0.0, "incidence": 0.0, "law_strength": 0.0, "fill_strength": 0.0,
+            "transmission": 0.0}
 #: A term set that scores this much (dB) below the plain fit on the fit's own
 #: mask is not kept: the plain fit is returned, with every term at its identity.
 WORSE_THAN_PLAIN_DB = 0.0
@@ -70,7 +72,7 @@ def against_plain(problem, path, result, plain) -> FitResult:
     layout = problem.param.layout()
     without = {}
     for term, name in LIGHT_UNKNOWNS.items():
-        if term == "law_strength" or term not in record:
+        if term in ("law_strength", "thickness_scale") or term not in record:
             continue
         knocked = "law_strength" if term == "law" else name
         if knocked not in layout:
@@ -84,11 +86,13 @@ def against_plain(problem, path, result, plain) -> FitResult:
     record["psnr_without"] = without
     messages = list(result.warnings)
     if result.psnr < plain.psnr - WORSE_THAN_PLAIN_DB and not result.interrupted:
-        held = {term: 0.0 for term in AFTER_BLUR if term in record}
+        held: dict[str, float | list[float]] = {term: 0.0 for term in AFTER_BLUR if term in record}
         if "law" in record:
             held["law_strength"] = 0.0
         if "fill" in record:
             held["fill"] = 0.0
+        if "transmission" in record:
+            held["transmission"] = 0.0 if np.ndim(record["transmission"]) == 0 else [0.0] * len(record["transmission"])
         identity = {**record, **held, "psnr_without": {}, "fallback": True}
         identity["stderr"] = {term: None for term in record["stderr"]}
         message = (
