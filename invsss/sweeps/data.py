@@ -28,7 +28,8 @@ PAIR_FILES = {"source": "source.exr", "target": "target.exr", "depth": "depth.ex
 
 #: Optional files of a pair folder: the buffers of the light-aware terms
 #: (:class:`invsss.LightBuffers`), recorded when present.
-BUFFER_FILES = {"normal": "normal.exr", "light": "light.exr", "key": "key.exr", "fill_light": "fill_light.exr"}
+BUFFER_FILES = {"normal": "normal.exr", "light": "light.exr", "key": "key.exr", "fill_light": "fill_light.exr",
+                "thickness": "thickness.exr", "key_irradiance": "key_irradiance.exr"}
 
 
 def _relative(path: str, root: str) -> str:
@@ -37,8 +38,8 @@ def _relative(path: str, root: str) -> str:
 
 def resolve_pairs(data: DataSpec, root: str, name: str) -> list[dict]:
     """The pairs of ``data`` as ``{"name", "source", "target", "depth", "mask"}`` dicts,
-    with ``"normal"``, ``"light"``, ``"key"`` and ``"fill_light"`` where the folder or file
-    set has them.
+    with ``"normal"``, ``"light"``, ``"key"``, ``"fill_light"``, ``"thickness"`` and
+    ``"key_irradiance"`` where the folder or file set has them.
 
     Paths in the result are relative to ``root`` (the experiment file's folder)
     and normalised, so the same experiment gives the same trial ids wherever it

@@ -41,7 +41,8 @@ def trial_folder(out: str, trial_id: str) -> str:
 
 def load_trial_pairs(trial: Trial) -> list:
     """The trial's pairs read from its data folder: an :class:`~invsss.ImagePair` per
-    pair, with the light buffers (normal, light, key, fill_light) its light terms read."""
+    pair, with the light buffers (normal, light, key, fill_light, thickness,
+    key_irradiance) its light terms read."""
     from ..io import load_pair, read_image
 
     pairs = []
@@ -55,9 +56,10 @@ def load_trial_pairs(trial: Trial) -> list:
             # them. The key light's image is read as the source is (one channel for
             # a grey source stored as RGB, which load_pair read as one).
             grey = data.source.shape[-1] == 1
+            read_as_source = ("key", "key_irradiance")
             buffers = {role: read_image(os.path.join(trial.root, pair[role]),
-                                        linear=trial.linear_codes if role == "key" else True,
-                                        grey=grey and role == "key")
+                                        linear=trial.linear_codes if role in read_as_source else True,
+                                        grey=(grey and role in read_as_source) or role == "thickness")
                        for role in trial.buffer_roles if role in pair}
             # ImagePair keeps the NumPy arrays as given; its fields are annotated as jax Arrays.
             data = dataclasses.replace(data, **buffers)  # type: ignore[arg-type]

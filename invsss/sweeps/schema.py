@@ -81,7 +81,8 @@ _Taps = str | _Numbers | None
 
 class FileSet(BaseModel):
     """One pair given file by file (``[[data.files]]``); ``normal``, ``light``,
-    ``key`` and ``fill_light`` are the optional buffers of the light-aware terms."""
+    ``key``, ``fill_light``, ``thickness`` and ``key_irradiance`` are the optional buffers
+    of the light-aware terms."""
 
     model_config = _STRICT
     name: str | None = None
@@ -93,6 +94,8 @@ class FileSet(BaseModel):
     light: str | None = None
     key: str | None = None
     fill_light: str | None = None
+    thickness: str | None = None
+    key_irradiance: str | None = None
 
 
 class DataSpec(BaseModel):

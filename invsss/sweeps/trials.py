@@ -108,8 +108,9 @@ class Trial:
             options["gauge"] = get_model(options.get("model", MODEL_NAMES[0])).default_gauge
         # The buffers count only for a trial that reads them: a folder that
         # gained light.exr keeps the ids of its trials without light terms, one
-        # that gained key.exr those without the law, and one that gained
-        # fill_light.exr those without the fill.
+        # that gained key.exr those without the law, one that gained
+        # fill_light.exr those without the fill, and one that gained thickness.exr
+        # and key_irradiance.exr those without the transmission.
         buffers = [role for role in BUFFER_FILES if role not in self.buffer_roles]
         return {
             "task": self.task,
@@ -122,7 +123,8 @@ class Trial:
     @property
     def buffer_roles(self) -> tuple[str, ...]:
         """The buffers this trial reads: none without light terms, the key light's
-        image only with the law, the other lights' direction only with the fill."""
+        image only with the law, the other lights' direction only with the fill, the
+        thickness and the key light's irradiance only with the transmission."""
         from ..estimator.options import check_light_terms
 
         if not self.options.get("light_terms"):
@@ -130,7 +132,8 @@ class Trial:
         terms, held = check_light_terms(self.options["light_terms"])
         named = (*terms, *held)
         return ("normal", "light", *(("key",) if "law" in named else ()),
-                *(("fill_light",) if "fill" in named else ()))
+                *(("fill_light",) if "fill" in named else ()),
+                *(("thickness", "key_irradiance") if "transmission" in named else ()))
 
     def to_dict(self) -> dict:
         """A plain mapping (for another process, or JSON); :meth:`from_dict` reverses it."""
