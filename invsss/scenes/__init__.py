@@ -3,7 +3,8 @@
 ``invsss scene CONFIG.toml --out DIR`` (and :func:`render_scene`) renders, from a
 scene description (:mod:`invsss.scenes.config`), a Lambertian source image and a
 path-traced target of the same scene with a homogeneous scattering medium behind a
-rough dielectric boundary, plus eye-space depth, mask, normals, light directions, coverage and a
+rough dielectric boundary, plus eye-space depth, mask, normals, light directions, coverage,
+the transmission term's thicknesses and key light irradiance (:mod:`invsss.scenes.transmission`) and a
 ``scene.json`` with everything needed to reproduce it. Mitsuba and trimesh are an
 optional extra (``pip install "invsss[scenes]"``) and are imported only when a
 scene is rendered: :mod:`invsss.scenes.config` works without them.

@@ -18,6 +18,13 @@ one unit through :class:`invsss.io.result_dir.ResultDir`:
 ``fill_light.exr`` the same towards the second light, the direction the ``fill``
                 light term gives the other lights (scenes with two lights or more)
 ``coverage.exr`` fraction of the pixel where skin is seen (occluders excluded)
+``thickness.exr`` mm the key light travels inside the skin to reach the seen point
+                (0 where the point faces it), :mod:`~invsss.scenes.transmission`
+``thickness_normal.exr`` mm from the seen point along the inward normal to where
+                the skin ends (a baked thickness map)
+``key_irradiance.exr`` the source's albedo times the key light's unshadowed
+                irradiance on a surface facing it, over pi: where the key light
+                reaches a point unshadowed, ``key.exr`` is this times ``max(n . l, 0)``
 ``scene.json``  the resolved scene, medium, calibration, seeds, spp, Mitsuba
                 version, render times and the noise estimate (:mod:`~invsss.scenes.noise`)
 ==============  ==========================================================
@@ -51,13 +58,14 @@ from .calibration import CALIBRATION_PIXELS, CALIBRATION_SPP, slab_albedo
 from .config import SceneConfig
 from .mitsuba_scene import import_mitsuba, load_mesh_ply, pigmented_mesh, scene_dict, write_attribute_ply
 from .noise import half_render_noise
+from .transmission import TRANSMISSION_FILES, albedo_map, transmission_buffers
 
 __all__ = ["SCENE_FILES", "SceneRender", "camera_points", "camera_pose", "fill_light_directions", "light_directions",
            "object_ply", "render_aovs", "render_scene", "scene_writers", "write_scene"]
 
 #: The files of a scene folder, in the order they are written.
 SCENE_FILES = ("source.exr", "target.exr", "depth.exr", "mask.png", "normal.exr", "coverage.exr", "light.exr",
-               "key.exr", "fill_light.exr", "scene.json")
+               "key.exr", "fill_light.exr", *TRANSMISSION_FILES, "scene.json")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,6 +82,8 @@ class SceneRender:
     target_halves: tuple[np.ndarray, np.ndarray] | None
     light: np.ndarray | None = None  # (H, W, 3) float32; None: computed from the depth when written
     key: np.ndarray | None = None  # (H, W, C) float32: the source lit by the first light alone; None: not written
+    # thickness.exr, thickness_normal.exr, key_irradiance.exr (transmission_buffers); None: not written
+    transmission: dict[str, np.ndarray] | None = None
 
 
 def _channels(image, count: int) -> np.ndarray:
@@ -276,6 +286,11 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
                                                        channels))
         else:
             key = source
+        # The transmission term's buffers, from the geometry pass's points and the source's albedo.
+        say("scene: transmission buffers")
+        pixel_albedo = albedo if pigment is None else albedo_map(
+            mi, scene_dict(mi, config, "geometry", mesh_ply=source_ply), geometry["cov"][..., 0])
+        transmission = transmission_buffers(mi, config, build("geometry"), geometry, pixel_albedo, channels)
         scenes = [(mi.load_dict(scene_dict(mi, config, "target", mesh_ply=mesh_ply, coefficients=medium)),
                    mi.load_dict(scene_dict(mi, config, "specular", mesh_ply=mesh_ply, coefficients=medium)))
                   for medium in media] if target else []
@@ -345,6 +360,7 @@ def render_scene(config: SceneConfig, progress: Callable[[str], None] | None = N
         target_halves=(halves[0].astype(np.float32), halves[1].astype(np.float32)) if target else None,
         light=light_directions(config, depth).astype(np.float32),
         key=key.astype(np.float32),
+        transmission=transmission,
     )
 
 
@@ -459,7 +475,8 @@ def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
     >>> image, plane = np.ones((4, 4, 1), np.float32), np.ones((4, 4), np.float32)
     >>> flat = SceneRender(image, image, 500 * plane, plane, np.zeros((4, 4, 3), np.float32),
     ...                    plane, {"spp": 2}, (image, image), light=np.zeros((4, 4, 3), np.float32), key=image)
-    >>> list(scene_writers(flat)) == [name for name in SCENE_FILES if name != "fill_light.exr"]  # one light
+    >>> list(scene_writers(flat)) == [name for name in SCENE_FILES  # one light, no transmission buffers
+    ...                               if name not in ("fill_light.exr", *TRANSMISSION_FILES)]
     True
     """
     text = json.dumps(result.info, indent=2) + "\n"
@@ -474,6 +491,7 @@ def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
         "light.exr": lambda path: write_image(path, _light_buffer(result)),
         "key.exr": lambda path: write_image(path, result.key),
         "fill_light.exr": lambda path: write_image(path, fill),
+        **{name: _image_writer(image) for name, image in (result.transmission or {}).items()},
         "scene.json": lambda path: write_text_atomic(path, text),
     }
     if fill is None:
@@ -483,6 +501,10 @@ def scene_writers(result: SceneRender) -> dict[str, Callable[[str], None]]:
     if result.key is None:
         del writers["key.exr"]
     return writers
+
+
+def _image_writer(image: np.ndarray) -> Callable[[str], None]:
+    return lambda path: write_image(path, image)
 
 
 def write_scene(result: SceneRender, out, *, overwrite: bool = False) -> list[str]:
@@ -502,7 +524,7 @@ def write_scene(result: SceneRender, out, *, overwrite: bool = False) -> list[st
     ...     "medium": {"preset": "thesis-940"}, "spp": 2})
     >>> folder = os.path.join(tempfile.mkdtemp(), "pair")
     >>> [os.path.basename(p) for p in write_scene(render_scene(config), folder)]  # one light: no fill_light.exr
-    ['source.exr', 'target.exr', 'depth.exr', 'mask.png', 'normal.exr', 'coverage.exr', 'light.exr', 'key.exr', 'scene.json']
+    ['source.exr', 'target.exr', 'depth.exr', 'mask.png', 'normal.exr', 'coverage.exr', 'light.exr', 'key.exr', 'thickness.exr', 'thickness_normal.exr', 'key_irradiance.exr', 'scene.json']
     """  # noqa: E501
     with ResultDir(os.fspath(out), overwrite=overwrite, names=SCENE_FILES, option="overwrite=True") as folder:
         return folder.commit(scene_writers(result), {"command": "scene"})

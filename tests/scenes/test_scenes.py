@@ -21,36 +21,7 @@ from invsss.scenes.media import dipole_fit_to_thesis_profile
 mitsuba = pytest.importorskip("mitsuba", reason='the scene tests need pip install "invsss[scenes]"')
 from invsss.scenes import render_scene  # noqa: E402  (needs Mitsuba)
 from tests import ROOT
-from tests.scenes._scene_configs import CAMERA, POINT_LIGHT, sphere_config
-
-
-def _pixel_rays(config, n: int = 8):
-    """Unnormalised ray directions (H, W, n, n, 3) through an n x n grid in each pixel.
-
-    Built from the camera's definition, not Mitsuba: pixel (row i, column j)
-    spans [j, j + 1] x [i, i + 1], image right is camera right, image down is
-    camera down, the optical axis meets the image at the centre plus
-    ``principal_offset_px``, and a direction has unit component along the optical axis, so
-    the ray parameter of a hit is its eye z.
-    """
-    camera = config.camera
-    origin = np.asarray(camera.position, float)
-    forward = np.asarray(camera.look_at, float) - origin
-    forward /= np.linalg.norm(forward)
-    right = np.cross(forward, camera.up)
-    right /= np.linalg.norm(right)
-    up = np.cross(right, forward)
-    f = camera.focal_length_px
-    sub = (np.arange(n) + 0.5) / n
-    u = np.arange(camera.width)[None, :, None, None] + sub[None, None, None, :]
-    v = np.arange(camera.height)[:, None, None, None] + sub[None, None, :, None]
-    # The optical axis meets the image at the centre plus the principal offset.
-    x = (u - camera.width / 2 - camera.principal_offset_px[1]) / f
-    y = -(v - camera.height / 2 - camera.principal_offset_px[0]) / f
-    x, y = np.broadcast_arrays(x, y)
-    directions = forward + x[..., None] * right + y[..., None] * up
-    return origin, directions, (right, up, forward)
-
+from tests.scenes._scene_configs import CAMERA, POINT_LIGHT, pixel_rays, sphere_config
 
 # ------------------------------------------------------------------ geometry
 
@@ -62,7 +33,7 @@ def test_depth_of_tilted_plane_is_analytic_eye_z():
                              "pose": {"rotate": [tilt, 0.0, 0.0]}},
                      camera={**CAMERA, "width": 32, "height": 24})
     result = render_scene(config)
-    origin, directions, _ = _pixel_rays(config)
+    origin, directions, _ = pixel_rays(config)
     # The slab's front face: through the origin, normal R_x(tilt) (0, 0, 1).
     normal = np.array([0.0, -np.sin(np.radians(tilt)), np.cos(np.radians(tilt))])
     eye_z = (-(origin @ normal) / (directions @ normal)).mean(axis=(2, 3))
@@ -87,7 +58,7 @@ def test_mask_and_coverage_match_the_silhouette_minus_occluder(camera):
               "width": 10.0, "length": 300.0, "count": 1, "duty": 0.5}
     config = sphere_config(occluders=[stripe], camera=camera)
     result = render_scene(config)
-    origin, directions, (right, up, forward) = _pixel_rays(config, n=16)
+    origin, directions, (right, up, forward) = pixel_rays(config, n=16)
     # Sphere about the origin: a ray hits it where its distance to the centre is < radius.
     unit = directions / np.linalg.norm(directions, axis=-1, keepdims=True)
     along = -(unit @ origin)
@@ -247,14 +218,14 @@ def test_example_scenes_render(name):
 
 def test_light_directions_point_from_the_surface_to_the_light():
     # Rebuild each pixel centre's surface point from the camera's definition
-    # (_pixel_rays, with one sample at the pixel centre) and the depth, and compare
+    # (pixel_rays, with one sample at the pixel centre) and the depth, and compare
     # its direction towards the point light with the light buffer.
     from invsss.scenes.path_tracing import light_directions
 
     config = sphere_config()
     depth = np.full((config.camera.height, config.camera.width), 250.0)
     depth[:3] = 0.0  # nothing seen
-    origin, directions, (right, up, forward) = _pixel_rays(config, n=1)
+    origin, directions, (right, up, forward) = pixel_rays(config, n=1)
     points = origin + depth[..., None] * directions[:, :, 0, 0]
     towards = np.asarray(POINT_LIGHT["position"], float) - points
     towards /= np.linalg.norm(towards, axis=-1, keepdims=True)
