@@ -57,7 +57,8 @@ def test_scene_command_writes_a_pair_folder(tmp_path, capsys):
     assert main(["scene", str(_write_toml(tmp_path)), "--out", str(out), "--width", "16"]) == 0
     files = sorted(os.listdir(out))
     assert files == sorted(["source.exr", "target.exr", "depth.exr", "mask.png", "normal.exr",
-                            "coverage.exr", "light.exr", "key.exr", "scene.json", "invsss-manifest.json"])
+                            "coverage.exr", "light.exr", "key.exr", "thickness.exr", "thickness_normal.exr",
+                            "key_irradiance.exr", "scene.json", "invsss-manifest.json"])
     info = json.loads((out / "scene.json").read_text())
     assert info["config"]["camera"]["width"] == 16 and info["config"]["camera"]["height"] == 16
     assert info["mitsuba_version"] == mitsuba.__version__ and info["spp"]["target_per_half"] == 2
