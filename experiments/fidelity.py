@@ -136,6 +136,10 @@ def load_scene_pair(folder: pathlib.Path) -> dict:
             key=invsss.read_image(folder / "key.exr") if (folder / "key.exr").is_file() else None,
             fill_light=(invsss.read_image(folder / "fill_light.exr") if (folder / "fill_light.exr").is_file()
                         else None),
+            thickness=(invsss.read_image(folder / "thickness.exr")[..., 0] if (folder / "thickness.exr").is_file()
+                       else None),
+            key_irradiance=(invsss.read_image(folder / "key_irradiance.exr")
+                            if (folder / "key_irradiance.exr").is_file() else None),
         ),
     }
 
