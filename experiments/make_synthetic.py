@@ -785,10 +785,10 @@ to a point inside; the scan's own triangles are unchanged, its texture is not us
 pt_fran_smooth_point_fill_940 renders it refined by two levels of Loop subdivision).
 
 **leeperrysmith, flat_card and the path-traced pt_face_940, pt_face_940_turned,
-pt_face_skin1, pt_face_ear_backlit_940, pt_face_rough_area_940, pt_face_rough_940 and
-twowave_face** use "Infinite, 3D Head Scan" by Lee Perry-Smith
-(Infinite-Realities, www.ir-ltd.net), based on a work at www.triplegangers.com, licensed
-under Creative Commons Attribution 3.0 Unported
+pt_face_skin1, pt_face_ear_backlit_940, pt_face_rough_area_940, pt_face_rough_940,
+pt_face_ear_glow_940, pt_face_nose_sidelit_940 and twowave_face** use "Infinite, 3D
+Head Scan" by Lee Perry-Smith (Infinite-Realities, www.ir-ltd.net), based on a work at
+www.triplegangers.com, licensed under Creative Commons Attribution 3.0 Unported
 (https://creativecommons.org/licenses/by/3.0/); the licence note asks that users always
 say where they got the files. We took the glTF conversion `LeePerrySmith.glb` and its
 colour map `Map-COL.jpg` as distributed with the three.js examples
@@ -806,8 +806,10 @@ as an absorbing layer on that boundary (the mesh split into four triangles per t
 twice to carry it). The flat card shows a crop of
 the Lee Perry-Smith colour map as a flat picture.
 
-**pt_proc_area_940, pt_proc_lowpoly_dir_940** use no outside data: their head is made
-by `invsss.scenes.procedural` (a signed distance field meshed by marching cubes).
+**pt_proc_area_940, pt_proc_lowpoly_dir_940, pt_proc_dir_fill_940,
+pt_proc_lowpoly_smooth_dir_940 and pt_proc_ear_glow_940** use no outside data: their
+head is made by `invsss.scenes.procedural` (a signed distance field meshed by marching
+cubes).
 """
 
 LICENCE_FILES = {
@@ -893,6 +895,9 @@ PATH_TRACED = {
     "pt_proc_lowpoly_smooth_dir_940": "proc_lowpoly_smooth_dir_940.toml",
     "pt_fran_smooth_point_fill_940": "fran_smooth_point_fill_940.toml",
     "pt_face_rough_940": "face_rough_940.toml",
+    "pt_face_ear_glow_940": "face_ear_glow_940.toml",
+    "pt_proc_ear_glow_940": "proc_ear_glow_940.toml",
+    "pt_face_nose_sidelit_940": "face_nose_sidelit_940.toml",
 }
 
 PATH_TRACED_HEAD = """
@@ -911,10 +916,12 @@ spp and seed, the buffer of the `law` light term; `source - key` is the fill lig
 part, with Monte Carlo noise of both passes), `fill_light.exr` (camera-space unit vectors
 towards the second light, the buffer of the `fill` light term; written into the pairs
 rendered before it existed by `make_synthetic.py --fill-light-only`, from their
-`scene.json` and `depth.exr`) and `scene.json` (the resolved scene, seeds,
-spp, render times and the noise estimate). There are no true screen-space parameters:
-these pairs measure how well the model can match real light transport
-(`experiments/fidelity.py`).
+`scene.json` and `depth.exr`), in the pairs rendered since the transmission term's
+buffers exist `thickness.exr`, `thickness_normal.exr` and `key_irradiance.exr` (the key
+light's path inside the skin and its unshadowed irradiance, docs/scenes.md) and
+`scene.json` (the resolved scene, seeds, spp, render times and the noise estimate).
+There are no true screen-space parameters: these pairs measure how well the model can
+match real light transport (`experiments/fidelity.py`).
 
 **Tuning and held-out pairs.** `SPLIT.toml` says which pairs a method may be tuned on
 (`tuning`) and which are only measured on (`held-out`); it was committed before any fit
