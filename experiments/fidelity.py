@@ -113,7 +113,7 @@ TRANSFER_ROWS = (("shift", "grazing", "incidence"), ("shift", "law"), ("shift", 
 THESIS_MAXDD_MM = 1000.0
 
 
-def load_scene_pair(folder: pathlib.Path) -> dict:
+def load_scene_pair(folder: pathlib.Path, thickness_file: str = "thickness.exr") -> dict:
     """A pair folder's images, mask, depth and scene.json.
 
     Off the object the depth is 0 (``invsss scene`` writes renderer-style depth);
@@ -136,7 +136,7 @@ def load_scene_pair(folder: pathlib.Path) -> dict:
             key=invsss.read_image(folder / "key.exr") if (folder / "key.exr").is_file() else None,
             fill_light=(invsss.read_image(folder / "fill_light.exr") if (folder / "fill_light.exr").is_file()
                         else None),
-            thickness=(invsss.read_image(folder / "thickness.exr")[..., 0] if (folder / "thickness.exr").is_file()
+            thickness=(invsss.read_image(folder / thickness_file)[..., 0] if (folder / thickness_file).is_file()
                        else None),
             key_irradiance=(invsss.read_image(folder / "key_irradiance.exr")
                             if (folder / "key_irradiance.exr").is_file() else None),
@@ -263,6 +263,9 @@ def main() -> None:
     parser.add_argument("--split", choices=(*SPLITS, "all"),
                         help="the part of data_synthetic/SPLIT.toml to run (default: tuning without PAIR_DIR, "
                         "else every PAIR_DIR given)")
+    parser.add_argument("--thickness", default="thickness.exr", choices=("thickness.exr", "thickness_normal.exr"),
+                        help="the transmission term's thickness: towards the key light (default) or along the "
+                        "inward normal")
     parser.add_argument("--lean", action="store_true",
                         help="only the source, the thesis's values, the plain fit and the term rows: no dipole, "
                         "free-variance, transfer or joint rows (a held-out check in a third of the time)")
@@ -290,7 +293,7 @@ def main() -> None:
         invsss.forward.models.get_model(name)
     if args.models_only and not models:
         parser.error("--models-only needs --models")
-    pairs = [load_scene_pair(folder) for folder in folders]
+    pairs = [load_scene_pair(folder, args.thickness) for folder in folders]
     for pair, folder in zip(pairs, folders):
         pair["split"] = pair_split(folder, split) or NO_SPLIT
     table: dict[str, dict[str, dict]] = {}

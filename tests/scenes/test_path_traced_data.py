@@ -55,6 +55,12 @@ ROUGH_MIN_CEILING_DB = 26.0
 INDEX_MATCHED_MIN_CEILING_DB = 30.0
 #: The median skin value over the target's per-pixel noise, at least (either boundary).
 MIN_MEDIAN_TO_NOISE = 8.0
+#: Pairs made to show light that crossed a thin part (issue 48): most of their frame is lit
+#: by the fill alone, darker than this allows (the median skin pixel 1.7 and 3.4 times the
+#: noise), so the median is taken where the key light arrives through at most
+#: THIN_PART_MM of skin, the light those pairs are for (12 and 45 times the noise).
+TRANSMISSION_PAIRS = ("pt_face_ear_glow_940", "pt_proc_ear_glow_940")
+THIN_PART_MM = 10.0
 
 
 def _info(name: str) -> dict:
@@ -207,7 +213,12 @@ def test_pair_images_agree_with_scene_json(name):
     # pt_face_ear_backlit_940, whose face has the weak fill light only, 20-50 times in the
     # others; rough dielectric: 11 and 16 times at 16384 spp, 4-5 times at 2048).
     floor = MIN_MEDIAN_TO_NOISE * info["noise"]["noise_rms"]
-    assert np.all(np.isfinite(target)) and float(np.median(target[skin])) > floor
+    measured = skin
+    if name in TRANSMISSION_PAIRS:
+        thickness = invsss.read_image(folder / "thickness.exr")[..., 0]
+        measured = skin & (thickness > 0.0) & (thickness <= THIN_PART_MM)
+        assert measured.sum() >= 200  # a thin part, not a few stray pixels
+    assert np.all(np.isfinite(target)) and float(np.median(target[measured])) > floor
     # Small renders, every file a renderer's buffer of the same size.
     assert max(camera["width"], camera["height"]) <= 160
     for buffer in ("normal.exr", "light.exr"):
