@@ -42,7 +42,8 @@ law            ``sigmoid(ref + z)``, one per source   ``logit(0.9)``: an albedo
                                                      section 8
 law_strength   ``z``                                 0 (Lambert: the plain model)
 fill_strength  ``z``                                 0 (the other lights Lambertian)
-transmission   ``z``, one per source channel          0 (no transmitted light)
+transmission   ``ref * z^2``, one per source channel  1; ``z = 0`` adds no light (a tint
+                                                     is >= 0: light crossing skin adds)
 thickness_     ``ref * exp(z)``                      one over the median thickness
 scale                                                behind the key light's terminator
 =============  ====================================  ===============================
@@ -117,7 +118,8 @@ def by_unknown(entries: dict) -> dict:
 #: shift, no gain): the vignetting coefficients and the light terms but the law
 #: (an albedo in (0, 1), a logit block).
 SCALED_BLOCKS = ("vignetting", "pigment",
-                 *(name for term, name in LIGHT_UNKNOWNS.items() if term not in ("law", "thickness_scale")))
+                 *(name for term, name in LIGHT_UNKNOWNS.items()
+                   if term not in ("law", "thickness_scale", "transmission")))
 #: Blocks that are ``ref * exp(z)``: positive, their uncertainty relative.
 _LOG_BLOCKS = ("sss_level", "maxdd", "variances", "thickness_scale")
 _SCALARS = ("sss_level", "correction", "maxdd")
@@ -299,6 +301,8 @@ class Parametrisation(eqx.Module):
                 out[name] = ref * u
             elif name == "law":
                 out[name] = _sigmoid(ref + u, xp)
+            elif name == "transmission":
+                out[name] = ref * u * u
             else:  # pragma: no cover - blocks are built by this module
                 raise AssertionError(name)
         return out
@@ -320,6 +324,8 @@ class Parametrisation(eqx.Module):
                 u = x / ref
             elif name == "law":
                 u = logit(np.clip(x, 1e-12, 1.0 - 1e-12)) - ref
+            elif name == "transmission":
+                u = np.sqrt(np.maximum(x, 0.0) / ref)
             else:
                 u = np.log(x)
             parts.append(np.broadcast_to(u, shape).ravel())

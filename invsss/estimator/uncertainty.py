@@ -145,7 +145,8 @@ def _reported(objective, linear_weights: bool, sizes, theta) -> dict:
     natural = objective.param.natural(z)
     out = {
         k: natural[k]
-        for k in ("sss_level", "correction", "maxdd", "variances", *SCALED_BLOCKS, "law", "thickness_scale")
+        for k in ("sss_level", "correction", "maxdd", "variances", *SCALED_BLOCKS, "law", "transmission",
+                  "thickness_scale")
         if k in objective.param.free
     }
     if linear_weights:

@@ -67,3 +67,17 @@ def test_missing_or_bad_transmission_buffers_are_refused_before_any_fit():
     bad = LightBuffers(buffers.normal, buffers.light, thickness=thickness, key_irradiance=buffers.key_irradiance)
     with pytest.raises(InvalidInputError, match="thickness: expected a thickness >= 0 mm"):
         _fit(source, target, depth, mask, bad)
+
+
+def test_a_thickness_scale_that_flattens_the_transmittance_is_named():
+    from invsss.estimator.stages.light_terms import thickness_unused
+
+    source, depth, mask, buffers = backlit_dome(size=16)
+    pair = invsss.ImagePair(source, source, depth, mask, thickness=buffers.thickness)
+    median = float(np.median(np.asarray(buffers.thickness)[(mask > 0) & (np.asarray(buffers.thickness) > 0.5)]))
+    for scale, words in ((1e-5 / median, "passes the same light through every thickness"),
+                         (1e4 / median, "only where the key light meets the surface itself")):
+        (message,) = thickness_unused([pair], {"transmission": [0.4], "thickness_scale": scale})
+        assert message.startswith("light_terms.thickness_scale: ") and words in message
+    assert thickness_unused([pair], {"transmission": [0.4], "thickness_scale": 1.0 / median}) == []
+    assert thickness_unused([pair], {"transmission": [0.0], "thickness_scale": 1e-9}) == []

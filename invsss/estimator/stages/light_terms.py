@@ -11,10 +11,11 @@ from ...forward.light_terms import AFTER_BLUR, law_excess
 from ..core import Fit, FitCall, Start, estimate_of, psnr_on_mask
 from ..options import FitOptions
 from ..parametrisation import LIGHT_UNKNOWNS
-from ..problem import evaluate
+from ..problem import THIN_MM, evaluate
 from ..result import FitResult
 
-__all__ = ["against_plain", "plain_model", "term_bounds", "unlike_any_medium", "with_light_terms"]
+__all__ = ["against_plain", "plain_model", "term_bounds", "thickness_unused", "unlike_any_medium",
+           "with_light_terms"]
 
 
 #: Every light term's unknown at its identity (docs/model.md, section 8): no
@@ -104,6 +105,7 @@ def against_plain(problem, path, result, plain) -> FitResult:
         return dataclasses.replace(plain, light_terms=identity, warnings=(*plain.warnings, message))
     messages.extend(term_bounds(record))
     messages.extend(unlike_any_medium(problem.given, record))
+    messages.extend(thickness_unused(problem.given, record))
     for term, value in without.items():
         if result.psnr - value < NEGLIGIBLE_DB:
             messages.append(
@@ -193,3 +195,34 @@ def unlike_any_medium(pairs, record) -> list[str]:
                 "not a measurement of the medium"
             )
     return out
+
+
+#: ``k t`` at the median thickness behind the terminator outside this range: the
+#: transmittance is about 1 (every thickness passes the same light) or about 0 (only
+#: where the key light meets the surface itself), so the thickness does not shape it.
+THICKNESS_USED = (0.01, 100.0)
+
+
+def thickness_unused(pairs, record) -> list[str]:
+    """A warning when the fitted thickness scale leaves the transmittance flat over
+    the thicknesses behind the terminator: the term then adds a wrapped light on the
+    back side (or at the terminator alone) that does not follow the thickness, and
+    its tint is not HDRP's transmission tint."""
+    if "thickness_scale" not in record or not np.any(np.asarray(record.get("transmission", 0.0)) > 0.0):
+        return []
+    behind = [np.asarray(p.thickness)[(np.asarray(p.mask) > 0) & (np.asarray(p.thickness) > THIN_MM)]
+              for p in pairs if p.thickness is not None]
+    values = np.concatenate(behind) if behind else np.zeros(0)
+    if not values.size:
+        return []
+    typical = float(record["thickness_scale"]) * float(np.median(values))
+    low, high = THICKNESS_USED
+    if low <= typical <= high:
+        return []
+    how = ("passes the same light through every thickness" if typical < low
+           else "passes light only where the key light meets the surface itself")
+    return [
+        f"light_terms.thickness_scale: at {float(record['thickness_scale']):.3g}/mm the transmittance {how} "
+        f"(k t = {typical:.3g} at the median thickness {float(np.median(values)):.3g} mm behind the terminator): "
+        "the term does not follow the thickness here, and its tint is not a transmission tint to export"
+    ]
