@@ -34,10 +34,9 @@ from ..forward.light_terms import (
     light_transport,
     lit_source,
     propagation_offsets,
-    transmitted_source,
-    wrapped_back_lighting,
 )
 from ..forward.stretch import stretch_factors
+from ..forward.transmission import transmitted_source, wrapped_back_lighting
 from .basis import basis_images
 from .parametrisation import LIGHT_UNKNOWNS, Parametrisation
 from .pigment import pigment_field

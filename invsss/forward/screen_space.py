@@ -34,7 +34,7 @@ from jaxtyping import Array, Float
 
 from ..validation import InvalidInputError, check_depth, check_image, check_mask, is_concrete
 from .burley_screen_space import check_burley_distances, render_burley
-from .light_terms import AFTER_BLUR, LightBuffers, LightTerms, apply_law, apply_light_terms, apply_transmission
+from .light_terms import AFTER_BLUR, LightBuffers, LightTerms, apply_law, apply_light_terms
 from .models import MODEL_NAMES, get_model, resolve_tap_weights
 from .pair import fill_background_depth
 from .params import SSSParams, check_plausible
@@ -43,6 +43,7 @@ from .passes import directional_pass, pixel_coordinates, sample_along, tap_sprea
 from .passes import tap_weights as tap_weight_set
 from .profiles import sum_of_gaussians
 from .stretch import stretch_factors
+from .transmission import apply_transmission
 
 __all__ = [
     "MODELS",
@@ -333,7 +334,7 @@ def render(
         The light-aware terms of docs/model.md, section 8: ``law`` and
         ``transmission`` change the image before the blur
         (:func:`invsss.forward.light_terms.apply_law`,
-        :func:`invsss.forward.light_terms.apply_transmission`), the others
+        :func:`invsss.forward.transmission.apply_transmission`), the others
         the blurred image (:func:`invsss.forward.light_terms.apply_light_terms`).
     light_buffers : LightBuffers, optional
         Their per-pixel buffers; required with ``light_terms``, and a term that is

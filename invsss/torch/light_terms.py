@@ -10,7 +10,8 @@ from __future__ import annotations
 import torch
 from kornia.geometry.transform import remap
 
-from ..forward.light_terms import LAW_TRUST, TRANSMISSION_WRAP
+from ..forward.light_terms import LAW_TRUST
+from ..forward.transmission import TRANSMISSION_WRAP
 from .stretch import stretch_factors
 
 __all__ = ["propagation_offsets", "grazing_field", "incidence_field", "chandrasekhar_h", "law_trust", "reflectance_law",
@@ -126,7 +127,7 @@ def wrapped_back_lighting(normal: torch.Tensor, light: torch.Tensor) -> torch.Te
 
 
 def apply_transmission(image, mask, tint, scale, thickness, key_irradiance, normal, light) -> torch.Tensor:
-    """Twin of :func:`invsss.forward.light_terms.apply_transmission` with the terms and buffers as
+    """Twin of :func:`invsss.forward.transmission.apply_transmission` with the terms and buffers as
     tensors: ``image`` and ``key_irradiance`` (H, W, C), ``mask`` and ``thickness`` (H, W),
     ``normal`` and ``light`` (H, W, 3), ``tint`` () or (C,), ``scale`` ()."""
     transmitted = burley_transmittance(scale * thickness) * wrapped_back_lighting(normal, light) * mask

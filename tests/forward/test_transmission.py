@@ -11,10 +11,9 @@ import pytest
 from scipy import integrate
 
 import invsss
-from invsss.forward.light_terms import (
+from invsss.forward.light_terms import LightBuffers, LightTerms
+from invsss.forward.transmission import (
     TRANSMISSION_WRAP,
-    LightBuffers,
-    LightTerms,
     apply_transmission,
     burley_transmittance,
     wrapped_back_lighting,

@@ -8,7 +8,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from invsss.forward.light_terms import LightTerms, apply_transmission
+from invsss.forward.light_terms import LightTerms
+from invsss.forward.transmission import apply_transmission
 from tests.forward._backlit_scenes import backlit_dome
 
 pytestmark = pytest.mark.usefixtures("float64")
