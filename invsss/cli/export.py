@@ -49,6 +49,10 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--world-scale", type=float, default=None,
                         help="hdrp: worldScale (m per unit); unreal: WorldUnitScale (default: the engine's, "
                         "reported as undetermined)")
+    parser.add_argument("--thickness-map-mm", type=float, default=None, metavar="MM",
+                        help="hdrp, for a fit with the transmission term: the thickness in mm that the "
+                        "material's thickness map's 1 stands for (default 5, HDRP's default remap, reported as "
+                        "undetermined); the exported thicknessRemap scales with it")
     parser.add_argument("--with-shader", action="store_true",
                         help="with --format hlsl and --out: also write the reference shader "
                         "(invsss_*.hlsl, docs/renderer.md) beside FILE, including it")
@@ -66,7 +70,7 @@ def _engine_options(args) -> dict | None:
         except ValueError:
             raise InvalidInputError(f"--albedo: expected a number or R/G/B numbers, got {args.albedo!r}") from None
     return {"mm_per_unit": args.mm_per_unit, "albedo": albedo, "world_scale": args.world_scale,
-            "accept_assumed": args.accept_assumed}
+            "accept_assumed": args.accept_assumed, "thickness_map_mm": args.thickness_map_mm}
 
 
 def _checked_albedo(engine: dict | None) -> dict | None:

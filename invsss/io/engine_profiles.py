@@ -53,6 +53,8 @@ __all__ = [
     "engine_profile",
     "unmeasured_distances",
     "engine_asset",
+    "hdrp_transmission",
+    "HDRP_THICKNESS_MAP_MM",
 ]
 
 #: The engine formats of ``invsss export``.
@@ -147,6 +149,45 @@ def hdrp_profile(d_mm, world_scale: float = 1.0) -> dict:
     colour, multiplier = _colour_and_scale(d)
     return {"scatteringDistance": colour, "scatteringDistanceMultiplier": multiplier,
             "worldScale": _positive(world_scale, "world_scale")}
+
+
+#: What a thickness map's 1 stands for (mm) unless told: HDRP's default thickness
+#: remap ends at 5 mm (``DiffusionProfile``'s constructor, ``thicknessRemap = (0, 5)``).
+HDRP_THICKNESS_MAP_MM = 5.0
+
+
+def hdrp_transmission(tint, thickness_scale: float, d_mm, thickness_map_mm: float = HDRP_THICKNESS_MAP_MM) -> dict:
+    """HDRP's transmission fields for a fitted ``transmission`` term, in its thin-object mode.
+
+    The term's transmittance is ``tau T(k t)`` with ``t`` the buffer's thickness in mm
+    (docs/model.md, section 8); HDRP's is ``tint T(S t_h)`` with ``S = 1 / d`` per
+    channel and ``t_h = remap.x + (remap.y - remap.x) m`` from the material's thickness
+    map ``m`` in [0, 1]. With ``m = t / thickness_map_mm`` the two agree when the tint is
+    ``tau`` and the remap is ``(0, k d thickness_map_mm)``; that needs one ``d`` for
+    every channel (HDRP's remap is one per profile, the term's ``k`` one number).
+    ``"ThinObject"``: HDRP's regular mode takes the thickness from the shadow map
+    without the remap, where the transmittance's length is the profile's ``d`` alone.
+
+    Examples
+    --------
+    >>> f = hdrp_transmission(0.6, 0.25, [2.0, 2.0, 2.0], 5.0)
+    >>> f["transmissionTint"], f["thicknessRemap"], f["transmissionMode"]
+    ([0.6, 0.6, 0.6], [0.0, 2.5], 'ThinObject')
+    """
+    tau = np.broadcast_to(np.asarray(tint, np.float64).reshape(-1), (3,))
+    if not np.all(np.isfinite(tau)) or np.any(tau < 0.0):
+        raise InvalidInputError(f"light_terms.transmission: expected a tint >= 0 per channel, got {tau.tolist()}")
+    k = _positive(thickness_scale, "light_terms.thickness_scale")
+    t_max = _positive(thickness_map_mm, "thickness_map_mm")
+    d = _distances(d_mm, "d_mm")
+    if np.ptp(d) > 1e-6 * d.max():
+        raise InvalidInputError(
+            f"light_terms: the transmission's thickness scale is one number, but Burley's d differs by channel "
+            f"({', '.join(f'{x:.4g}' for x in d)} mm) and HDRP's thickness remap is one per profile: export the "
+            "profile without the transmission, or fit a grey pair"
+        )
+    return {"transmissionMode": "ThinObject", "transmissionTint": tau.tolist(),
+            "thicknessRemap": [0.0, float(k * d[0] * t_max)]}
 
 
 def hdrp_distances(fields: dict) -> np.ndarray:
@@ -274,7 +315,8 @@ def unmeasured_distances(extras: dict) -> dict[str, str]:
 
 
 def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None, world_scale=None,
-                   assumed: dict | None = None) -> dict:
+                   assumed: dict | None = None, transmission: dict | None = None,
+                   thickness_map_mm: float | None = None) -> dict:
     """The asset values of engine ``format`` for a ``burley`` fit's parameters.
 
     Parameters
@@ -294,6 +336,14 @@ def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None
         Shape parameters that were not measured (:func:`unmeasured_distances`),
         written anyway at the user's request: each is listed under ``assumed``
         in the output, and the distance fields under ``undetermined``.
+    transmission : dict, optional
+        A fitted ``transmission`` term, ``{"transmission": tint, "thickness_scale": k}``
+        (params.json's ``light_terms``): ``hdrp`` writes its fields
+        (:func:`hdrp_transmission`); ``unreal`` names it as not written.
+    thickness_map_mm : float, optional
+        ``hdrp`` with ``transmission``: the thickness in mm that the material's
+        thickness map's 1 stands for (default :data:`HDRP_THICKNESS_MAP_MM`, then
+        listed as undetermined).
 
     Returns
     -------
@@ -337,8 +387,19 @@ def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None
         fields = hdrp_profile(d, 1.0 if world_scale is None else world_scale)
         undetermined["indexOfRefraction"] = "the blur does not see the specular reflection; HDRP's default is 1.4"
         undetermined["texturingMode"] = "whether albedo is applied before or after the blur is the material's choice"
-        undetermined["transmissionTint"] = "transmission is not in a front-lit photograph pair"
         units = "scatteringDistance x scatteringDistanceMultiplier = Burley's d per channel in mm"
+        if transmission is None:
+            undetermined["transmissionTint"] = "transmission is not in a front-lit photograph pair"
+        else:
+            if thickness_map_mm is None:
+                undetermined["thicknessRemap"] = (
+                    f"the material's thickness map convention: its 1 assumed to stand for {HDRP_THICKNESS_MAP_MM:g} mm "
+                    "(HDRP's default remap); the remap scales with it"
+                )
+            fields.update(hdrp_transmission(transmission["transmission"], transmission["thickness_scale"], d,
+                                            HDRP_THICKNESS_MAP_MM if thickness_map_mm is None else thickness_map_mm))
+            units += ("; thicknessRemap in mm for a thickness map of the fit's thickness (mm) over "
+                      f"{HDRP_THICKNESS_MAP_MM if thickness_map_mm is None else thickness_map_mm:g} mm")
     else:
         if albedo is None:
             undetermined["SurfaceAlbedo"] = (
@@ -350,7 +411,9 @@ def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None
         fields = unreal_profile(d, UNREAL_DEFAULT_ALBEDO if albedo is None else albedo,
                                 0.1 if world_scale is None else world_scale)
         undetermined["IOR"] = "the blur does not see the specular reflection"
-        undetermined["Tint, BoundaryColorBleed, TransmissionTintColor"] = "not in a front-lit photograph pair"
+        undetermined["Tint, BoundaryColorBleed, TransmissionTintColor"] = (
+            "not in a front-lit photograph pair" if transmission is None
+            else "the fit's transmission is not written to Unreal's profile yet (issue 48)")
         units = ("MeanFreePathColor x MeanFreePathDistance = mean free path l per channel in cm; "
                  "Burley's d = 10 l / (0.6 (1.85 - A + 7 |A - 0.8|^3)) mm (Unreal 5; Implementation: Unreal 5.6+)")
     out = {"format": format, "fields": fields, "shapeParameterMm": d.reshape(-1).tolist(),
@@ -361,7 +424,7 @@ def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None
 
 
 def engine_asset(params, extras: dict, format: str, *, source: str = "params", mm_per_unit=None,
-                 albedo=None, world_scale=None, accept_assumed: bool = False) -> dict:
+                 albedo=None, world_scale=None, accept_assumed: bool = False, thickness_map_mm=None) -> dict:
     """:func:`engine_profile` for a params file's content, refusing what the fit did not measure.
 
     Parameters
@@ -381,6 +444,8 @@ def engine_asset(params, extras: dict, format: str, *, source: str = "params", m
     accept_assumed : bool
         Write shape parameters the fit held or left undetermined
         (:func:`unmeasured_distances`), marked as assumed; otherwise they are refused.
+    thickness_map_mm : float, optional
+        As in :func:`engine_profile`, for a fit with the ``transmission`` term.
 
     Examples
     --------
@@ -413,5 +478,9 @@ def engine_asset(params, extras: dict, format: str, *, source: str = "params", m
             "measures d), or give --accept-assumed to write it marked as assumed",
             field=source,
         )
+    terms = extras.get("light_terms") or {}
+    tint = np.asarray(terms.get("transmission", 0.0), np.float64)
+    transmission = ({"transmission": tint, "thickness_scale": terms["thickness_scale"]}
+                    if np.any(tint > 0.0) and "thickness_scale" in terms else None)
     return engine_profile(params, format, mm_per_unit=mm_per_unit, albedo=albedo, world_scale=world_scale,
-                          assumed=unmeasured or None)
+                          assumed=unmeasured or None, transmission=transmission, thickness_map_mm=thickness_map_mm)

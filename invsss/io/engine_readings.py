@@ -41,7 +41,7 @@ import numpy as np
 
 from ..validation import InvalidInputError
 
-__all__ = ["hdrp_reading", "hdrp_mm_per_unit", "unreal_reading", "UNREAL_LIMITS"]
+__all__ = ["hdrp_reading", "hdrp_mm_per_unit", "hdrp_transmittance", "unreal_reading", "UNREAL_LIMITS"]
 
 #: HDRP's cap on the shape parameter (``UpdateKernel``: "rather inconvenient to support S = Inf").
 _HDRP_MAX_SHAPE = 16777216.0
@@ -97,6 +97,36 @@ def hdrp_reading(fields: dict) -> np.ndarray:
     with np.errstate(divide="ignore"):
         shape = np.minimum(_HDRP_MAX_SHAPE, 1.0 / scattering)
     return 1.0 / shape
+
+
+def hdrp_transmittance(fields: dict, thickness_map) -> np.ndarray:
+    """The transmittance per channel HDRP computes for a thin object from Diffusion
+    Profile ``fields`` at thickness-map values ``thickness_map`` (in [0, 1]), shape (..., 3).
+
+    As HDRP does it: ``Validate`` clamps ``thicknessRemap`` (``y >= 0``, ``0 <= x <= y``);
+    ``UpdateCache`` stores ``(x, y - x)`` and the tint times 0.25; ``FillMaterialTransmission``
+    remaps the map's value to mm, ``x + (y - x) m``; ``ComputeTransmittanceDisney`` returns
+    ``0.25 tint e (e^2 + 3)`` with ``e = 2^(-log2(e) S t / 3)``, ``S`` the shape parameter
+    of :func:`hdrp_reading`. The light it multiplies (the wrapped back cosine, the
+    light's colour, the albedo) is the term's own (docs/model.md, section 8).
+
+    Examples
+    --------
+    >>> f = {"scatteringDistance": [1.0, 1.0, 1.0], "scatteringDistanceMultiplier": 2.0,
+    ...      "transmissionTint": [1.0, 0.5, 0.25], "thicknessRemap": [0.0, 5.0]}
+    >>> hdrp_transmittance(f, 0.0).tolist()         # no thickness: the tint
+    [1.0, 0.5, 0.25]
+    """
+    remap = _vector(fields, "thicknessRemap", 2)
+    high = max(remap[1], 0.0)
+    low = min(max(remap[0], 0.0), high)
+    start, extent = low, high - low
+    quarter_tint = 0.25 * _vector(fields, "transmissionTint")
+    shape = 1.0 / hdrp_reading(fields)
+    thickness_mm = start + extent * np.asarray(thickness_map, np.float64)[..., None]
+    log2_e = 1.0 / np.log(2.0)
+    third = np.exp2((log2_e * (-1.0 / 3.0) * thickness_mm) * shape)
+    return quarter_tint * (third * (third * third + 3.0))
 
 
 def hdrp_mm_per_unit(fields: dict) -> float:

@@ -120,3 +120,35 @@ def test_render_converts_a_depth_in_another_unit(tmp_path, capsys):
     capsys.readouterr()
     render(files["cm"])  # the unit left out: rendered as mm, with a notice naming cm
     assert "--depth-unit cm" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ transmission (issue 48)
+
+
+def test_a_fitted_transmission_reaches_hdrp_as_the_term_transmits(tmp_path, capsys):
+    from invsss.forward.transmission import burley_transmittance
+    from invsss.io.engine_readings import hdrp_transmittance
+
+    grey = {**BURLEY, "variances": [1.0, 1.0, 1.0]}  # d = 1 mm in every channel
+    stderr = {"sss_level": 2.0, "variances": [0.01, 0.01, 0.01]}
+    terms = {"transmission": [0.6], "thickness_scale": 0.3, "stderr": {"transmission": [0.02],
+                                                                       "thickness_scale": 0.01}, "fixed": []}
+    path = tmp_path / "params.json"
+    invsss.write_params(path, {**grey, "fixed": {}, "gauge": "depth", "stderr": stderr, "depth_unit": "mm",
+                               "light_terms": terms})
+    assert main(["export", str(path), "--format", "hdrp", "--thickness-map-mm", "8"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    fields = out["fields"]
+    assert fields["transmissionMode"] == "ThinObject" and "transmissionTint" not in out["undetermined"]
+    thickness = np.linspace(0.0, 8.0, 9)
+    np.testing.assert_allclose(hdrp_transmittance(fields, thickness / 8.0)[:, 0],
+                               0.6 * np.asarray(burley_transmittance(0.3 * thickness), np.float64), rtol=1e-6)
+    # Without the map's convention, HDRP's default 5 mm, named as assumed.
+    assert main(["export", str(path), "--format", "hdrp"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["fields"]["thicknessRemap"] == pytest.approx([0.0, 0.3 * 1.0 * 5.0]) and "thicknessRemap" in out[
+        "undetermined"]
+    # Unreal's transmission is not written yet, and the asset says so.
+    assert main(["export", str(path), "--format", "unreal"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert any("not written to Unreal's profile yet" in why for why in out["undetermined"].values())

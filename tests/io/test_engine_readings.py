@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from invsss.io.engine_profiles import hdrp_profile, unreal_profile
-from invsss.io.engine_readings import UNREAL_LIMITS, hdrp_reading, unreal_reading
+from invsss.io.engine_readings import UNREAL_LIMITS, hdrp_reading, hdrp_transmittance, unreal_reading
 from invsss.validation import InvalidInputError
 
 ALBEDOS = np.linspace(0.05, 0.95, 20)
@@ -94,3 +94,30 @@ def test_hdrp_reading_caps_the_shape_parameter():
     # HDRP's UpdateKernel: S = min(2^24, 1 / sd), so a zero channel renders d = 2^-24 mm.
     d = hdrp_reading({"scatteringDistance": [1.0, 0.0, 0.5], "scatteringDistanceMultiplier": 2.0})
     np.testing.assert_allclose(d, [2.0, 2.0**-24, 1.0])
+
+
+@pytest.mark.parametrize("d_mm", [0.3, 1.0, 4.0])
+@pytest.mark.parametrize("map_mm", [2.0, 5.0, 20.0])
+def test_hdrp_transmits_what_the_fitted_term_transmits(d_mm, map_mm):
+    # Issue 48: the term's tint * T(k t) (invsss.forward.transmission) against HDRP's reading
+    # of the exported fields, on a thickness map of t / map_mm.
+    from invsss.forward.transmission import burley_transmittance
+    from invsss.io.engine_profiles import hdrp_transmission
+
+    tint, k = np.array([0.9, 0.45, 0.2]), 0.3
+    fields = {**hdrp_profile([d_mm] * 3), **hdrp_transmission(tint, k, [d_mm] * 3, map_mm)}
+    thickness = np.linspace(0.0, map_mm, 11)
+    expected = tint * np.asarray(burley_transmittance(k * thickness), np.float64)[:, None]
+    np.testing.assert_allclose(hdrp_transmittance(fields, thickness / map_mm), expected, rtol=1e-6)
+    # A remap without the profile's d (the slope k * map_mm alone) would be read wrong.
+    wrong = {**fields, "thicknessRemap": [0.0, k * map_mm]}
+    assert not np.allclose(hdrp_transmittance(wrong, thickness / map_mm), expected, rtol=1e-3) or d_mm == 1.0
+
+
+def test_hdrp_transmission_needs_one_distance():
+    from invsss.io.engine_profiles import hdrp_transmission
+
+    with pytest.raises(InvalidInputError, match="Burley's d differs by channel"):
+        hdrp_transmission(0.5, 0.3, [1.0, 0.5, 0.25])
+    with pytest.raises(InvalidInputError, match="transmission: expected a tint >= 0"):
+        hdrp_transmission(-0.1, 0.3, [1.0, 1.0, 1.0])
