@@ -42,6 +42,7 @@ from ..forward.params import SSSParams
 from ..forward.passes import TAP_OFFSETS, tap_spread
 from ..forward.passes import tap_weights as tap_weight_set
 from ..forward.screen_space import separable_kernel
+from ..forward.transmission import TRANSMISSION_WRAP
 from ..validation import InvalidInputError
 from . import read_params
 from .light_constants import light_constants
@@ -231,6 +232,27 @@ float3 LAW_NAME(float3 normal, float3 toLight)
     float3 headOn = invsssHapkeH(1.0, w) * invsssHapkeH(1.0, w) / 2.0;
     float3 ratio = invsssHapkeH(mu, w) * invsssHapkeH(mu0, w) / max(mu + mu0, 1e-6) / headOn;
     return 1.0 + {prefix}LAW_STRENGTH * trust * (ratio - 1.0);
+}
+"""
+
+#: The HLSL :func:`to_hlsl` appends when the constants hold the ``transmission`` term
+#: (docs/model.md, section 8): the light a key light behind a thin part adds, before the blur.
+TRANSMISSION_HLSL = """
+// Light from the key light that crossed a thin part (invsss docs/model.md, section 8):
+// in the lighting pass, add this to the diffuse lighting that the blur spreads.
+// thickness: mm the key light travels inside the skin (0 where the surface faces it);
+// keyIrradiance: the albedo times the key light's unshadowed irradiance on a surface
+// facing it, in the same units as the lighting; normal and toLight: unit vectors in
+// view space, z towards the camera. As HDRP's ComputeTransmittanceDisney with its
+// wrapped back cosine (15 degrees).
+float3 invsssTransmittedLight(float thickness, float3 keyIrradiance, float3 normal, float3 toLight)
+{
+    float third = exp(-{prefix}thicknessScale * thickness / 3.0);
+    float transmittance = 0.25 * third * (third * third + 3.0);
+    float wrap = WRAP_PLACEHOLDER;
+    float back = saturate((-dot(normal, toLight) + wrap) / ((1.0 + wrap) * (1.0 + wrap)));
+    float3 tint = float3({prefix}transmissionTint[0], {prefix}transmissionTint[1], {prefix}transmissionTint[2]);
+    return tint * transmittance * back * keyIrradiance;
 }
 """
 
@@ -424,6 +446,8 @@ def to_hlsl(constants: dict, prefix: str = "") -> str:
         for name, strength, comment in factors:
             text += comment + LAW_FACTOR_HLSL.replace("LAW_NAME", name).replace("LAW_STRENGTH", strength)
         text = text.replace("{prefix}", prefix).replace("LAW_TRUST_PLACEHOLDER", repr(LAW_TRUST))
+    if "transmissionTint" in constants:
+        text += TRANSMISSION_HLSL.replace("{prefix}", prefix).replace("WRAP_PLACEHOLDER", repr(TRANSMISSION_WRAP))
     return text
 
 

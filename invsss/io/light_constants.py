@@ -20,7 +20,8 @@ def light_constants(light_terms) -> dict:
 
     ``lightShift``, ``grazingGain`` and ``incidenceGain`` (all three when any
     term after the blur is in use, or no law), ``lawAlbedo`` (red, green,
-    blue), ``lawStrength`` and ``lawFillStrength`` with the law.
+    blue), ``lawStrength`` and ``lawFillStrength`` with the law,
+    ``transmissionTint`` (red, green, blue) and ``thicknessScale`` with the transmission.
 
     Parameters
     ----------
@@ -49,15 +50,10 @@ def light_constants(light_terms) -> dict:
             f"light_terms: expected an invsss.LightTerms or a mapping, got {type(light_terms).__name__}",
             field="light_terms",
         )
-    transmission = (light_terms.transmission if isinstance(light_terms, LightTerms)
-                    else light_terms.get("transmission", 0.0))
-    if np.any(np.asarray(transmission, np.float64) != 0.0):
-        # Refused rather than dropped: a shader without it would render the fit's image without that light.
-        raise InvalidInputError(
-            "light_terms.transmission: the reference shader does not implement the transmission term yet "
-            "(issue 48); export the profile alone, or refit without it",
-            field="light_terms.transmission",
-        )
+    tint = np.asarray(light_terms.transmission if isinstance(light_terms, LightTerms)
+                      else light_terms.get("transmission", 0.0), np.float64)
+    scale = float(np.asarray(light_terms.thickness_scale if isinstance(light_terms, LightTerms)
+                             else light_terms.get("thickness_scale", 1.0), np.float64))
     # Checked as LightTerms, written from the given numbers: LightTerms holds
     # JAX's default float32 outside x64, which would round them.
     shift, grazing, incidence = (float(np.asarray(v, np.float64)) for v in after)
@@ -76,6 +72,13 @@ def light_constants(light_terms) -> dict:
         out["lawStrength"] = strength
         if fill != 0.0:
             out["lawFillStrength"] = fill
+    if np.any(tint != 0.0):
+        LightTerms(transmission=tint, thickness_scale=scale).check()  # type: ignore[arg-type]  # the fields' converters take array-likes
+        if tint.size not in (1, 3):
+            raise InvalidInputError(f"light_terms.transmission: expected one tint or three (RGB), got {tint.size}",
+                                    field="light_terms.transmission")
+        out["transmissionTint"] = np.broadcast_to(tint.ravel(), (3,)).tolist()
+        out["thicknessScale"] = scale
     return out
 
 

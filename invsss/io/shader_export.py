@@ -18,8 +18,9 @@ __all__ = ["shader_files", "write_shader"]
 
 #: The light terms' shader files, by the constant that says a fit uses them
 #: (:func:`~invsss.io.export.shader_constants` writes ``lawAlbedo`` with the law, ``lightShift``
-#: with a term after the blur).
-_LIGHT_TERM_SHADERS = {"lawAlbedo": "invsss_law.hlsl", "lightShift": "invsss_light_terms.hlsl"}
+#: with a term after the blur, ``transmissionTint`` with the transmission).
+_LIGHT_TERM_SHADERS = {"lawAlbedo": "invsss_law.hlsl", "lightShift": "invsss_light_terms.hlsl",
+                       "transmissionTint": "invsss_transmission.hlsl"}
 
 
 def shader_files(constants_path, model: str | None = None, light_terms=None) -> dict[str, str]:

@@ -52,6 +52,7 @@ SHADER_FILES = (
     "invsss_burley.hlsl",
     "invsss_law.hlsl",
     "invsss_light_terms.hlsl",
+    "invsss_transmission.hlsl",
 )
 #: For each model: the file and the entry points it runs.
 #: Each model's reference shader: its HLSL file and entry points (the model
@@ -74,8 +75,8 @@ def shader_sources(constants_name: str = CONSTANTS_FILE, *, model: str | None = 
     model : str, optional
         A key of :data:`MODEL_SHADERS`: only the files that model's shader
         needs, its own file and the files it includes (the light terms' files,
-        ``invsss_law.hlsl`` and ``invsss_light_terms.hlsl``, are not part of
-        any model's). Default: every file of :data:`SHADER_FILES`.
+        ``invsss_law.hlsl``, ``invsss_transmission.hlsl`` and ``invsss_light_terms.hlsl``,
+        are not part of any model's). Default: every file of :data:`SHADER_FILES`.
 
     Returns
     -------
@@ -224,7 +225,7 @@ class _Runner:
                         "storage_texture": {"access": wgpu.StorageTextureAccess.read_write,
                                             "format": wgpu.TextureFormat.rgba32float,
                                             "view_dimension": wgpu.TextureViewDimension.d2}})
-        entries.append({"binding": 8, "visibility": wgpu.ShaderStage.COMPUTE, "texture": texture})
+        entries += [{"binding": b, "visibility": wgpu.ShaderStage.COMPUTE, "texture": texture} for b in (8, 9, 10)]
         self.group_layout = device.create_bind_group_layout(entries=entries)
         self.layout = device.create_pipeline_layout(bind_group_layouts=[self.group_layout])
         self.pending = []
@@ -250,7 +251,7 @@ class _Runner:
         uniform = self.device.create_buffer_with_data(
             data=np.array([pass_index, pass_axis, 0, 0], np.uint32), usage=self.wgpu.BufferUsage.UNIFORM)
         entries = [{"binding": 0, "resource": {"buffer": uniform, "offset": 0, "size": 16}}]
-        entries += [{"binding": b, "resource": resources[b].create_view()} for b in range(1, 9)]
+        entries += [{"binding": b, "resource": resources[b].create_view()} for b in range(1, 11)]
         group = self.device.create_bind_group(layout=self.group_layout, entries=entries)
         encoder = self.device.create_command_encoder()
         compute = encoder.begin_compute_pass()
@@ -281,8 +282,8 @@ def _rgba(image, h, w) -> np.ndarray:
 
 def run_shader(
     image, depth, mask, constants_hlsl: str, model: str, *, normal=None, light=None, key=None, fill_light=None,
-    law: bool = False, after_blur: bool = False, adapter_name: str | None = None, compiler: str | None = None,
-    messages: list | None = None,
+    thickness=None, key_irradiance=None, law: bool = False, transmission: bool = False, after_blur: bool = False,
+    adapter_name: str | None = None, compiler: str | None = None, messages: list | None = None,
 ) -> np.ndarray:
     """Run the reference shader of ``model`` on one image; returns (H, W, C) float32.
 
@@ -304,8 +305,11 @@ def run_shader(
         The light terms' buffers (view-space unit vectors (H, W, 3); the key
         light's part of the source, shaped like ``image``; the direction towards
         the other lights, for a constants text with the fill term).
-    law, after_blur : bool
-        Run LawCS before the blur, LightTermsCS after it.
+    thickness, key_irradiance : arrays, optional
+        The transmission term's buffers: mm the key light crosses, (H, W); the albedo
+        times the key light's unshadowed irradiance, shaped like ``image``.
+    law, transmission, after_blur : bool
+        Run LawCS and then TransmissionCS before the blur, LightTermsCS after it.
     adapter_name : str, optional
         A part of the Vulkan device's name ("llvmpipe", "NVIDIA"); the first one otherwise.
     messages : list, optional
@@ -332,6 +336,8 @@ def run_shader(
         pipes = {entry: build(file, entry) for entry in entries}
         if law:
             pipes["LawCS"] = build("invsss_law.hlsl", "LawCS")
+        if transmission:
+            pipes["TransmissionCS"] = build("invsss_transmission.hlsl", "TransmissionCS")
         if after_blur:
             pipes["LightTermsCS"] = build("invsss_light_terms.hlsl", "LightTermsCS")
 
@@ -340,7 +346,10 @@ def run_shader(
            4: runner.texture(zero if normal is None else _rgba(normal, h, w)),
            5: runner.texture(zero if light is None else _rgba(light, h, w)),
            6: runner.texture(zero if key is None else _rgba(key, h, w)),
-           8: runner.texture(zero if fill_light is None else _rgba(fill_light, h, w))}
+           8: runner.texture(zero if fill_light is None else _rgba(fill_light, h, w)),
+           9: runner.texture(np.zeros((h, w), np.float32) if thickness is None
+                             else np.asarray(thickness, np.float32).reshape(h, w)),
+           10: runner.texture(zero if key_irradiance is None else _rgba(key_irradiance, h, w))}
     a, b = runner.texture(_rgba(image, h, w)), runner.texture(zero)
 
     def run(entry, src, dst, index=0, axis=0):
@@ -348,6 +357,9 @@ def run_shader(
 
     if law:
         run("LawCS", a, b)
+        a, b = b, a
+    if transmission:
+        run("TransmissionCS", a, b)
         a, b = b, a
     passes = _num_passes(constants_hlsl)
     layout = get_model(model).layout

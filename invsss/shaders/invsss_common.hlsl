@@ -48,6 +48,8 @@ Texture2D<float4> ToLight : register(t5);      // light terms: view-space unit v
 Texture2D<float4> KeyLight : register(t6);     // law term: the source lit by the key light alone
 RWTexture2D<float4> Destination : register(u7); // the pass's output (read and written by AccumulateCS)
 Texture2D<float4> FillToLight : register(t8);  // fill term: view-space unit vector towards the other lights in xyz
+Texture2D<float> Thickness : register(t9);     // transmission term: mm the key light crosses inside the skin
+Texture2D<float4> KeyIrradiance : register(t10); // transmission term: albedo times the key light's unshadowed irradiance
 
 int2 InvsssSize()
 {

@@ -235,3 +235,43 @@ def test_wrong_light_constants_are_caught(device, mistake):
     breaker(broken)
     got = _shade(device, image, depth, mask, broken, "sog", terms, buffers)
     assert relative_error(got, want) > 10 * TOLERANCE, mistake
+
+
+# ------------------------------------------------------------ transmission (issue 48)
+
+#: The tuning ear of the transmission term with a tint and scale of the size its fits
+#: found (docs/model.md, section 8: 0.55 and 0.29/mm), not a fit run here.
+TRANSMISSION = LightTerms(transmission=0.55, thickness_scale=0.29)
+
+
+def _ear():
+    image, depth, mask = pair("pt_face_ear_glow_940")
+    d = DATA / "pt_face_ear_glow_940"
+    raw = LightBuffers(normal=read_image(d / "normal.exr", linear=True), light=read_image(d / "light.exr", linear=True),
+                       thickness=read_image(d / "thickness.exr", linear=True, grey=True)[..., 0],
+                       key_irradiance=read_image(d / "key_irradiance.exr", linear=True, grey=True))
+    return image, depth, mask, raw.checked(mask.shape, mask, channels=image.shape[2])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", ["sog", "thesis"])
+def test_shader_transmission_matches_render(device, model):
+    image, depth, mask, buffers = _cached("ear", _ear)
+    want = _render32(image, depth, mask, PT_PARAMS, model, TRANSMISSION, buffers)
+    plain = _render32(image, depth, mask, PT_PARAMS, model)
+    messages = []
+    constants = shader_constants(PT_PARAMS, model, light_terms=TRANSMISSION)
+    got = run_shader(image, depth, mask, to_hlsl(constants), model, normal=np.asarray(buffers.normal),
+                     light=np.asarray(buffers.light), thickness=np.asarray(buffers.thickness),
+                     key_irradiance=np.asarray(buffers.key_irradiance), transmission=True,
+                     after_blur=True, adapter_name=device, messages=messages)
+    assert relative_error(got, want) < TOLERANCE
+    assert relative_error(plain, want) > 100 * TOLERANCE  # the light through the ear
+    assert all(text == "" for _, _, text in messages), messages
+    # A tint 2 % off is caught.
+    wrong = dict(constants, transmissionTint=[0.55 * 1.02] * 3)
+    off = run_shader(image, depth, mask, to_hlsl(wrong), model, normal=np.asarray(buffers.normal),
+                     light=np.asarray(buffers.light), thickness=np.asarray(buffers.thickness),
+                     key_irradiance=np.asarray(buffers.key_irradiance), transmission=True, after_blur=True,
+                     adapter_name=device)
+    assert relative_error(off, want) > 10 * TOLERANCE
