@@ -91,6 +91,7 @@ from scipy import ndimage
 
 import invsss
 from invsss.estimator.diagnostics import masked_psnr, masked_ssim
+from invsss.runtime.determinism import use_deterministic_scheduler
 from invsss.scenes.split import SPLITS, pair_split, read_split
 
 #: The split file of the bundled pairs (docs/scenes.md).
@@ -253,6 +254,10 @@ def save_residual(path: pathlib.Path, residual: np.ndarray, mask: np.ndarray) ->
 
 
 def main() -> None:
+    # As the command line does: without it XLA's threads may sum in another order from
+    # run to run, and an ill-posed pair's plain fit then ends elsewhere (on
+    # pt_face_ear_glow_940 at sss_level 2e-6 in one process and 2e5 in the next).
+    use_deterministic_scheduler()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("pairs", nargs="*", type=pathlib.Path, help="pair folders (default: data_synthetic/*)")
     parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("runs/fidelity"))
