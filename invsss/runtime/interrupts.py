@@ -161,16 +161,38 @@ class StopSignals:
         self._deferring = 0
         self._on_first: Callable[[int], None] | None = None
         self._previous: dict = {}
+        self._previous_hook = sys.unraisablehook
 
     def __enter__(self) -> StopSignals:
         for sig in _SIGNALS:
             self._previous[sig] = signal.signal(sig, self._handle)
+        self._previous_hook = sys.unraisablehook
+        sys.unraisablehook = self._unraisable
         return self
 
     def __exit__(self, *exc) -> None:
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
         self._previous.clear()
+        sys.unraisablehook = self._previous_hook
+
+    def _unraisable(self, unraisable) -> None:
+        # Interrupted raised while the main thread ran a callback Python cannot
+        # propagate from (JAX's garbage-collection callback, a __del__): Python
+        # would print "Exception ignored in ..." with a traceback and carry on as if
+        # no signal had come. Outside a deferred section there is nothing to keep,
+        # so end the command as the signal asked, in one line.
+        if isinstance(unraisable.exc_value, Interrupted) and self.signum is not None:
+            try:
+                sys.stdout.flush()
+            except Exception:  # noqa: BLE001 -- a stream in use or closed: its text is lost either way
+                pass
+            try:
+                os.write(2, f"invsss: interrupted ({signal.Signals(self.signum).name}); nothing written\n".encode())
+            except OSError:
+                pass
+            os._exit(128 + self.signum)
+        self._previous_hook(unraisable)
 
     def __call__(self) -> bool:
         """True once a signal has been received: the ``stop`` callback of long work."""
