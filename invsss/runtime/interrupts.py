@@ -15,6 +15,10 @@ seen). :class:`StopSignals` handles both signals instead:
   who does not want to wait.
 
 The exit status of an interrupted command is 130 for SIGINT and 143 for SIGTERM.
+A signal whose :class:`Interrupted` is raised where Python cannot propagate it (a
+garbage-collection callback, such as JAX's, or a ``__del__``) would be printed as
+"Exception ignored" with a traceback and then forgotten; while :class:`StopSignals`
+is installed its unraisable hook ends the command in one line instead.
 
 Before :class:`StopSignals` is installed the command is still importing (JAX and
 its libraries take a second or more) and parsing its arguments; after it, the
