@@ -190,6 +190,16 @@ def parameter_lines(result) -> list[str]:
             f_err = terms["stderr"].get("fill")
             parts.append(f"law on the other lights, strength {terms['fill']:.3g} "
                          f"(stderr {'?' if f_err is None else f'{f_err:.2g}'})")
+        if "transmission" in terms:
+            # One tint per source channel, and the thickness's scale (docs/model.md, section 8).
+            tints = np.atleast_1d(terms["transmission"]).tolist()
+            errs = terms["stderr"].get("transmission")
+            errs = [None] * len(tints) if errs is None else np.atleast_1d(np.asarray(errs, object)).tolist()
+            k_err = terms["stderr"].get("thickness_scale")
+            parts.append(f"transmission tint {'/'.join(f'{t:.3g}' for t in tints)} "
+                         f"(stderr {'/'.join('?' if e is None else f'{e:.2g}' for e in errs)}), thickness scale "
+                         f"{terms.get('thickness_scale', 1.0):.3g}/mm "
+                         f"(stderr {'?' if k_err is None else f'{k_err:.2g}'})")
         lines.append("light terms: " + ", ".join(parts))
         if "psnr_plain" in terms:
             # Measured: the plain fit, and this fit with each term at its identity.

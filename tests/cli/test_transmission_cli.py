@@ -34,6 +34,14 @@ def _files(tmp_path):
     return paths, files, profile
 
 
+def _buffers(files):
+    from invsss.forward.light_terms import LightBuffers
+
+    return LightBuffers(normal=invsss.read_image(files["normal"]), light=invsss.read_image(files["light"]),
+                        thickness=invsss.read_image(files["thickness"])[..., 0],
+                        key_irradiance=invsss.read_image(files["key_irradiance"]))
+
+
 def test_missing_or_misshapen_buffers_are_one_line_naming_the_flag_or_file(tmp_path, capsys):
     from invsss.cli import main
     from tests.io._pair_files import pair_args
@@ -64,6 +72,15 @@ def test_cli_fit_and_render_with_the_transmission_buffers(tmp_path, capsys):
                  *buffers, "--light-terms", "transmission", "--out", str(tmp_path / "fit")]) == 0
     stored = json.loads((tmp_path / "fit" / "params.json").read_text())["light_terms"]
     assert stored["transmission"][0] == pytest.approx(0.6, rel=0.02)
+    from invsss.cli.report import parameter_lines
+
+    # The report prints the tint and the scale (the same fit from the library).
+    fit = invsss.fit_pair(invsss.read_image(paths["source"]), invsss.read_image(paths["target"]),
+                          invsss.read_depth(paths["depth"]), invsss.read_mask(paths["mask"]), profile=PROFILE,
+                          fix={"correction": 0.0, "maxdd": 1.0}, light_terms="transmission",
+                          light_buffers=_buffers(files))
+    text = "\n".join(parameter_lines(fit))
+    assert "light terms: transmission tint 0.6" in text and "thickness scale 0.1" in text
     assert stored["thickness_scale"] == pytest.approx(0.1, rel=0.02)
     # invsss render applies the fitted term, as the library does with the stored values.
     out = tmp_path / "rendered.exr"
