@@ -170,45 +170,52 @@ def parameter_lines(result) -> list[str]:
                      f"(1 + {a1:+.3f} rho^2 {a2:+.3f} rho^4; stderr {errors})")
     terms = getattr(result, "light_terms", None)
     if terms is not None:
-        parts = []
-        for name, unit in (("shift", " mm"), ("grazing", ""), ("incidence", "")):
-            if name in terms:
-                err = terms["stderr"].get(name)
-                parts.append(f"{name} {terms[name]:+.3g}{unit} (stderr {'?' if err is None else f'{err:.2g}'})")
-        if "law" in terms:
-            # One albedo per source channel (or one held value).
-            values = np.atleast_1d(terms["law"]).tolist()
-            errs = terms["stderr"].get("law")
-            errs = [None] * len(values) if errs is None else np.atleast_1d(np.asarray(errs, object)).tolist()
-            shown = "/".join(f"{w:.3f}" for w in values)
-            spread = "/".join("?" if e is None else f"{e:.2g}" for e in errs)
-            strength = terms.get("law_strength", 1.0)
-            s_err = terms["stderr"].get("law_strength")
-            parts.append(f"law albedo {shown} (stderr {spread}), strength {strength:.3g} "
-                         f"(stderr {'?' if s_err is None else f'{s_err:.2g}'})")
-        if "fill" in terms:
-            f_err = terms["stderr"].get("fill")
-            parts.append(f"law on the other lights, strength {terms['fill']:.3g} "
-                         f"(stderr {'?' if f_err is None else f'{f_err:.2g}'})")
-        if "transmission" in terms:
-            # One tint per source channel, and the thickness's scale (docs/model.md, section 8).
-            tints = np.atleast_1d(terms["transmission"]).tolist()
-            errs = terms["stderr"].get("transmission")
-            errs = [None] * len(tints) if errs is None else np.atleast_1d(np.asarray(errs, object)).tolist()
-            k_err = terms["stderr"].get("thickness_scale")
-            parts.append(f"transmission tint {'/'.join(f'{t:.3g}' for t in tints)} "
-                         f"(stderr {'/'.join('?' if e is None else f'{e:.2g}' for e in errs)}), thickness scale "
-                         f"{terms.get('thickness_scale', 1.0):.3g}/mm "
-                         f"(stderr {'?' if k_err is None else f'{k_err:.2g}'})")
-        lines.append("light terms: " + ", ".join(parts))
-        if "psnr_plain" in terms:
-            # Measured: the plain fit, and this fit with each term at its identity.
-            knocked = ", ".join(f"{term} {value:.2f}" for term, value in terms.get("psnr_without", {}).items())
-            lines.append(f"PSNR {result.psnr:.2f} dB with the terms, {terms['psnr_plain']:.2f} dB plain fit"
-                         + (f"; with one term at its identity: {knocked}" if knocked else ""))
+        lines.extend(_light_term_lines(terms, result.psnr))
     lines.extend(textwrap.wrap(_CONDITIONAL_NOTE, width=_TEXT_WIDTH, subsequent_indent="  "))
     for message in result.warnings:
         lines.extend(textwrap.wrap("! " + message, width=_TEXT_WIDTH, subsequent_indent="  "))
+    return lines
+
+
+def _light_term_lines(terms: dict, psnr: float) -> list[str]:
+    """The report's lines for a fit's ``light_terms`` record: each term's value with its
+    standard error, then the PSNR with the terms, of the plain fit and with each term off."""
+    parts = []
+    for name, unit in (("shift", " mm"), ("grazing", ""), ("incidence", "")):
+        if name in terms:
+            err = terms["stderr"].get(name)
+            parts.append(f"{name} {terms[name]:+.3g}{unit} (stderr {'?' if err is None else f'{err:.2g}'})")
+    if "law" in terms:
+        # One albedo per source channel (or one held value).
+        values = np.atleast_1d(terms["law"]).tolist()
+        errs = terms["stderr"].get("law")
+        errs = [None] * len(values) if errs is None else np.atleast_1d(np.asarray(errs, object)).tolist()
+        shown = "/".join(f"{w:.3f}" for w in values)
+        spread = "/".join("?" if e is None else f"{e:.2g}" for e in errs)
+        strength = terms.get("law_strength", 1.0)
+        s_err = terms["stderr"].get("law_strength")
+        parts.append(f"law albedo {shown} (stderr {spread}), strength {strength:.3g} "
+                     f"(stderr {'?' if s_err is None else f'{s_err:.2g}'})")
+    if "fill" in terms:
+        f_err = terms["stderr"].get("fill")
+        parts.append(f"law on the other lights, strength {terms['fill']:.3g} "
+                     f"(stderr {'?' if f_err is None else f'{f_err:.2g}'})")
+    if "transmission" in terms:
+        # One tint per source channel, and the thickness's scale (docs/model.md, section 8).
+        tints = np.atleast_1d(terms["transmission"]).tolist()
+        errs = terms["stderr"].get("transmission")
+        errs = [None] * len(tints) if errs is None else np.atleast_1d(np.asarray(errs, object)).tolist()
+        k_err = terms["stderr"].get("thickness_scale")
+        parts.append(f"transmission tint {'/'.join(f'{t:.3g}' for t in tints)} "
+                     f"(stderr {'/'.join('?' if e is None else f'{e:.2g}' for e in errs)}), thickness scale "
+                     f"{terms.get('thickness_scale', 1.0):.3g}/mm "
+                     f"(stderr {'?' if k_err is None else f'{k_err:.2g}'})")
+    lines = ["light terms: " + ", ".join(parts)]
+    if "psnr_plain" in terms:
+        # Measured: the plain fit, and this fit with each term at its identity.
+        knocked = ", ".join(f"{term} {value:.2f}" for term, value in terms.get("psnr_without", {}).items())
+        lines.append(f"PSNR {psnr:.2f} dB with the terms, {terms['psnr_plain']:.2f} dB plain fit"
+                     + (f"; with one term at its identity: {knocked}" if knocked else ""))
     return lines
 
 
