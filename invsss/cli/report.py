@@ -177,6 +177,15 @@ def parameter_lines(result) -> list[str]:
     return lines
 
 
+def _per_channel(terms: dict, name: str, form: str) -> tuple[str, str]:
+    """A per-channel term's values and standard errors, each joined by ``/`` (``?`` where
+    undetermined): one value per source channel, or one held value."""
+    values = np.atleast_1d(terms[name]).tolist()
+    errs = terms["stderr"].get(name)
+    errs = [None] * len(values) if errs is None else np.atleast_1d(np.asarray(errs, object)).tolist()
+    return ("/".join(f"{v:{form}}" for v in values), "/".join("?" if e is None else f"{e:.2g}" for e in errs))
+
+
 def _light_term_lines(terms: dict, psnr: float) -> list[str]:
     """The report's lines for a fit's ``light_terms`` record: each term's value with its
     standard error, then the PSNR with the terms, of the plain fit and with each term off."""
@@ -186,12 +195,7 @@ def _light_term_lines(terms: dict, psnr: float) -> list[str]:
             err = terms["stderr"].get(name)
             parts.append(f"{name} {terms[name]:+.3g}{unit} (stderr {'?' if err is None else f'{err:.2g}'})")
     if "law" in terms:
-        # One albedo per source channel (or one held value).
-        values = np.atleast_1d(terms["law"]).tolist()
-        errs = terms["stderr"].get("law")
-        errs = [None] * len(values) if errs is None else np.atleast_1d(np.asarray(errs, object)).tolist()
-        shown = "/".join(f"{w:.3f}" for w in values)
-        spread = "/".join("?" if e is None else f"{e:.2g}" for e in errs)
+        shown, spread = _per_channel(terms, "law", ".3f")
         strength = terms.get("law_strength", 1.0)
         s_err = terms["stderr"].get("law_strength")
         parts.append(f"law albedo {shown} (stderr {spread}), strength {strength:.3g} "
@@ -201,13 +205,10 @@ def _light_term_lines(terms: dict, psnr: float) -> list[str]:
         parts.append(f"law on the other lights, strength {terms['fill']:.3g} "
                      f"(stderr {'?' if f_err is None else f'{f_err:.2g}'})")
     if "transmission" in terms:
-        # One tint per source channel, and the thickness's scale (docs/model.md, section 8).
-        tints = np.atleast_1d(terms["transmission"]).tolist()
-        errs = terms["stderr"].get("transmission")
-        errs = [None] * len(tints) if errs is None else np.atleast_1d(np.asarray(errs, object)).tolist()
+        # The thickness's scale is one number (docs/model.md, section 8).
+        tints, spread = _per_channel(terms, "transmission", ".3g")
         k_err = terms["stderr"].get("thickness_scale")
-        parts.append(f"transmission tint {'/'.join(f'{t:.3g}' for t in tints)} "
-                     f"(stderr {'/'.join('?' if e is None else f'{e:.2g}' for e in errs)}), thickness scale "
+        parts.append(f"transmission tint {tints} (stderr {spread}), thickness scale "
                      f"{terms.get('thickness_scale', 1.0):.3g}/mm "
                      f"(stderr {'?' if k_err is None else f'{k_err:.2g}'})")
     lines = ["light terms: " + ", ".join(parts)]

@@ -193,14 +193,20 @@ TRANSMISSION_START = 0.5
 THIN_MM = 0.5
 
 
-def thickness_reference(pairs) -> float:
-    """The thickness scale's reference ``k``: one over the median thickness (mm) of the
-    masked pixels that the key light reaches only through the skin, so that ``k t``
-    is about 1 there at the start (1/mm when no pixel is behind the terminator)."""
+def median_thickness_behind(pairs) -> float | None:
+    """The median thickness (mm) of the masked pixels that the key light reaches only
+    through the skin (thicker than :data:`THIN_MM`), over all pairs; None without any."""
     behind = [np.asarray(p.thickness)[(np.asarray(p.mask) > 0) & (np.asarray(p.thickness) > THIN_MM)]
               for p in pairs if p.thickness is not None]
     values = np.concatenate(behind) if behind else np.zeros(0)
-    return 1.0 / float(np.median(values)) if values.size else 1.0
+    return float(np.median(values)) if values.size else None
+
+
+def thickness_reference(pairs) -> float:
+    """The thickness scale's reference ``k``: one over :func:`median_thickness_behind`,
+    so that ``k t`` is about 1 there at the start (1/mm when no pixel is behind the terminator)."""
+    median = median_thickness_behind(pairs)
+    return 1.0 if median is None else 1.0 / median
 
 
 def _on_device(x) -> jax.Array:

@@ -37,12 +37,17 @@ BUFFER_MEANINGS = {
 UNIT_TOLERANCE = 0.05
 
 
-def _check_unit_vectors(array, shape, mask, name: str):
+def _numbers(array, name: str) -> np.ndarray:
+    """``array`` as float64, or one line naming the buffer when it is not numbers."""
     try:
-        a = np.asarray(array, dtype=np.float64)
+        return np.asarray(array, dtype=np.float64)
     except (TypeError, ValueError):
         raise InvalidInputError(f"{name}: expected an array of numbers, got {type(array).__name__}",
                                 field=name) from None
+
+
+def _check_unit_vectors(array, shape, mask, name: str):
+    a = _numbers(array, name)
     if a.shape != (*shape, 3):
         raise InvalidInputError(f"{name}: expected shape {(*shape, 3)} (unit vectors per pixel), got {a.shape}",
                                 field=name)
@@ -64,11 +69,7 @@ def _check_unit_vectors(array, shape, mask, name: str):
 
 
 def _check_thickness(array, shape, mask, name: str):
-    try:
-        a = np.asarray(array, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: expected an array of numbers, got {type(array).__name__}",
-                                field=name) from None
+    a = _numbers(array, name)
     if a.ndim == 3 and a.shape[2] == 1:
         a = a[..., 0]
     if a.shape != tuple(shape):
@@ -86,11 +87,7 @@ def _check_thickness(array, shape, mask, name: str):
 
 
 def _check_key(array, shape, channels, name: str, mask=None, meaning="the key light's part of the source"):
-    try:
-        a = np.asarray(array, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: expected an array of numbers, got {type(array).__name__}",
-                                field=name) from None
+    a = _numbers(array, name)
     if a.ndim == 2:
         a = a[..., None]
     wanted = (*shape, channels) if channels else None

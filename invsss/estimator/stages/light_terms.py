@@ -11,7 +11,7 @@ from ...forward.light_terms import AFTER_BLUR, law_excess
 from ..core import Fit, FitCall, Start, estimate_of, psnr_on_mask
 from ..options import FitOptions
 from ..parametrisation import LIGHT_UNKNOWNS
-from ..problem import THIN_MM, evaluate
+from ..problem import evaluate, median_thickness_behind
 from ..result import FitResult
 
 __all__ = ["against_plain", "plain_model", "term_bounds", "thickness_unused", "unlike_any_medium",
@@ -210,12 +210,10 @@ def thickness_unused(pairs, record) -> list[str]:
     its tint is not HDRP's transmission tint."""
     if "thickness_scale" not in record or not np.any(np.asarray(record.get("transmission", 0.0)) > 0.0):
         return []
-    behind = [np.asarray(p.thickness)[(np.asarray(p.mask) > 0) & (np.asarray(p.thickness) > THIN_MM)]
-              for p in pairs if p.thickness is not None]
-    values = np.concatenate(behind) if behind else np.zeros(0)
-    if not values.size:
+    median = median_thickness_behind(pairs)
+    if median is None:
         return []
-    typical = float(record["thickness_scale"]) * float(np.median(values))
+    typical = float(record["thickness_scale"]) * median
     low, high = THICKNESS_USED
     if low <= typical <= high:
         return []
@@ -223,6 +221,6 @@ def thickness_unused(pairs, record) -> list[str]:
            else "passes light only where the key light meets the surface itself")
     return [
         f"light_terms.thickness_scale: at {float(record['thickness_scale']):.3g}/mm the transmittance {how} "
-        f"(k t = {typical:.3g} at the median thickness {float(np.median(values)):.3g} mm behind the terminator): "
+        f"(k t = {typical:.3g} at the median thickness {median:.3g} mm behind the terminator): "
         "the term does not follow the thickness here, and its tint is not a transmission tint to export"
     ]
