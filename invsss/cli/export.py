@@ -53,6 +53,9 @@ def add_parser(subparsers) -> None:
                         help="hdrp, for a fit with the transmission term: the thickness in mm that the "
                         "material's thickness map's 1 stands for (default 5, HDRP's default remap, reported as "
                         "undetermined); the exported thicknessRemap scales with it")
+    parser.add_argument("--thickness-range-mm", default=None, metavar="LO,HI",
+                        help="unreal, for a fit with the transmission term: the thicknesses in mm over which "
+                        "the transmission tint is matched (default 1,10, reported as undetermined)")
     parser.add_argument("--with-shader", action="store_true",
                         help="with --format hlsl and --out: also write the reference shader "
                         "(invsss_*.hlsl, docs/renderer.md) beside FILE, including it")
@@ -69,8 +72,18 @@ def _engine_options(args) -> dict | None:
             albedo = [float(a) for a in args.albedo.split("/")]
         except ValueError:
             raise InvalidInputError(f"--albedo: expected a number or R/G/B numbers, got {args.albedo!r}") from None
+    thickness_range = None
+    if args.thickness_range_mm is not None:
+        try:
+            thickness_range = tuple(float(x) for x in args.thickness_range_mm.split(","))
+        except ValueError:
+            thickness_range = ()
+        if len(thickness_range) != 2 or not 0.0 < thickness_range[0] < thickness_range[1]:
+            raise InvalidInputError(
+                f"--thickness-range-mm: expected LO,HI in mm with 0 < LO < HI, got {args.thickness_range_mm!r}")
     return {"mm_per_unit": args.mm_per_unit, "albedo": albedo, "world_scale": args.world_scale,
-            "accept_assumed": args.accept_assumed, "thickness_map_mm": args.thickness_map_mm}
+            "accept_assumed": args.accept_assumed, "thickness_map_mm": args.thickness_map_mm,
+            "thickness_range_mm": thickness_range}
 
 
 def _checked_albedo(engine: dict | None) -> dict | None:

@@ -316,7 +316,7 @@ def unmeasured_distances(extras: dict) -> dict[str, str]:
 
 def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None, world_scale=None,
                    assumed: dict | None = None, transmission: dict | None = None,
-                   thickness_map_mm: float | None = None) -> dict:
+                   thickness_map_mm: float | None = None, thickness_range_mm=None) -> dict:
     """The asset values of engine ``format`` for a ``burley`` fit's parameters.
 
     Parameters
@@ -338,18 +338,24 @@ def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None
         in the output, and the distance fields under ``undetermined``.
     transmission : dict, optional
         A fitted ``transmission`` term, ``{"transmission": tint, "thickness_scale": k}``
-        (params.json's ``light_terms``): ``hdrp`` writes its fields
-        (:func:`hdrp_transmission`); ``unreal`` names it as not written.
+        (params.json's ``light_terms``): both formats write their fields
+        (:func:`hdrp_transmission`, :func:`invsss.io.unreal_transmission.unreal_transmission`).
     thickness_map_mm : float, optional
         ``hdrp`` with ``transmission``: the thickness in mm that the material's
         thickness map's 1 stands for (default :data:`HDRP_THICKNESS_MAP_MM`, then
         listed as undetermined).
+    thickness_range_mm : (float, float), optional
+        ``unreal`` with ``transmission``: the thicknesses (mm) its tint is matched
+        over (default :data:`~invsss.io.unreal_transmission.UNREAL_TRANSMISSION_RANGE_MM`,
+        then listed as undetermined).
 
     Returns
     -------
     dict
         ``format``, ``fields`` (the asset's values), ``shapeParameterMm`` (``d`` per
-        channel), ``undetermined`` (field: why, and what was assumed) and ``units``.
+        channel), ``undetermined`` (field: why, and what was assumed) and ``units``;
+        ``unreal`` with ``transmission`` adds ``transmissionMatch`` (how much of the
+        fitted transmitted light Unreal renders over the thickness range).
 
     Examples
     --------
@@ -375,7 +381,7 @@ def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None
             f"depth unit) is outside {low:g}-{high:g} mm, where skin and other translucent materials lie; "
             "was the fit's depth in another unit? Refit with --depth-unit, or give --mm-per-unit"
         )
-    undetermined = {}
+    undetermined, match = {}, None
     if assumed:
         reasons = "; ".join(f"{k}: {v}" for k, v in assumed.items())
         distance_fields = ("scatteringDistance, scatteringDistanceMultiplier" if format == "hdrp"
@@ -411,20 +417,54 @@ def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None
         fields = unreal_profile(d, UNREAL_DEFAULT_ALBEDO if albedo is None else albedo,
                                 0.1 if world_scale is None else world_scale)
         undetermined["IOR"] = "the blur does not see the specular reflection"
-        undetermined["Tint, BoundaryColorBleed, TransmissionTintColor"] = (
-            "not in a front-lit photograph pair" if transmission is None
-            else "the fit's transmission is not written to Unreal's profile yet (issue 48)")
+        if transmission is None:
+            undetermined["Tint, BoundaryColorBleed, TransmissionTintColor"] = "not in a front-lit photograph pair"
+        else:
+            undetermined["Tint, BoundaryColorBleed"] = "not in a front-lit photograph pair"
+            extra, match = _unreal_transmission_fields(transmission, d, fields["WorldUnitScale"],
+                                                       thickness_range_mm, undetermined)
+            fields.update(extra)
         units = ("MeanFreePathColor x MeanFreePathDistance = mean free path l per channel in cm; "
                  "Burley's d = 10 l / (0.6 (1.85 - A + 7 |A - 0.8|^3)) mm (Unreal 5; Implementation: Unreal 5.6+)")
     out = {"format": format, "fields": fields, "shapeParameterMm": d.reshape(-1).tolist(),
            "undetermined": undetermined, "units": units}
+    if match is not None:
+        out["transmissionMatch"] = match
     if assumed:
         out["assumed"] = dict(assumed)
     return out
 
 
+def _unreal_transmission_fields(transmission: dict, d, world_unit_scale: float, thickness_range_mm,
+                                undetermined: dict) -> tuple[dict, dict]:
+    # Unreal's transmission fields, with what its reading leaves unsure named in ``undetermined``.
+    from .unreal_transmission import UNREAL_TRANSMISSION_RANGE_MM, unreal_transmission
+
+    if thickness_range_mm is None:
+        thickness_range_mm = UNREAL_TRANSMISSION_RANGE_MM
+        undetermined["TransmissionTintColor"] = (
+            "matched over thicknesses of {:g}-{:g} mm (assumed; give --thickness-range-mm)".format(
+                *UNREAL_TRANSMISSION_RANGE_MM))
+    fields, match = unreal_transmission(transmission["transmission"], transmission["thickness_scale"], d,
+                                        world_unit_scale, thickness_range_mm)
+    undetermined["ExtinctionScale"] = (
+        "computed for a shadow-map thickness in world units of 10 WorldUnitScale mm, with the optical depth's "
+        "floor and bias as published transcriptions of Unreal's shader give them; not checked in a running editor")
+    undetermined["NormalScale, ScatteringDistribution"] = (
+        "the fitted term has no normal offset nor phase function: Unreal's default normal scale, an isotropic phase")
+    low = min(lo for lo, _ in match["renderedOverFitted"])
+    if low < 0.9:
+        undetermined["TransmissionTintColor"] = (
+            f"Unreal renders {low:.2f} of the fitted transmitted light at some thickness in "
+            f"{match['thicknessMm'][0]:g}-{match['thicknessMm'][1]:g} mm: its table starts "
+            f"{match['tableStartMm']:.3g} profile mm in and the tint stops at 1 "
+            "(docs/renderer.md, 'Transmission in Unreal')")
+    return fields, match
+
+
 def engine_asset(params, extras: dict, format: str, *, source: str = "params", mm_per_unit=None,
-                 albedo=None, world_scale=None, accept_assumed: bool = False, thickness_map_mm=None) -> dict:
+                 albedo=None, world_scale=None, accept_assumed: bool = False, thickness_map_mm=None,
+                 thickness_range_mm=None) -> dict:
     """:func:`engine_profile` for a params file's content, refusing what the fit did not measure.
 
     Parameters
@@ -444,7 +484,7 @@ def engine_asset(params, extras: dict, format: str, *, source: str = "params", m
     accept_assumed : bool
         Write shape parameters the fit held or left undetermined
         (:func:`unmeasured_distances`), marked as assumed; otherwise they are refused.
-    thickness_map_mm : float, optional
+    thickness_map_mm, thickness_range_mm : optional
         As in :func:`engine_profile`, for a fit with the ``transmission`` term.
 
     Examples
@@ -483,4 +523,5 @@ def engine_asset(params, extras: dict, format: str, *, source: str = "params", m
     transmission = ({"transmission": tint, "thickness_scale": terms["thickness_scale"]}
                     if np.any(tint > 0.0) and "thickness_scale" in terms else None)
     return engine_profile(params, format, mm_per_unit=mm_per_unit, albedo=albedo, world_scale=world_scale,
-                          assumed=unmeasured or None, transmission=transmission, thickness_map_mm=thickness_map_mm)
+                          assumed=unmeasured or None, transmission=transmission, thickness_map_mm=thickness_map_mm,
+                          thickness_range_mm=thickness_range_mm)

@@ -41,7 +41,8 @@ import numpy as np
 
 from ..validation import InvalidInputError
 
-__all__ = ["hdrp_reading", "hdrp_mm_per_unit", "hdrp_transmittance", "unreal_reading", "UNREAL_LIMITS"]
+__all__ = ["hdrp_reading", "hdrp_mm_per_unit", "hdrp_transmittance", "unreal_reading", "unreal_transmittance",
+           "UNREAL_LIMITS"]
 
 #: HDRP's cap on the shape parameter (``UpdateKernel``: "rather inconvenient to support S = Inf").
 _HDRP_MAX_SHAPE = 16777216.0
@@ -188,3 +189,60 @@ def unreal_reading(fields: dict) -> np.ndarray:
     dmfp_mm = mean_free_path_cm * _searchlight(albedo) / _perpendicular(albedo) * _CM_TO_MM / _UNREAL_DMFP_TO_MFP
     dmfp_mm = np.clip(dmfp_mm, 0.0, UNREAL_LIMITS["dmfp_max_mm"])
     return dmfp_mm / _searchlight(albedo)
+
+
+#: ``GetNextSmallerPositiveFloat(0x10000)``: CreateTexture's scale into 16-bit unorm.
+_UNORM16_SCALE = float(np.nextafter(np.float32(65536.0), np.float32(0.0)))
+
+
+def _unorm16(value: np.ndarray) -> np.ndarray:
+    # CreateTexture writes (uint16)(value * FloatScale); the sampler reads n / 65535.
+    return np.floor(np.clip(value, 0.0, 1.0) * _UNORM16_SCALE) / 65535.0
+
+
+def unreal_transmittance(fields: dict, thickness_mm) -> np.ndarray:
+    """The transmittance per channel Unreal looks up for thickness ``thickness_mm`` (mm,
+    the key light's path inside), from Subsurface Profile ``fields``, shape (..., 3).
+
+    The table as Epic's C++ builds it (Unreal Engine 5): ``CreateTexture`` clamps
+    ``TransmissionTintColor`` to [0.009, 1] and encodes ``ExtinctionScale`` times 0.01,
+    both in 16-bit unorm; ``ComputeTransmissionProfileBurley`` fills 32 entries with
+    ``tint 0.25 (e^(-S r / L) + 3 e^(-S r / (3 L)))`` at ``r = (i / 32 x 50 + 0.6) /
+    u`` mm, ``u = WorldUnitScale / 0.1``, ``S`` the searchlight scaling factor of the
+    albedo and ``L`` the diffuse mean free path (as :func:`unreal_reading` derives it),
+    and blacks out the last. Then the lookup, as published transcriptions of Unreal's
+    ``TransmissionThickness.ush`` give it: the optical depth ``clamp(ExtinctionScale
+    t_w + NormalScale / 2, 0.15, 5) + 0.25`` of the thickness in world units
+    ``t_w = t / (10 WorldUnitScale)`` (the blur export's world-to-profile scale),
+    read at entry ``depth / 5 x 31`` between its neighbours. Left out: the shadow
+    mask's 8-bit encoding of the depth, and the phase function the light is weighted by.
+
+    Examples
+    --------
+    >>> f = {"SurfaceAlbedo": [0.8] * 3, "MeanFreePathColor": [1.0] * 3, "MeanFreePathDistance": 0.1,
+    ...      "WorldUnitScale": 1.0, "TransmissionTintColor": [1.0, 0.5, 0.25], "ExtinctionScale": 3.0,
+    ...      "NormalScale": 0.0}
+    >>> unreal_transmittance(f, [2.0, 20.0]).round(3).tolist()
+    [[0.767, 0.383, 0.192], [0.0, 0.0, 0.0]]
+    """
+    d_mm = unreal_reading(fields)
+    albedo = np.clip(np.clip(_vector(fields, "SurfaceAlbedo"), *UNREAL_LIMITS["SurfaceAlbedo"]),
+                     UNREAL_LIMITS["render_floor"], 1.0)
+    scaling = _searchlight(albedo)
+    dmfp = d_mm * scaling
+    tint = np.clip(_vector(fields, "TransmissionTintColor"), UNREAL_LIMITS["render_floor"], 1.0)
+    world = float(np.clip(_number(fields, "WorldUnitScale"), *UNREAL_LIMITS["WorldUnitScale"]))
+    inverse_unit = 0.1 / world
+    entries = np.arange(32, dtype=np.float64)
+    radius = (entries / 32.0 * 50.0 + 0.6) * inverse_unit
+    x = scaling * radius[:, None] / dmfp
+    table = _unorm16(0.25 * (np.exp(-x) + 3.0 * np.exp(-x / 3.0)) * tint)
+    table[-1] = 0.0
+    extinction = _unorm16(np.array(_number(fields, "ExtinctionScale") * 0.01))[()] * 100.0
+    normal = _unorm16(np.array(_number(fields, "NormalScale")))[()]
+    world_units = np.asarray(thickness_mm, np.float64) / (10.0 * world)
+    depth = np.clip(extinction * world_units + 0.5 * normal, 0.15, 5.0) + 0.25
+    position = np.clip(depth / 5.0 * 31.0, 0.0, 31.0)
+    below = np.minimum(np.floor(position).astype(int), 30)
+    share = (position - below)[..., None]
+    return table[below] * (1.0 - share) + table[below + 1] * share

@@ -504,7 +504,8 @@ def export_params(
     engine : dict, optional
         ``hdrp``/``unreal`` only: keyword arguments of
         :func:`~invsss.io.engine_profiles.engine_asset` (``mm_per_unit``,
-        ``albedo``, ``world_scale``, ``accept_assumed``, ``thickness_map_mm``).
+        ``albedo``, ``world_scale``, ``accept_assumed``, ``thickness_map_mm``,
+        ``thickness_range_mm``).
     model, tap_weights, taps, strength
         As in :func:`shader_constants`; ``model`` and ``tap_weights`` override the file.
     with_shader : bool

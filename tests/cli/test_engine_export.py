@@ -127,7 +127,7 @@ def test_render_converts_a_depth_in_another_unit(tmp_path, capsys):
 
 def test_a_fitted_transmission_reaches_hdrp_as_the_term_transmits(tmp_path, capsys):
     from invsss.forward.transmission import burley_transmittance
-    from invsss.io.engine_readings import hdrp_transmittance
+    from invsss.io.engine_readings import hdrp_transmittance, unreal_transmittance
 
     grey = {**BURLEY, "variances": [1.0, 1.0, 1.0]}  # d = 1 mm in every channel
     stderr = {"sss_level": 2.0, "variances": [0.01, 0.01, 0.01]}
@@ -148,7 +148,27 @@ def test_a_fitted_transmission_reaches_hdrp_as_the_term_transmits(tmp_path, caps
     out = json.loads(capsys.readouterr().out)
     assert out["fields"]["thicknessRemap"] == pytest.approx([0.0, 0.3 * 1.0 * 5.0]) and "thicknessRemap" in out[
         "undetermined"]
-    # Unreal's transmission is not written yet, and the asset says so.
+
+    # Unreal: the fields reach its reading as the term transmits where its table can follow
+    # (WorldUnitScale 1 starts the table at 0.45 profile mm); the match range is named.
+    assert main(["export", str(path), "--format", "unreal", "--world-scale", "1",
+                 "--thickness-range-mm", "1,8"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["transmissionMatch"]["thicknessMm"] == [1.0, 8.0] and "TransmissionTintColor" not in out[
+        "undetermined"]
+    thickness = np.linspace(1.0, 8.0, 8)
+    read = unreal_transmittance(out["fields"], thickness)[:, 0]
+    np.testing.assert_allclose(read, 0.6 * np.asarray(burley_transmittance(0.3 * thickness)), rtol=0.03)
+    # At Unreal's default WorldUnitScale the table starts 4.5 profile mm in: the asset says
+    # how much of the fitted light Unreal renders, and that is what it reads.
     assert main(["export", str(path), "--format", "unreal"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert any("not written to Unreal's profile yet" in why for why in out["undetermined"].values())
+    why = out["undetermined"]["TransmissionTintColor"]
+    low = min(lo for lo, _ in out["transmissionMatch"]["renderedOverFitted"])
+    assert f"renders {low:.2f} of the fitted" in why and low < 0.5
+    thickness = np.linspace(1.0, 10.0, 1000)
+    ratio = unreal_transmittance(out["fields"], thickness)[:, 0] / (0.6 * np.asarray(burley_transmittance(
+        0.3 * thickness)))
+    assert ratio.min() == pytest.approx(low, rel=3e-3)
+    assert main(["export", str(path), "--format", "unreal", "--thickness-range-mm", "5,2"]) == 2
+    assert "--thickness-range-mm: expected LO,HI" in capsys.readouterr().err

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from invsss.io.engine_profiles import hdrp_profile, unreal_profile
-from invsss.io.engine_readings import UNREAL_LIMITS, hdrp_reading, hdrp_transmittance, unreal_reading
+from invsss.io.engine_readings import (UNREAL_LIMITS, hdrp_reading, hdrp_transmittance, unreal_reading,
+                                      unreal_transmittance)
 from invsss.validation import InvalidInputError
 
 ALBEDOS = np.linspace(0.05, 0.95, 20)
@@ -121,3 +122,69 @@ def test_hdrp_transmission_needs_one_distance():
         hdrp_transmission(0.5, 0.3, [1.0, 0.5, 0.25])
     with pytest.raises(InvalidInputError, match="transmission: expected a tint >= 0"):
         hdrp_transmission(-0.1, 0.3, [1.0, 1.0, 1.0])
+
+
+@pytest.mark.parametrize("d_mm, world_unit_scale", [(0.5, 1.0), (1.0, 1.0), (2.0, 0.5), (4.0, 0.1)])
+def test_unreal_transmits_what_the_fitted_term_transmits(d_mm, world_unit_scale):
+    # Issue 48: where Unreal's table covers the thicknesses (from 4.5 to about 48 profile mm
+    # over WorldUnitScale / 0.1, against k d t), its reading of the exported fields follows the
+    # term's tau T(k t) within its 32-entry table's interpolation.
+    from invsss.forward.transmission import burley_transmittance
+    from invsss.io.unreal_transmission import unreal_transmission
+
+    tau, k = np.array([0.5, 0.3, 0.1]), 0.25
+    extra, match = unreal_transmission(tau, k, [d_mm] * 3, world_unit_scale, (1.0, 10.0))
+    fields = {**unreal_profile([d_mm] * 3, albedo=0.6, world_unit_scale=world_unit_scale), **extra}
+    thickness = np.linspace(1.0, 10.0, 1000)
+    fitted = tau * np.asarray(burley_transmittance(k * thickness), np.float64)[:, None]
+    ratio = unreal_transmittance(fields, thickness) / fitted
+    # What the export says Unreal renders is what Unreal's reading renders (but for the
+    # 16-bit texture), and here that is the fitted light within 6 %.
+    claimed = np.array(match["renderedOverFitted"])
+    np.testing.assert_allclose(ratio.min(axis=0), claimed[:, 0], rtol=3e-3)
+    np.testing.assert_allclose(ratio.max(axis=0), claimed[:, 1], rtol=3e-3)
+    np.testing.assert_allclose(ratio, 1.0, atol=0.06)
+    # Without WorldUnitScale's square in ExtinctionScale the slope is read wrong.
+    if world_unit_scale != 0.1:
+        wrong = {**fields, "ExtinctionScale": extra["ExtinctionScale"] * 0.1 / world_unit_scale}
+        assert not np.allclose(unreal_transmittance(wrong, thickness), fitted, rtol=0.1)
+
+
+def test_unreal_reports_the_light_its_table_cannot_start_with():
+    # d = 1 mm at the default WorldUnitScale: the table starts at 4.5 profile mm, the tint
+    # would have to exceed 1; the export says what share Unreal renders and the reading agrees.
+    from invsss.forward.transmission import burley_transmittance
+    from invsss.io.unreal_transmission import unreal_transmission
+
+    extra, match = unreal_transmission(0.55, 0.29, [1.0] * 3, 0.1, (1.0, 10.0))
+    assert extra["TransmissionTintColor"] == [1.0, 1.0, 1.0] and match["tableStartMm"] == pytest.approx(4.475)
+    fields = {**unreal_profile([1.0] * 3, albedo=0.6), **extra}
+    thickness = np.linspace(1.0, 10.0, 1000)
+    ratio = unreal_transmittance(fields, thickness)[:, 0] / (0.55 * np.asarray(burley_transmittance(0.29 * thickness)))
+    lo, hi = match["renderedOverFitted"][0]
+    assert ratio.min() == pytest.approx(lo, rel=3e-3) and ratio.max() == pytest.approx(hi, rel=3e-3) and hi < 0.7
+    # d = 2 mm at WorldUnitScale 1: the table ends (black) at about 4.9 profile mm, k d t = 5 mm.
+    extra, match = unreal_transmission(0.55, 0.25, [2.0] * 3, 1.0, (1.0, 10.0))
+    fields = {**unreal_profile([2.0] * 3, albedo=0.6, world_unit_scale=1.0), **extra}
+    assert match["renderedOverFitted"][0][0] == 0.0 and unreal_transmittance(fields, 10.0)[0] == 0.0
+
+
+def test_unreal_transmission_reads_the_engines_clamps_and_black_end():
+    base = {"SurfaceAlbedo": [0.8] * 3, "MeanFreePathColor": [1.0] * 3, "MeanFreePathDistance": 0.1,
+            "WorldUnitScale": 1.0, "TransmissionTintColor": [2.0, 0.5, 0.0], "ExtinctionScale": 3.0,
+            "NormalScale": 0.0}
+    read = unreal_transmittance(base, [0.0, 100.0])
+    # The tint held to [0.009, 1]; the floor of the optical depth (0.15 + 0.25) at no thickness;
+    # past the table's last entry (black) nothing.
+    np.testing.assert_allclose(read[0] / read[0, 0], [1.0, 0.5, 0.009], rtol=2e-3)  # 16-bit texture
+    assert np.all(read[1] == 0.0)
+    assert np.all(unreal_transmittance(base, 0.0) == unreal_transmittance(base, 0.3))
+
+
+def test_unreal_transmission_needs_one_distance():
+    from invsss.io.unreal_transmission import unreal_transmission
+
+    with pytest.raises(InvalidInputError, match="Unreal's ExtinctionScale is one per profile"):
+        unreal_transmission(0.5, 0.3, [1.0, 0.5, 0.25])
+    with pytest.raises(InvalidInputError, match="thickness_range_mm: expected 0 < low < high"):
+        unreal_transmission(0.5, 0.3, [1.0] * 3, 0.1, (3.0, 1.0))
