@@ -74,6 +74,11 @@ class MeasuredProfile(eqx.Module):
         Distances below this were left out as directly lit.
     centre : (float, float)
         Spot centre (row, column) in the skin image, pixels.
+    reflectance_stderr : ndarray like ``reflectance``, or None
+        Standard error of each sample from its pixels' scatter about a straight line
+        in ``r`` across the bin (so the profile's own slope over one pixel is not
+        counted as noise): ``sqrt(SSR / (n - 2) / n)`` in the units of
+        ``reflectance``; NaN where a bin has fewer than 3 pixels.
     """
 
     r_mm: np.ndarray
@@ -83,6 +88,7 @@ class MeasuredProfile(eqx.Module):
     lit_area_mm2: float = eqx.field(static=True)
     lit_radius_mm: float = eqx.field(static=True)
     centre: tuple = eqx.field(static=True)
+    reflectance_stderr: np.ndarray = None
 
     def fit(self, num_gaussians: int = 3, **kwargs) -> ProfileFit:
         """Sum-of-Gaussians fit of the samples (thesis 4.1.3); see :func:`fit_sum_of_gaussians`."""
@@ -352,9 +358,11 @@ def measure_profile(
     counts = counts[present]
     r_mm = r_sum / counts * mm_per_pixel
     mean_intensity = sums / counts[:, None]
+    spread = _bin_stderr(bins, radius_px[usable], values, present, counts)
 
     # Step 4: thesis normalisation (244 * 10 = 2440), then the spot area (module notes).
-    reflectance = mean_intensity / (level * filter_factor) * spectralon_reflectance / spot_area_mm2
+    scale = spectralon_reflectance / (level * filter_factor * spot_area_mm2)
+    reflectance = mean_intensity * scale
     single = np.ndim(skin_image) == 2
     return MeasuredProfile(
         r_mm=r_mm,
@@ -364,4 +372,26 @@ def measure_profile(
         lit_area_mm2=float(lit_area_mm2),
         lit_radius_mm=float(lit_radius_mm),
         centre=(cy, cx),
+        reflectance_stderr=(spread * scale)[:, 0] if single else spread * scale,
     )
+
+
+def _bin_stderr(bins, radius, values, present, counts):
+    """Standard error of each bin's mean about a line in ``r`` across the bin, (bins, C)."""
+    index = np.searchsorted(np.nonzero(present)[0], bins)  # each pixel's sample
+    n = counts.astype(np.float64)
+
+    def total(weights):
+        return np.bincount(index, weights=weights, minlength=n.size)
+
+    dr = radius - (total(radius) / n)[index]
+    srr = total(dr * dr)
+    out = np.full((n.size, values.shape[1]), np.nan)
+    enough = n >= 3
+    for c in range(values.shape[1]):
+        dv = values[:, c] - (total(values[:, c]) / n)[index]
+        srv = total(dr * dv)
+        slope_part = np.divide(srv**2, srr, out=np.zeros_like(srr), where=srr > 0)
+        ssr = np.clip(total(dv * dv) - slope_part, 0.0, None)
+        out[enough, c] = np.sqrt(ssr[enough] / (n[enough] - 2) / n[enough])
+    return out
