@@ -43,18 +43,18 @@ still be used as `invsss fit --profile`.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import time
 
 import numpy as np
 
-from invsss.measurement.dipole_fit import fit_dipole
-from invsss.io import write_image
+from invsss.io import read_image, write_image
 from invsss.measurement.measure import measure_profile
+from invsss.measurement.medium_fit import MODEL_NAMES, fit_medium
+from invsss.measurement.trusted_radii import trusted_radii
 from invsss.scenes import parse_config
-from invsss.scenes.mitsuba_scene import import_mitsuba, scene_dict
+from invsss.scenes.config import Medium
 
 CAMERA_Z = 300.0  # mm, camera on the slab's axis
 LIGHT_Z = 150.0  # mm, the reference's spot light on the same axis
@@ -98,14 +98,50 @@ def slab_config(medium: dict, width: int, height: int, pitch: float, spp: int, s
 
 
 def render(mi, config, kind, spp, seed, **extra):
+    from invsss.scenes.mitsuba_scene import scene_dict
+
     scene = mi.load_dict(scene_dict(mi, config, kind, coefficients=config.medium.coefficients(), **extra))
-    return np.asarray(mi.render(scene, spp=spp, seed=seed), np.float64)[..., 0]
+    return np.asarray(mi.render(scene, spp=spp, seed=seed), np.float64)  # (H, W, 3)
+
+
+def render_pair(args, medium):
+    """``(skin, reference)``, (H, W, 3) each: the scattering slab and the white slab."""
+    from invsss.scenes.mitsuba_scene import import_mitsuba
+
+    matched = args.boundary == "index-matched"
+    shape = (medium, args.width, args.height, args.pitch, args.spp, args.seed)
+    config = slab_config(*shape, light="spot" if matched else "contact")
+    mi = import_mitsuba(config.variant)
+    t0 = time.perf_counter()
+    skin = render(mi, config, "target", args.spp, args.seed)
+    if not matched:  # an index-matched boundary reflects nothing
+        skin = skin - render(mi, config, "specular", args.spp, args.seed)
+    reference = render(mi, slab_config(*shape, light="spot"), "source", 16, args.seed + 1, albedo=1.0)
+    print(f"rendered {args.width}x{args.height} px at {args.pitch} mm, {args.spp} spp in "
+          f"{time.perf_counter() - t0:.0f} s")
+    return skin, reference
+
+
+def measure_channel(skin, reference, args):
+    """The measured profile of one channel, normalised by the spot's effective area."""
+    options = dict(filter_factor=1.0, saturation=None, lit_radius_mm=args.lit_radius_mm,
+                   max_radius_mm=0.5 * args.width * args.pitch + 15 * args.pitch - 1.0)
+    first = measure_profile(skin, reference, None, args.pitch, **options)
+    # The reference's lit pixels at >= half its peak miss the partly lit edge pixels:
+    # its whole reflected power over the mean level is the spot's effective area.
+    spot_area = float(reference.sum()) * args.pitch**2 / float(first.spectralon_level)
+    return measure_profile(skin, reference, None, args.pitch, spot_area_mm2=spot_area, **options)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--medium", default="thesis-940", help="medium preset (default thesis-940)")
+    parser.add_argument("--coefficients", default=None, metavar="S,A",
+                        help="sigma_s' and sigma_a (1/mm) instead of the preset, eta 1.3")
+    parser.add_argument("--channels", default="0", help="channels to measure, e.g. 0,1 (jensen-skin1: "
+                        "red, green)")
     parser.add_argument("--spp", type=int, default=256)
+    parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--width", type=int, default=110)
     parser.add_argument("--height", type=int, default=50)
     parser.add_argument("--pitch", type=float, default=0.1, help="mm per pixel on the slab")
@@ -114,50 +150,47 @@ def main() -> None:
                         choices=["rough-dielectric", "index-matched"],
                         help="index-matched: no dielectric, so the spot light itself lights "
                         "the skin (next-event estimation reaches it from inside the beam)")
-    parser.add_argument("--out", default=None, help="folder for skin.exr, reference.exr, profile.json")
+    parser.add_argument("--roughness", type=float, default=0.5, help="Beckmann alpha of the dielectric")
+    parser.add_argument("--models", default=",".join(MODEL_NAMES), help="models to fit, comma-separated")
+    parser.add_argument("--out", default=None, help="folder to write skin.exr and reference.exr to")
+    parser.add_argument("--from", dest="source", default=None,
+                        help="folder with skin.exr and reference.exr of an earlier run: no render")
     args = parser.parse_args()
 
     matched = args.boundary == "index-matched"
-    medium = {"preset": args.medium, **({"boundary": "index-matched"} if matched else {})}
-    shape = (medium, args.width, args.height, args.pitch, args.spp, 1)
-    config = slab_config(*shape, light="spot" if matched else "contact")
-    truth = config.medium.coefficients()
-    mi = import_mitsuba(config.variant)
-    t0 = time.perf_counter()
-    skin = render(mi, config, "target", args.spp, 1)
-    if not matched:  # an index-matched boundary reflects nothing
-        skin = skin - render(mi, config, "specular", args.spp, 1)
-    reference = render(mi, slab_config(*shape, light="spot"), "source", 16, 2, albedo=1.0)
-    seconds = time.perf_counter() - t0
-
-    options = dict(filter_factor=1.0, saturation=None, lit_radius_mm=args.lit_radius_mm,
-                   max_radius_mm=0.5 * args.width * args.pitch + 15 * args.pitch - 1.0)
-    first = measure_profile(skin, reference, None, args.pitch, **options)
-    # The reference's lit pixels at >= half its peak miss the partly lit edge pixels:
-    # its whole reflected power over the mean level is the spot's effective area.
-    spot_area = float(reference.sum()) * args.pitch**2 / float(first.spectralon_level)
-    measured = measure_profile(skin, reference, None, args.pitch, spot_area_mm2=spot_area, **options)
-    dipole = fit_dipole(measured.r_mm, measured.reflectance, eta=float(truth["eta"]))
-    gaussians = measured.fit(3)
-    s_true, a_true = (float(np.ravel(truth[k])[0]) for k in ("sigma_s_prime", "sigma_a"))
-    s_fit, a_fit = float(dipole.sigma_s_prime), float(dipole.sigma_a)
-    print(f"medium {args.medium}: {args.width}x{args.height} px at {args.pitch} mm, {args.spp} spp, "
-          f"render {seconds:.0f} s; lit area {first.lit_area_mm2:.3f} mm^2 (effective "
-          f"{spot_area:.3f}, true {math.pi * SPOT_RADIUS**2:.3f}), "
-          f"samples {measured.r_mm[0]:.2f}-{measured.r_mm[-1]:.2f} mm")
-    print(f"{'':14}{'true':>10}{'fitted':>10}{'error':>9}")
-    print(f"{'sigma_s_prime':14}{s_true:10.4f}{s_fit:10.4f}{s_fit / s_true - 1:+9.1%}")
-    print(f"{'sigma_a':14}{a_true:10.4f}{a_fit:10.4f}{a_fit / a_true - 1:+9.1%}")
-    print(f"dipole rms log error {float(dipole.rms_log_error):.3f}; "
-          f"3 Gaussians rms {float(gaussians.rms):.3f}")
+    if args.coefficients:
+        s, a = (float(v) for v in args.coefficients.split(","))
+        medium = {"sigma_s_prime": [s], "sigma_a": [a], "eta": 1.3}
+        args.medium = f"{s:g},{a:g}"
+    else:
+        medium = {"preset": args.medium}
+    medium.update({"boundary": "index-matched"} if matched else {"roughness": args.roughness})
+    truth = Medium(**medium).coefficients()
+    if args.source:
+        skin, reference = (np.asarray(read_image(os.path.join(args.source, f"{name}.exr")), np.float64)
+                           for name in ("skin", "reference"))
+    else:
+        skin, reference = render_pair(args, medium)
     if args.out:
         os.makedirs(args.out, exist_ok=True)
         write_image(os.path.join(args.out, "skin.exr"), skin.astype(np.float32))
         write_image(os.path.join(args.out, "reference.exr"), reference.astype(np.float32))
-        content = gaussians.to_dict()
-        content["fit"]["dipole"] = dipole.to_dict()
-        with open(os.path.join(args.out, "profile.json"), "w") as handle:
-            json.dump(content, handle, indent=2)
+    eta = float(truth["eta"])
+    print(f"{'medium':12}{'ch':>3} {'model':18}{'sigma_s_prime':>22}{'err':>8}{'sigma_a':>24}{'err':>8}"
+          f"{'chi2':>7}  radii")
+    for c in (int(k) for k in args.channels.split(",")):
+        measured = measure_channel(skin[..., c], reference[..., c], args)
+        trusted = trusted_radii(measured, args.pitch)
+        m = trusted.mask
+        s_true, a_true = (float(np.ravel(truth[k])[c % np.size(truth[k])]) for k in ("sigma_s_prime", "sigma_a"))
+        for name in args.models.split(","):
+            fit = fit_medium(measured.r_mm[m], measured.reflectance[m], model=name, eta=eta,
+                             stderr=measured.reflectance_stderr[m])
+            s, a = float(fit.sigma_s_prime), float(fit.sigma_a)
+            print(f"{args.medium:12}{c:3d} {name:18}{s:10.4f} +- {float(fit.sigma_s_prime_stderr):.4f} "
+                  f"({s_true:.4f}){s / s_true - 1:+8.1%}{a:10.4f} +- {float(fit.sigma_a_stderr):.4f} "
+                  f"({a_true:.4f}){a / a_true - 1:+8.1%}{float(fit.reduced_chi2):7.2f}  "
+                  f"{float(trusted.r_min_mm):.2f}-{float(trusted.r_max_mm):.2f} mm")
 
 
 if __name__ == "__main__":

@@ -10,6 +10,8 @@ import tempfile
 import numpy as np
 
 from ..io import read_image
+from ..measurement.medium_fit import MODEL_NAMES
+from ..measurement.transport_profile import TRANSPORT_ETAS
 from ..runtime.interrupts import StopSignals
 from ..validation import InvalidInputError
 
@@ -20,9 +22,11 @@ def add_parser(subparsers) -> None:
         help="measure a diffusion profile from a spot-lit skin image and a white reference",
         description="Measure R(r) from SKIN (skin or a slab lit by a small spot) and REF (a "
         "white Lambertian reference, e.g. Spectralon, under the same spot and exposure; "
-        "thesis 4.1), fit a sum of Gaussians and Jensen's dipole, and write OUT as a "
-        "profile JSON for `invsss fit --profile OUT`. The dipole's sigma_s' and sigma_a "
-        "and the samples are stored under \"fit\".",
+        "thesis 4.1), fit a sum of Gaussians and the medium (sigma_s', sigma_a, Burley's d and "
+        "albedo, with standard errors from the samples' noise, on the radii above the spot, the "
+        "resolution and the noise floor), and write OUT as a profile JSON for `invsss fit "
+        "--profile OUT`. The medium, the dipole's reading and the samples are stored under "
+        "\"fit\".",
     )
     parser.add_argument("skin", help="linear image of the spot-lit skin")
     parser.add_argument("reference", metavar="REF", help="linear image of the lit white reference")
@@ -46,8 +50,9 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--max-radius-mm", type=float, default=None, metavar="MM",
                         help="leave out distances above this (default: the image border)")
     parser.add_argument("--spot-area-mm2", type=float, default=None, metavar="MM2",
-                        help="divide by this spot area (default: the lit area seen on REF, "
-                        "which makes R absolute in mm^-2, as the dipole fit needs)")
+                        help="divide by this spot area (default: the spot's area from its power "
+                        "on REF, partly lit edge pixels included, which makes R absolute in "
+                        "mm^-2, as the medium fit needs)")
     parser.add_argument("--saturation", type=float, default=None, metavar="LEVEL",
                         help="values at or above this are overexposed (default: no check; "
                         "1 for clipped [0, 1] photos, 255 for 8-bit counts)")
@@ -56,7 +61,16 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--gaussians", type=int, default=3, metavar="K",
                         help="number of Gaussians in the fitted profile (default: 3)")
     parser.add_argument("--eta", type=float, default=1.3,
-                        help="relative index of refraction for the dipole fit (default: 1.3)")
+                        help="relative index of refraction of the skin's surface (default: 1.3; "
+                        "the transport models have tables for 1.0 and 1.3)")
+    parser.add_argument("--model", default="transport", choices=list(MODEL_NAMES),
+                        help="profile model of the medium fit (default: transport, what a camera "
+                        "on the axis of a focused spot reads; transport-diffuse for a diffuse "
+                        "source on the skin; the published ones give the exitance and misread "
+                        "a photograph: docs/capture.md, 'The spot measurement')")
+    parser.add_argument("--min-snr", type=float, default=3.0, metavar="SNR",
+                        help="noise floor: trust samples out to where R / stderr falls below "
+                        "this (default: 3)")
     parser.add_argument("--linear-codes", action="store_true",
                         help="8/16-bit codes are linear, not sRGB")
     parser.set_defaults(func=run)
@@ -70,6 +84,10 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
         raise InvalidInputError(f"{args.out}: already exists; remove it or choose another --out")
     if not os.path.isdir(os.path.dirname(os.path.abspath(args.out))):
         raise InvalidInputError(f"{args.out}: cannot write, its directory does not exist")
+    if args.model.startswith("transport") and not any(abs(args.eta - e) < 1e-6 for e in TRANSPORT_ETAS):
+        raise InvalidInputError(f"--eta: the {args.model} model is tabulated for eta "
+                                f"{', '.join(map(str, TRANSPORT_ETAS))}, got {args.eta:g}; give one of "
+                                "them or another --model")
     skin = read_image(args.skin, linear=args.linear_codes)
     reference = read_image(args.reference, linear=args.linear_codes)
     options = dict(
@@ -85,28 +103,79 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
     if spot_area is None:
         # The lit area is only known after reading REF: a first pass measures it.
         spot_area = measure_profile(skin, reference, centre, args.mm_per_pixel, names=names,
-                                    **options).lit_area_mm2
+                                    **options).spot_area_mm2
     measured = measure_profile(skin, reference, centre, args.mm_per_pixel, names=names,
                                spot_area_mm2=spot_area, **options)
     gaussians = measured.fit(args.gaussians)
-    dipole = fit_dipole(measured.r_mm, measured.reflectance, eta=args.eta)
+    medium, trusted = _fit_medium(measured, args)
+    # The dipole's reading, kept for comparison (docs/capture.md), on the samples every
+    # channel trusts.
+    both = np.asarray(trusted.mask).reshape(measured.r_mm.size, -1).all(axis=1)
+    dipole = fit_dipole(measured.r_mm[both], measured.reflectance[both], eta=args.eta)
     content = gaussians.to_dict()
     content["source"] = f"measured by invsss profile from {args.skin} and {args.reference}"
+    content["fit"]["medium"] = {**medium.to_dict(), "r_min_mm": np.asarray(trusted.r_min_mm).tolist(),
+                                "r_max_mm": np.asarray(trusted.r_max_mm).tolist(),
+                                "trusted": list(trusted.reasons)}
     content["fit"]["dipole"] = dipole.to_dict()
     content["fit"]["measurement"] = {
         "mm_per_pixel": args.mm_per_pixel, "centre": list(measured.centre),
         "spot_area_mm2": spot_area, "lit_area_mm2": measured.lit_area_mm2,
         "lit_radius_mm": measured.lit_radius_mm, **options,
         "r_mm": measured.r_mm.tolist(), "reflectance": np.asarray(measured.reflectance).tolist(),
+        "reflectance_stderr": np.nan_to_num(np.asarray(measured.reflectance_stderr), nan=-1.0).tolist(),
     }
     text = json.dumps(content, indent=2) + "\n"
     folder = os.path.dirname(os.path.abspath(args.out))
     with tempfile.NamedTemporaryFile("w", dir=folder, suffix=".tmp", delete=False) as handle:
         handle.write(text)
     os.replace(handle.name, args.out)  # never a half-written profile under the real name
-    ss, sa = (np.round(np.asarray(x, dtype=float), 4).tolist()
-              for x in (dipole.sigma_s_prime, dipole.sigma_a))
     print(f"profile: {measured.r_mm.size} samples from {measured.r_mm[0]:.2f} to "
           f"{measured.r_mm[-1]:.2f} mm; {args.gaussians} Gaussians (rms {float(gaussians.rms):.3f}); "
-          f"dipole sigma_s' {ss} /mm, sigma_a {sa} /mm; wrote {args.out}")
+          f"wrote {args.out}")
+    for line in _medium_lines(medium, trusted):
+        print(line)
     return 0
+
+
+def _fit_medium(measured, args):
+    """The medium fit of each channel on its trusted samples, and the trusted radii."""
+    from ..measurement.medium_fit import MediumFit, fit_medium
+    from ..measurement.trusted_radii import trusted_radii
+
+    trusted = trusted_radii(measured, args.mm_per_pixel, min_snr=args.min_snr)
+    y = np.asarray(measured.reflectance)
+    err = np.asarray(measured.reflectance_stderr)
+    single = y.ndim == 1
+    columns, errors, masks = (a[:, None] if single else a for a in (y, err, np.asarray(trusted.mask)))
+    fits = []
+    for c in range(columns.shape[1]):
+        keep = masks[:, c]
+        if np.count_nonzero(keep) < 3:
+            raise InvalidInputError(
+                f"{args.skin}: only {np.count_nonzero(keep)} trusted sample(s) in channel {c} "
+                f"({'; '.join(trusted.reasons)}); lower --min-snr or --lit-radius-mm")
+        fits.append(fit_medium(measured.r_mm[keep], columns[keep, c], model=args.model, eta=args.eta,
+                               stderr=errors[keep, c]))
+    if single:
+        return fits[0], trusted
+    stacked = {k: np.array([getattr(f, k) for f in fits]) for k in MediumFit.__dataclass_fields__
+               if k not in ("model", "eta")}
+    return MediumFit(**stacked, model=args.model, eta=fits[0].eta), trusted
+
+
+def _medium_lines(medium, trusted):
+    def pm(value, error, digits):
+        v, e = np.atleast_1d(value), np.atleast_1d(error)
+        return ", ".join(f"{a:.{digits}f} +- {b:.{digits}f}" for a, b in zip(v, e))
+
+    return [
+        f"medium ({medium.model}, eta {medium.eta:g}): sigma_s' {pm(medium.sigma_s_prime, medium.sigma_s_prime_stderr, 4)} "
+        f"/mm, sigma_a {pm(medium.sigma_a, medium.sigma_a_stderr, 5)} /mm",
+        f"Burley: d {pm(medium.burley_d, medium.burley_d_stderr, 3)} mm, albedo "
+        f"{pm(medium.burley_albedo, medium.burley_albedo_stderr, 3)}; reduced chi2 "
+        f"{', '.join(f'{v:.2f}' for v in np.atleast_1d(medium.reduced_chi2))}",
+        "trusted radii: " + ", ".join(f"{a:.2f}-{b:.2f} mm" for a, b in
+                                      zip(np.atleast_1d(trusted.r_min_mm), np.atleast_1d(trusted.r_max_mm)))
+        + " (" + "; ".join(trusted.reasons) + ")",
+    ]

@@ -74,6 +74,11 @@ class MeasuredProfile(eqx.Module):
         Distances below this were left out as directly lit.
     centre : (float, float)
         Spot centre (row, column) in the skin image, pixels.
+    spot_area_mm2 : float or None
+        The spot's area from its power: the reference's light at >= 5 % of its peak,
+        summed, over its mean level on the lit area. Unlike ``lit_area_mm2`` it counts
+        the partly lit pixels at the spot's edge (a spot a few pixels wide loses much
+        of its area to them), so it is the area to divide by for an absolute ``R``.
     reflectance_stderr : ndarray like ``reflectance``, or None
         Standard error of each sample from its pixels' scatter about a straight line
         in ``r`` across the bin (so the profile's own slope over one pixel is not
@@ -89,6 +94,7 @@ class MeasuredProfile(eqx.Module):
     lit_radius_mm: float = eqx.field(static=True)
     centre: tuple = eqx.field(static=True)
     reflectance_stderr: np.ndarray = None
+    spot_area_mm2: float | None = eqx.field(static=True, default=None)
 
     def fit(self, num_gaussians: int = 3, **kwargs) -> ProfileFit:
         """Sum-of-Gaussians fit of the samples (thesis 4.1.3); see :func:`fit_sum_of_gaussians`."""
@@ -165,7 +171,8 @@ def _spectralon_reference(spectralon, black_level, lit_threshold, saturation, mm
     rows, cols = np.nonzero(lit)
     # Half a pixel's diagonal past the farthest lit pixel centre covers that pixel.
     extent_px = np.max(np.hypot(rows - rows.mean(), cols - cols.mean())) + 0.5 * np.sqrt(2.0)
-    return level, lit.sum() * mm_per_pixel**2, extent_px * mm_per_pixel
+    power_area = brightness[brightness >= 0.05 * peak].sum() / float(np.mean(level)) * mm_per_pixel**2
+    return level, lit.sum() * mm_per_pixel**2, extent_px * mm_per_pixel, power_area
 
 
 def _spot_centre(skin):
@@ -304,7 +311,7 @@ def measure_profile(
         raise InvalidInputError(f"black_level: expected a finite number, got {black_level!r}")
 
     # Step 1: the reference. Saturation is judged on raw values, before the black level.
-    level, lit_area_mm2, lit_extent_mm = _spectralon_reference(
+    level, lit_area_mm2, lit_extent_mm, power_area_mm2 = _spectralon_reference(
         spectralon, black_level, lit_threshold, saturation, mm_per_pixel, spectralon_name
     )
     skin_clipped = (
@@ -370,6 +377,7 @@ def measure_profile(
         num_pixels=counts,
         spectralon_level=level[0] if single else level,
         lit_area_mm2=float(lit_area_mm2),
+        spot_area_mm2=float(power_area_mm2),
         lit_radius_mm=float(lit_radius_mm),
         centre=(cy, cx),
         reflectance_stderr=(spread * scale)[:, 0] if single else spread * scale,

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..validation import InvalidInputError
 from .profile_models import PROFILE_MODELS, burley_parameters
+from .transport_profile import TRANSPORT_ETAS
 
 __all__ = ["MediumFit", "fit_medium", "MODEL_NAMES"]
 
@@ -128,7 +129,7 @@ def _fit_channel(model_name, r, y, stderr, eta):
     cov = np.linalg.pinv(J.T @ J) * scale  # of log sigma
     sigma = np.exp(p)
     sigma_err = sigma * np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    illumination = "diffuse" if model_name == "burley-diffuse" else "searchlight"
+    illumination = "diffuse" if model_name.endswith("-diffuse") else "searchlight"
     burley = np.asarray(_burley_of(jnp.asarray(p), illumination))
     b_jac = np.asarray(jax.jacfwd(_burley_of)(jnp.asarray(p), illumination))
     burley_err = np.sqrt(np.clip(np.diag(b_jac @ cov @ b_jac.T), 0.0, None))
@@ -159,10 +160,13 @@ def _check(r_mm, reflectance, stderr, model, eta):
         eta = float("nan")
     if not (np.isfinite(eta) and eta >= 1.0):
         raise InvalidInputError(f"eta: expected a finite number >= 1, got {eta!r}")
+    if model.startswith("transport") and not any(abs(eta - e) < 1e-6 for e in TRANSPORT_ETAS):
+        raise InvalidInputError(f"eta: the {model} model is tabulated for eta "
+                                f"{', '.join(map(str, TRANSPORT_ETAS))}, got {eta:g}")
     return r, y, stderr, eta
 
 
-def fit_medium(r_mm, reflectance, *, model: str = "burley", eta: float = 1.3, stderr=None) -> MediumFit:
+def fit_medium(r_mm, reflectance, *, model: str = "transport", eta: float = 1.3, stderr=None) -> MediumFit:
     """Fit ``sigma_s'`` and ``sigma_a`` of a profile model to ``R(r)`` samples.
 
     Parameters
@@ -173,8 +177,12 @@ def fit_medium(r_mm, reflectance, *, model: str = "burley", eta: float = 1.3, st
     reflectance : array, shape (N,) or (N, C)
         Absolute ``R(r)`` in mm^-2 (> 0); each channel is fitted on its own.
     model : str
-        One of :data:`MODEL_NAMES`: ``"burley"`` (default: Burley's searchlight fit),
-        ``"burley-diffuse"``, ``"photon-beam"``, ``"better-dipole"`` or ``"dipole"``.
+        One of :data:`MODEL_NAMES`: ``"transport"`` (what a camera on the axis of a
+        focused spot reads, tabulated from the exact transport), ``"transport-diffuse"``
+        (the same for a Lambertian source on the surface), ``"burley"`` (Burley's
+        searchlight fit), ``"burley-diffuse"``, ``"photon-beam"``, ``"better-dipole"``
+        or ``"dipole"``. The published models give the exitance, not the camera's
+        reading (module :mod:`invsss.measurement.transport_profile`).
     eta : float
         Relative index of refraction (>= 1), for the dipole models.
     stderr : array like ``reflectance``, optional
@@ -196,7 +204,7 @@ def fit_medium(r_mm, reflectance, *, model: str = "burley", eta: float = 1.3, st
     >>> import numpy as np
     >>> from invsss.measurement.profile_models import burley_searchlight
     >>> r = np.linspace(1.5, 6.0, 20)
-    >>> fit = fit_medium(r, np.asarray(burley_searchlight(r, 0.8, 0.03)))
+    >>> fit = fit_medium(r, np.asarray(burley_searchlight(r, 0.8, 0.03)), model="burley")
     >>> round(float(fit.sigma_s_prime), 3), round(float(fit.sigma_a), 4)
     (0.8, 0.03)
     """

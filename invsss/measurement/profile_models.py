@@ -49,6 +49,7 @@ import numpy as np
 
 from ..forward.profiles import burley as _burley_profile
 from ..forward.profiles import jensen_dipole
+from .transport_profile import transport_diffuse, transport_searchlight
 
 __all__ = [
     "ILLUMINATIONS",
@@ -237,11 +238,15 @@ def photon_beam(r, sigma_s_prime, sigma_a, eta=1.3):
     return s / sigma_t * jnp.tensordot(weights, kappa * value, axes=1)
 
 
-#: Models by name: ``f(r, sigma_s', sigma_a, eta) -> R(r)`` in mm^-2.
+#: Models by name: ``f(r, sigma_s', sigma_a, eta) -> R(r)`` in mm^-2. The published
+#: ones give the exitance; ``transport`` and ``transport-diffuse`` give what a camera on
+#: the spot's axis reads (:mod:`invsss.measurement.transport_profile`).
 PROFILE_MODELS = {
-    "dipole": jensen_dipole,
-    "better-dipole": better_dipole,
-    "photon-beam": photon_beam,
+    "transport": transport_searchlight,
+    "transport-diffuse": transport_diffuse,
     "burley": burley_searchlight,
     "burley-diffuse": burley_diffuse,
+    "photon-beam": photon_beam,
+    "better-dipole": better_dipole,
+    "dipole": jensen_dipole,
 }
