@@ -100,7 +100,14 @@ def slab_config(medium: dict, width: int, height: int, pitch: float, spp: int, s
 def render(mi, config, kind, spp, seed, **extra):
     from invsss.scenes.mitsuba_scene import scene_dict
 
-    scene = mi.load_dict(scene_dict(mi, config, kind, coefficients=config.medium.coefficients(), **extra))
+    content = scene_dict(mi, config, kind, coefficients=config.medium.coefficients(), **extra)
+    for key, value in content.items():
+        if key.startswith("light_") and value.get("type") == "rectangle":
+            # Mitsuba's default BSDF of a shape is a grey diffuse (0.5): the contact light's
+            # back would send half the light leaving beneath it back into the slab, a
+            # second source the profile models know nothing of. Black, it absorbs.
+            value["bsdf"] = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
+    scene = mi.load_dict(content)
     return np.asarray(mi.render(scene, spp=spp, seed=seed), np.float64)  # (H, W, 3)
 
 

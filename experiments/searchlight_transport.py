@@ -10,8 +10,8 @@ looking down on the spot reads the *radiance* leaving along the normal, and the
 measurement turns it into ``pi L(r)`` (the exitance only if the surface were
 Lambertian). It is not: near the spot the light leaves obliquely (low-order
 scattering from the beam), far away the diffusion regime's radiance peaks along the
-normal. For the thesis's 940 nm medium without a boundary, ``pi L / R`` is 0.80 at
-1.3 mm, 0.93 at 3.1 mm and 1.08 at 6.1 mm (this script; Mitsuba's render of the same
+normal. For the thesis's 940 nm medium without a boundary, ``pi L / R`` is 0.76 at
+1.3 mm, 0.92 at 3.3 mm and 1.01 at 6.2 mm (``--check``; Mitsuba's render of the same
 slab agrees within its noise), so a fit of any exitance model misreads the medium.
 
 The transport: a semi-infinite medium, isotropic scattering, extinction 1 (lengths in
