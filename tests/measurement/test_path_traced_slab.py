@@ -1,10 +1,10 @@
 """The measurement on a path-traced slab shipped with the tests (issue 50, item 4).
 
-``data/slab_thesis940_matched_*.exr``: a slab of the thesis's 940 nm medium
+``data/slab_thesis940_matched.npz``: a slab of the thesis's 940 nm medium
 (sigma_s' 0.7748, sigma_a 0.02808 /mm), no boundary, lit by a 0.3 mm spot, and the white
 reference under the same spot; Mitsuba 3.9.1 volpath, 8192 spp, 50 x 26 px at 0.2 mm
 (``python experiments/profile_slab.py --boundary index-matched --spp 8192 --width 50
---height 26 --pitch 0.2 --out DIR``). This is the slab the measurement was developed on;
+--height 26 --pitch 0.2 --out DIR``, one channel of its EXRs). This is the slab the measurement was developed on;
 docs/capture.md's validation table is on other renders.
 """
 
@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from invsss.io import read_image
 from invsss.measurement.measure import measure_profile
 from invsss.measurement.medium_fit import fit_medium
 from invsss.measurement.trusted_radii import trusted_radii
@@ -24,8 +23,8 @@ MEDIUM = (0.7748, 0.02808)
 
 
 def _measured():
-    skin, reference = (np.asarray(read_image(DATA / f"slab_thesis940_matched_{n}.exr"))[..., 0]
-                       for n in ("skin", "reference"))
+    with np.load(DATA / "slab_thesis940_matched.npz") as data:
+        skin, reference = data["skin"].astype(np.float64), data["reference"].astype(np.float64)
     options = dict(filter_factor=1.0, saturation=None, lit_radius_mm=1.5, max_radius_mm=6.9)
     area = measure_profile(skin, reference, None, PITCH, **options).spot_area_mm2
     return measure_profile(skin, reference, None, PITCH, spot_area_mm2=area, **options)
