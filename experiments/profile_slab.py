@@ -1,43 +1,31 @@
-"""Path-traced check of the measurement pipeline (issue 7, item 5).
+"""Path-traced check of the measurement pipeline (issues 7 and 50): the medium back from a slab.
 
-A flat slab of a known medium is lit by a narrow spot light and rendered with
-Mitsuba 3 (volpath, rough-dielectric boundary, the specular reflection rendered
-separately and subtracted, as ``invsss scene`` does); a white Lambertian slab
-(albedo 1, the Spectralon stand-in) is rendered under the same light and camera.
-Both go through ``invsss profile``'s steps (measure_profile, sum of Gaussians,
-fit_dipole) and the fitted sigma_s' and sigma_a are compared with the medium's.
+A flat slab of a known medium is lit at a small spot and rendered with Mitsuba 3
+(volpath); a white Lambertian slab (albedo 1, the Spectralon stand-in) is rendered
+under a 0.3 mm spot light and the same camera. Both go through ``invsss profile``'s
+steps (measure_profile with the spot's area from the reference's power,
+trusted_radii, fit_medium with the samples' standard errors) for each model, and
+the fitted sigma_s' and sigma_a are printed against the medium's.
 
-    python experiments/profile_slab.py [--spp 256] [--medium thesis-940] [--out DIR]
+    python experiments/profile_slab.py [--medium thesis-940 | --coefficients S,A]
+        [--boundary rough-dielectric|index-matched] [--roughness 0.5] [--spp 256]
+        [--out DIR] [--from DIR] [--reference FILE] [--models transport,burley,...]
 
-Too slow for CI on two cores (minutes); the CI test of the same pipeline on a
-dipole-made image is tests/measurement/test_profile_pipeline.py.
+The light: with ``--boundary index-matched`` the spot light itself (a searchlight:
+model ``transport``, eta 1). Through a dielectric, volpath cannot reach a spot light
+from inside the slab, so the slab is lit by a square Lambertian emitter of the spot's
+area and power just above it (a diffuse source: ``transport-diffuse``, or
+``transport-diffuse-rough`` for the default Beckmann 0.5 boundary); its back is black
+(Mitsuba's default grey BSDF would return half the light leaving beneath it).
 
-Measured (Mitsuba 3.9.1 scalar_rgb, 2 CPU cores, thesis-940: sigma_s' 0.7748,
-sigma_a 0.02808 /mm), the check does NOT pass its 10 % target yet:
-
-    --spp 4096  --width 50 --height 26 --pitch 0.2   112 s   sigma_s' 0.416 (-46 %)  sigma_a 0.0501 (+79 %)
-    --spp 16384 --width 44 --height 16 --pitch 0.2   127 s   sigma_s' 0.428 (-45 %)  sigma_a 0.0539 (+92 %)
-
-    --boundary index-matched --spp 8192 (same frame)  46 s   sigma_s' 0.444 (-43 %)  sigma_a 0.0670 (+139 %)
-
-Two causes, seen by dividing the radial samples by the dipole of the true medium
-(normalised by the light's analytic power instead of the reference): the path
-tracer's profile lies 25-30 % below ``jensen_dipole`` at every r from 1 to 6 mm
-(a level difference, not a shape one), and the per-bin noise is still about
-15 % at 16384 spp (light enters only under the 0.3 mm spot, which camera paths
-reach rarely). The dipole fit reads a level change as a lower albedo, so it
-trades sigma_s' for sigma_a. Not yet separated: the rough (Beckmann 0.5)
-boundary's transmission, the emitter's diffuse incidence (more Fresnel loss than
-a collimated spot) and the dipole's own error at 1-6 mm. The index-matched run
-(no boundary at all, lit by the spot light itself, noise about 5 % per bin) still
-lies at 0.63-0.66 of the dipole (eta 1) from 1 to 3.5 mm, rising to 0.78-0.86 at
-5-6 mm: most of the gap is between the dipole and the exact transport, not in
-the boundary or the light. The totals agree (index-matched slab albedo from
-invsss.scenes.calibration.slab_albedo 0.591 +- 0.002, jensen_dipole_total 0.575),
-so the path tracer keeps more of the energy within 1 mm (single and low-order
-scattering, which the dipole leaves out) and less at 1-6 mm. So a dipole fit of a path-traced profile cannot give
-the medium back within 10 %; a profile fitted directly (sum of Gaussians) can
-still be used as `invsss fit --profile`.
+The reference sets the profile's level (its power over its lit level is the spot's
+area), and the fitted albedo hangs on that level: at 16 spp the partly lit pixels of a
+0.3 mm spot at 0.2 mm per pixel moved the area by 9 % between seeds and sigma_a by
+27 %. Render it once at 4096 spp (``--reference-spp``) and pass it to every run of the
+same frame (``--reference``). Too slow for CI on two cores (minutes a render); the CI
+tests are tests/measurement/test_path_traced_slab.py (one small render shipped) and
+tests/measurement/test_profile_pipeline.py (a dipole-made image). The measured
+table is in docs/capture.md, "The spot measurement".
 """
 
 from __future__ import annotations
@@ -123,7 +111,11 @@ def render_pair(args, medium):
     skin = render(mi, config, "target", args.spp, args.seed)
     if not matched:  # an index-matched boundary reflects nothing
         skin = skin - render(mi, config, "specular", args.spp, args.seed)
-    reference = render(mi, slab_config(*shape, light="spot"), "source", 16, args.seed + 1, albedo=1.0)
+    # The reference's level over its lit pixels gives the spot's area, and so the profile's
+    # level: at 16 spp the partly lit edge pixels of a 0.3 mm spot moved it by 9 % between
+    # seeds (and sigma_a by 27 %); 1024 spp keeps it within 1 %.
+    reference = render(mi, slab_config(*shape, light="spot"), "source", args.reference_spp, args.seed + 1,
+                       albedo=1.0)
     print(f"rendered {args.width}x{args.height} px at {args.pitch} mm, {args.spp} spp in "
           f"{time.perf_counter() - t0:.0f} s")
     return skin, reference
@@ -159,6 +151,9 @@ def main() -> None:
                         "the skin (next-event estimation reaches it from inside the beam)")
     parser.add_argument("--roughness", type=float, default=0.5, help="Beckmann alpha of the dielectric")
     parser.add_argument("--models", default=",".join(MODEL_NAMES), help="models to fit, comma-separated")
+    parser.add_argument("--reference-spp", type=int, default=1024)
+    parser.add_argument("--reference", default=None,
+                        help="reference.exr to use instead of the run's (same frame and spot)")
     parser.add_argument("--out", default=None, help="folder to write skin.exr and reference.exr to")
     parser.add_argument("--from", dest="source", default=None,
                         help="folder with skin.exr and reference.exr of an earlier run: no render")
@@ -167,7 +162,7 @@ def main() -> None:
     matched = args.boundary == "index-matched"
     if args.coefficients:
         s, a = (float(v) for v in args.coefficients.split(","))
-        medium = {"sigma_s_prime": [s], "sigma_a": [a], "eta": 1.3}
+        medium = {"sigma_s_prime": s, "sigma_a": a, **({} if matched else {"eta": 1.3})}
         args.medium = f"{s:g},{a:g}"
     else:
         medium = {"preset": args.medium}
@@ -178,6 +173,8 @@ def main() -> None:
                            for name in ("skin", "reference"))
     else:
         skin, reference = render_pair(args, medium)
+    if args.reference:
+        reference = np.asarray(read_image(args.reference), np.float64)
     if args.out:
         os.makedirs(args.out, exist_ok=True)
         write_image(os.path.join(args.out, "skin.exr"), skin.astype(np.float32))

@@ -43,9 +43,11 @@ import numpy as np
 ONE_MINUS_ALPHA = np.geomspace(0.6, 0.003, 20)
 #: Bin edges in mean free paths: fine near the spot, log-spaced beyond.
 EDGES = np.geomspace(0.2, 60.0, 73)
-#: The tables: a focused spot with and without a boundary (skin, and the index-matched
-#: check), and a Lambertian source on skin (the path-traced slabs' contact light).
-TABLES = (("searchlight", 1.0), ("searchlight", 1.3), ("diffuse", 1.3))
+#: The tables, (incidence, eta, Beckmann roughness; 0 smooth): a focused spot with and
+#: without a boundary (skin, and the index-matched check), and a Lambertian source on skin
+#: (the path-traced slabs' contact light) through a smooth and a rough (0.5, the scenes'
+#: default) boundary.
+TABLES = (("searchlight", 1.0, 0.0), ("searchlight", 1.3, 0.0), ("diffuse", 1.3, 0.0), ("diffuse", 1.3, 0.5))
 
 
 def fresnel(cos_i, eta):
@@ -126,6 +128,133 @@ def simulate(alpha, eta, incidence, photons, seed=0, batches=8):
             cameras.std(axis=0, ddof=1) / np.sqrt(batches))
 
 
+# --------------------------------------------------------------------------- a rough boundary
+# Walter, Marschner, Li & Torrance 2007, "Microfacet Models for Refraction through Rough
+# Surfaces": Beckmann normals sampled in proportion to D(m) cos(theta_m), Smith's shadowing
+# (its exact Beckmann form, as Mitsuba's roughdielectric), the Fresnel term at the
+# microfacet. Directions are (x, y, z) with z the depth (into the medium).
+
+
+def _beckmann_normals(n, roughness, rng, sign):
+    tan2 = -roughness**2 * np.log1p(-rng.random(n))
+    cos_t = 1.0 / np.sqrt(1.0 + tan2)
+    sin_t = np.sqrt(1.0 - cos_t**2)
+    phi = 2.0 * np.pi * rng.random(n)
+    return np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), sign * cos_t], axis=-1)
+
+
+def _smith_g1(cos_v, roughness):
+    from scipy.special import erf
+
+    cos_v = np.clip(np.abs(cos_v), 1e-9, 1.0)
+    tan = np.sqrt(1.0 - cos_v**2) / cos_v
+    a = 1.0 / np.maximum(roughness * tan, 1e-12)
+    lam = np.where(a < 1e6, 0.5 * (erf(a) - 1.0) + np.exp(-a * a) / (2.0 * a * np.sqrt(np.pi)), 0.0)
+    return 1.0 / (1.0 + lam)
+
+
+def _beckmann_d(cos_m, roughness):
+    c2 = cos_m**2
+    return np.exp(-(1.0 - c2) / (c2 * roughness**2)) / (np.pi * roughness**2 * c2**2)
+
+
+def _dot(a, b):
+    return np.sum(a * b, axis=-1)
+
+
+def _cross_in(d, eta, roughness, rng):
+    """Light arriving from outside along ``d`` (z > 0): ``(weight factor, direction inside)``."""
+    i = -d
+    m = _beckmann_normals(d.shape[0], roughness, rng, -1.0)
+    c = _dot(i, m)
+    eta_r = 1.0 / eta
+    f = fresnel(np.clip(c, 0.0, 1.0), eta_r)
+    root = np.sqrt(np.clip(1.0 + eta_r**2 * (c**2 - 1.0), 0.0, None))
+    t = (eta_r * c - root)[:, None] * m - eta_r * i
+    ok = (c > 0) & (t[:, 2] > 0)
+    g = _smith_g1(i[:, 2], roughness) * _smith_g1(t[:, 2], roughness)
+    weight = np.where(ok, (1.0 - f) * c * g / (np.abs(i[:, 2]) * np.abs(m[:, 2])), 0.0)
+    return weight, t
+
+
+def _camera_rough(pos, w, alpha, eta, roughness, rng):
+    """Each collision's share of the camera's reading through a rough boundary: ``(r, value)``.
+
+    A microfacet normal ``h`` is drawn from ``D(h) cos``, the inside direction ``i`` that
+    refracts through it straight up to the camera follows, and the ray from the collision
+    back along ``i`` meets the surface at distance ``r`` from the spot. Divided by the
+    density of ``i``, Walter's BTDF leaves ``(1 - F(i.h)) G1(i) / (eta^2 i_z)``; the ray's
+    transmittance is ``exp(-z / i_z)`` (smooth limit: the vertical estimate of :func:`simulate`).
+    """
+    h = _beckmann_normals(pos.shape[0], roughness, rng, 1.0)
+    s = h[:, 2] - np.sqrt(h[:, 2] ** 2 + eta**2 - 1.0)
+    i = (np.array([0.0, 0.0, 1.0]) - s[:, None] * h) / eta
+    ih = _dot(i, h)
+    ok = (i[:, 2] > 1e-6) & (ih > 0)
+    iz = np.where(ok, i[:, 2], 1.0)
+    length = pos[:, 2] / iz
+    x = pos[:, 0] - length * i[:, 0]
+    y = pos[:, 1] - length * i[:, 1]
+    value = (w * alpha / (4.0 * np.pi) * np.exp(-length) * (1.0 - fresnel(np.clip(ih, 0.0, 1.0), eta))
+             * _smith_g1(iz, roughness) / (eta**2 * iz))
+    return np.hypot(x, y), np.where(ok, value, 0.0)
+
+
+def simulate_rough(alpha, eta, incidence, photons, roughness, seed=0, batches=8):
+    """As :func:`simulate` (no exitance) with a rough (Beckmann) boundary (:func:`_camera_rough`)."""
+    rng = np.random.default_rng(seed)
+    cameras = []
+    for _ in range(batches):
+        n = photons // batches
+        camera = np.zeros(EDGES.size - 1)
+        cameras.append(camera)
+        if incidence == "searchlight":
+            d = np.tile([0.0, 0.0, 1.0], (n, 1))
+        else:
+            mu = np.sqrt(rng.random(n))
+            phi = 2 * np.pi * rng.random(n)
+            s = np.sqrt(1.0 - mu**2)
+            d = np.stack([s * np.cos(phi), s * np.sin(phi), mu], axis=-1)
+        w, d = _cross_in(d, eta, roughness, rng)
+        pos = np.zeros((n, 3))
+        while n:
+            t = -np.log(rng.random(n))
+            z_new = pos[:, 2] + d[:, 2] * t
+            out = z_new < 0.0
+            tt = np.where(out, -pos[:, 2] / np.where(out, d[:, 2], -1.0), t)
+            pos = pos + d * tt[:, None]
+            pos[out, 2] = 0.0
+            # At the boundary: reflection (or leaving).
+            i = -d[out]
+            m = _beckmann_normals(i.shape[0], roughness, rng, 1.0)
+            c = _dot(i, m)
+            f = fresnel(np.clip(c, 0.0, 1.0), eta)
+            o = 2.0 * c[:, None] * m - i
+            reflect = (rng.random(i.shape[0]) < f) & (c > 0) & (o[:, 2] > 0)
+            g = _smith_g1(i[:, 2], roughness) * _smith_g1(o[:, 2], roughness)
+            w_out = np.where(reflect, w[out] * c * g / (np.abs(i[:, 2]) * np.abs(m[:, 2])), 0.0)
+            d[out] = o
+            w[out] = w_out
+            # Collisions: the camera's reading, then scattering.
+            hit = ~out
+            r, value = _camera_rough(pos[hit], w[hit], alpha, eta, roughness, rng)
+            camera += np.histogram(r, EDGES, weights=value)[0]
+            w = np.where(hit, w * alpha, w)
+            cz = 2.0 * rng.random(n) - 1.0
+            p = 2.0 * np.pi * rng.random(n)
+            s = np.sqrt(1.0 - cz * cz)
+            d[hit] = np.stack([s * np.cos(p), s * np.sin(p), cz], axis=-1)[hit]
+            low = w < 1e-3
+            survive = rng.random(n) < 0.2
+            w = np.where(low, np.where(survive, w * 5.0, 0.0), w)
+            keep = w > 0.0
+            pos, d, w = pos[keep], d[keep], w[keep]
+            n = int(keep.sum())
+    area = np.pi * (EDGES[1:] ** 2 - EDGES[:-1] ** 2) * (photons // batches)
+    cameras = np.pi * np.array(cameras) / area
+    return None, cameras.mean(axis=0), cameras.std(axis=0, ddof=1) / np.sqrt(batches)
+
+
 def smooth_log(values, stderr, half_width=2.5):
     """Local weighted quadratic regression of ``log values`` over ``log rho``, bin by bin.
 
@@ -165,7 +294,7 @@ def _write(path, tables):
     lines = [
         '"""Monte Carlo tables of the camera reading around a spot (made by experiments/searchlight_transport.py).',
         "",
-        "Do not edit: rerun the script. ``LOG_READING[(incidence, eta)][i][j]`` is",
+        "Do not edit: rerun the script. ``LOG_READING[(incidence, eta, roughness)][i][j]`` is",
         "``log(pi L / sigma_t^2)`` at ``RHO[j]`` mean free paths for ``1 - alpha = ONE_MINUS_ALPHA[i]``.",
         '"""',
         "",
@@ -180,7 +309,7 @@ def _write(path, tables):
     for key, table in tables.items():
         lines.append(f"    {key!r}: [")
         for row in table:
-            block = _numbers(row, 4, "        ")
+            block = _numbers(row, 3, "        ")
             block[-1] += ","
             lines += block
         lines.append("    ],")
@@ -193,6 +322,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--photons", type=int, default=400_000)
     parser.add_argument("--check", action="store_true")
+    parser.add_argument("--only", default=None, metavar="INCIDENCE:ETA:ROUGHNESS",
+                        help="make one table, e.g. diffuse:1.3:0.5 (its module holds only it)")
     parser.add_argument("--out", default=os.path.join(os.path.dirname(__file__), "..", "invsss",
                                                       "measurement", "transport_table.py"))
     args = parser.parse_args()
@@ -207,12 +338,18 @@ def main() -> None:
                   f"{smooth[j] / cam[j]:.3f}  pi L / exitance {cam[j] / ex[j]:.3f}")
         return
     tables = {}
-    for incidence, eta in TABLES:
+    for incidence, eta, roughness in TABLES:
+        if args.only and args.only != f"{incidence}:{eta}:{roughness}":
+            continue
         t0 = time.perf_counter()
-        rows = [smooth_log(*simulate(1.0 - m, eta, incidence, args.photons, seed=k)[1:])
-                for k, m in enumerate(ONE_MINUS_ALPHA)]
-        tables[(incidence, eta)] = rows
-        print(f"{incidence} eta {eta}: {time.perf_counter() - t0:.0f} s", flush=True)
+        if roughness:
+            rows = [smooth_log(*simulate_rough(1.0 - m, eta, incidence, args.photons, roughness, seed=k)[1:])
+                    for k, m in enumerate(ONE_MINUS_ALPHA)]
+        else:
+            rows = [smooth_log(*simulate(1.0 - m, eta, incidence, args.photons, seed=k)[1:])
+                    for k, m in enumerate(ONE_MINUS_ALPHA)]
+        tables[(incidence, eta, roughness)] = rows
+        print(f"{incidence} eta {eta} roughness {roughness}: {time.perf_counter() - t0:.0f} s", flush=True)
     _write(args.out, tables)
 
 

@@ -12,6 +12,7 @@ import numpy as np
 from ..io import read_image
 from ..measurement.medium_fit import MODEL_NAMES
 from ..measurement.transport_profile import TRANSPORT_ETAS
+from ..measurement.transport_table import ONE_MINUS_ALPHA
 from ..runtime.interrupts import StopSignals
 from ..validation import InvalidInputError
 
@@ -155,8 +156,10 @@ def _fit_medium(measured, args):
             raise InvalidInputError(
                 f"{args.skin}: only {np.count_nonzero(keep)} trusted sample(s) in channel {c} "
                 f"({'; '.join(trusted.reasons)}); lower --min-snr or --lit-radius-mm")
+        # A noise-free image's bins can have no scatter at all: floor the error at 1e-6 of R.
+        floor = np.maximum(errors[keep, c], 1e-6 * columns[keep, c])
         fits.append(fit_medium(measured.r_mm[keep], columns[keep, c], model=args.model, eta=args.eta,
-                               stderr=errors[keep, c]))
+                               stderr=floor))
     if single:
         return fits[0], trusted
     stacked = {k: np.array([getattr(f, k) for f in fits]) for k in MediumFit.__dataclass_fields__
@@ -169,7 +172,15 @@ def _medium_lines(medium, trusted):
         v, e = np.atleast_1d(value), np.atleast_1d(error)
         return ", ".join(f"{a:.{digits}f} +- {b:.{digits}f}" for a, b in zip(v, e))
 
-    return [
+    lines = []
+    if medium.model.startswith("transport"):
+        alpha = np.atleast_1d(medium.sigma_s_prime) / (np.atleast_1d(medium.sigma_s_prime)
+                                                       + np.atleast_1d(medium.sigma_a))
+        low, high = 1.0 - max(ONE_MINUS_ALPHA), 1.0 - min(ONE_MINUS_ALPHA)
+        if np.any((alpha < low) | (alpha > high)):
+            lines.append(f"note: albedo {', '.join(f'{a:.4f}' for a in alpha)} lies outside the transport "
+                         f"table's {low:.3f}-{high:.3f}: the reading there is extrapolated")
+    return lines + [
         f"medium ({medium.model}, eta {medium.eta:g}): sigma_s' {pm(medium.sigma_s_prime, medium.sigma_s_prime_stderr, 4)} "
         f"/mm, sigma_a {pm(medium.sigma_a, medium.sigma_a_stderr, 5)} /mm",
         f"Burley: d {pm(medium.burley_d, medium.burley_d_stderr, 3)} mm, albedo "

@@ -129,7 +129,7 @@ def _fit_channel(model_name, r, y, stderr, eta):
     cov = np.linalg.pinv(J.T @ J) * scale  # of log sigma
     sigma = np.exp(p)
     sigma_err = sigma * np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    illumination = "diffuse" if model_name.endswith("-diffuse") else "searchlight"
+    illumination = "diffuse" if "-diffuse" in model_name else "searchlight"
     burley = np.asarray(_burley_of(jnp.asarray(p), illumination))
     b_jac = np.asarray(jax.jacfwd(_burley_of)(jnp.asarray(p), illumination))
     burley_err = np.sqrt(np.clip(np.diag(b_jac @ cov @ b_jac.T), 0.0, None))

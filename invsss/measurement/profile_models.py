@@ -49,7 +49,7 @@ import numpy as np
 
 from ..forward.profiles import burley as _burley_profile
 from ..forward.profiles import jensen_dipole
-from .transport_profile import transport_diffuse, transport_searchlight
+from .transport_profile import transport_diffuse, transport_diffuse_rough, transport_searchlight
 
 __all__ = [
     "ILLUMINATIONS",
@@ -239,11 +239,12 @@ def photon_beam(r, sigma_s_prime, sigma_a, eta=1.3):
 
 
 #: Models by name: ``f(r, sigma_s', sigma_a, eta) -> R(r)`` in mm^-2. The published
-#: ones give the exitance; ``transport`` and ``transport-diffuse`` give what a camera on
-#: the spot's axis reads (:mod:`invsss.measurement.transport_profile`).
+#: ones give the exitance; ``transport``, ``transport-diffuse`` and ``transport-diffuse-rough``
+#: give what a camera on the spot's axis reads (:mod:`invsss.measurement.transport_profile`).
 PROFILE_MODELS = {
     "transport": transport_searchlight,
     "transport-diffuse": transport_diffuse,
+    "transport-diffuse-rough": transport_diffuse_rough,
     "burley": burley_searchlight,
     "burley-diffuse": burley_diffuse,
     "photon-beam": photon_beam,

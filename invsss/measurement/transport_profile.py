@@ -14,7 +14,9 @@ This model is the camera's reading itself, from a Monte Carlo of the transport
 medium with a smooth boundary of relative index ``eta`` (1.0 or 1.3 tabulated), lit
 at a point by a pencil beam along the normal (``"searchlight"``: a focused spot
 light, as in the thesis) or by light from all directions (``"diffuse"``: a
-Lambertian source on the surface), per unit incident power. Lengths scale with the
+Lambertian source on the surface), per unit incident power; and the diffuse case
+through a rough boundary (Beckmann 0.5, Walter et al. 2007's microfacet refraction, the
+default boundary of the path-traced scenes). Lengths scale with the
 mean free path: a medium of extinction ``sigma_t = sigma_s' + sigma_a`` and albedo
 ``alpha = sigma_s' / sigma_t`` reads ``sigma_t^2 T_alpha(sigma_t r)``. The table is
 interpolated linearly in ``log(sigma_t r)`` and with Catmull-Rom cubics in
@@ -27,15 +29,20 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from . import transport_table
+from . import transport_table, transport_table_rough
 
-__all__ = ["TRANSPORT_ETAS", "transport_reading", "transport_searchlight", "transport_diffuse"]
+__all__ = ["TRANSPORT_ETAS", "transport_reading", "transport_searchlight", "transport_diffuse",
+           "transport_diffuse_rough"]
 
 _LOG_RHO = np.log(np.asarray(transport_table.RHO))
 _LOG_ONE_MINUS_ALPHA = np.log(np.asarray(transport_table.ONE_MINUS_ALPHA))
-_TABLES = {key: np.asarray(rows) for key, rows in transport_table.LOG_READING.items()}
+# Keys (incidence, eta, Beckmann roughness of the boundary; 0 smooth).
+_TABLES = {(key + (0.0,))[:3]: np.asarray(rows) for module in (transport_table, transport_table_rough)
+           for key, rows in module.LOG_READING.items()}
+assert all(np.allclose(m.RHO, transport_table.RHO) and np.allclose(m.ONE_MINUS_ALPHA, transport_table.ONE_MINUS_ALPHA)
+           for m in (transport_table_rough,)), "the transport tables must share their grid"
 #: The boundaries tabulated: relative indices of refraction.
-TRANSPORT_ETAS = tuple(sorted({eta for _, eta in _TABLES}))
+TRANSPORT_ETAS = tuple(sorted({eta for _, eta, _ in _TABLES}))
 
 
 def _cell(grid, x):
@@ -49,19 +56,21 @@ def _catmull_rom(p0, p1, p2, p3, t):
     return p1 + 0.5 * t * (p2 - p0 + t * (2 * p0 - 5 * p1 + 4 * p2 - p3 + t * (3 * (p1 - p2) + p3 - p0)))
 
 
-def _table(incidence, eta):
+def _table(incidence, eta, roughness):
     try:
         eta = float(eta)
     except TypeError:
         raise ValueError("eta: the transport model needs a concrete eta (one of its tables)") from None
-    for (name, tabulated), table in _TABLES.items():
-        if name == incidence and abs(tabulated - eta) < 1e-6:
+    for (name, tabulated, rough), table in _TABLES.items():
+        if name == incidence and abs(tabulated - eta) < 1e-6 and abs(rough - roughness) < 1e-6:
             return table
-    raise ValueError(f"eta: the transport model has tables for eta {', '.join(map(str, TRANSPORT_ETAS))} "
-                     f"({incidence}), got {eta:g}")
+    have = ", ".join(f"{e:g}" for n, e, g in _TABLES if n == incidence and abs(g - roughness) < 1e-6)
+    raise ValueError(f"eta: the transport model has tables for eta {have or 'none'} ({incidence}, "
+                     f"roughness {roughness:g}), got {eta:g}")
 
 
-def transport_reading(r, sigma_s_prime, sigma_a, eta=1.3, incidence: str = "searchlight"):
+def transport_reading(r, sigma_s_prime, sigma_a, eta=1.3, incidence: str = "searchlight",
+                      roughness: float = 0.0):
     """The camera's reading ``pi L(r)`` in mm^-2 per unit incident power.
 
     Parameters
@@ -74,12 +83,14 @@ def transport_reading(r, sigma_s_prime, sigma_a, eta=1.3, incidence: str = "sear
         Relative index of the boundary: one of :data:`TRANSPORT_ETAS`.
     incidence : {"searchlight", "diffuse"}
         How the light enters.
+    roughness : float
+        Beckmann roughness of the boundary: 0 (smooth) or a tabulated one (0.5, diffuse).
 
     Returns
     -------
     array, shape (*N, *C)
     """
-    table = jnp.asarray(_table(incidence, eta))
+    table = jnp.asarray(_table(incidence, eta, roughness))
     s, a = jnp.asarray(sigma_s_prime, dtype=jnp.result_type(float)), jnp.asarray(sigma_a, dtype=jnp.result_type(float))
     shape = jnp.broadcast_shapes(s.shape, a.shape)
     r = jnp.asarray(r, dtype=s.dtype)
@@ -114,3 +125,8 @@ def transport_searchlight(r, sigma_s_prime, sigma_a, eta=1.3):
 def transport_diffuse(r, sigma_s_prime, sigma_a, eta=1.3):
     """:func:`transport_reading` of a Lambertian source on the surface."""
     return transport_reading(r, sigma_s_prime, sigma_a, eta, "diffuse")
+
+
+def transport_diffuse_rough(r, sigma_s_prime, sigma_a, eta=1.3):
+    """:func:`transport_reading` of a Lambertian source through a rough boundary (Beckmann 0.5)."""
+    return transport_reading(r, sigma_s_prime, sigma_a, eta, "diffuse", 0.5)

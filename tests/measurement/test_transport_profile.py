@@ -12,7 +12,7 @@ ONE_MINUS_ALPHA = np.asarray(transport_table.ONE_MINUS_ALPHA)
 
 
 def test_the_table_nodes_are_read_exactly():
-    table = np.asarray(transport_table.LOG_READING[("searchlight", 1.3)])
+    table = np.asarray(transport_table.LOG_READING[("searchlight", 1.3, 0.0)])
     i, j = 7, np.arange(10, 40, 3)
     alpha = 1.0 - ONE_MINUS_ALPHA[i]
     with jax.enable_x64(True):
