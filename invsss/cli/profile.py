@@ -11,7 +11,7 @@ import numpy as np
 
 from ..io import read_image
 from ..measurement.medium_fit import MODEL_NAMES
-from ..measurement.transport_profile import TRANSPORT_ETAS
+from ..measurement.profile_models import PROFILE_MODELS
 from ..measurement.transport_table import ONE_MINUS_ALPHA
 from ..runtime.interrupts import StopSignals
 from ..validation import InvalidInputError
@@ -67,8 +67,9 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--model", default="transport", choices=list(MODEL_NAMES),
                         help="profile model of the medium fit (default: transport, what a camera "
                         "on the axis of a focused spot reads; transport-diffuse for a diffuse "
-                        "source on the skin; the published ones give the exitance and misread "
-                        "a photograph: docs/capture.md, 'The spot measurement')")
+                        "source on the skin, transport-diffuse-rough through a rough (Beckmann "
+                        "0.5) surface; the published ones give the exitance and misread a "
+                        "photograph: docs/capture.md, 'The spot measurement')")
     parser.add_argument("--min-snr", type=float, default=3.0, metavar="SNR",
                         help="noise floor: trust samples out to where R / stderr falls below "
                         "this (default: 3)")
@@ -85,10 +86,11 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
         raise InvalidInputError(f"{args.out}: already exists; remove it or choose another --out")
     if not os.path.isdir(os.path.dirname(os.path.abspath(args.out))):
         raise InvalidInputError(f"{args.out}: cannot write, its directory does not exist")
-    if args.model.startswith("transport") and not any(abs(args.eta - e) < 1e-6 for e in TRANSPORT_ETAS):
-        raise InvalidInputError(f"--eta: the {args.model} model is tabulated for eta "
-                                f"{', '.join(map(str, TRANSPORT_ETAS))}, got {args.eta:g}; give one of "
-                                "them or another --model")
+    try:  # before reading anything: the transport models have tables for some eta only
+        PROFILE_MODELS[args.model](np.ones(1), 1.0, 0.1, args.eta)
+    except ValueError as error:
+        raise InvalidInputError(f"--eta: {str(error).removeprefix('eta: ')} (--model {args.model}); give a tabulated eta "
+                                "or another --model") from None
     skin = read_image(args.skin, linear=args.linear_codes)
     reference = read_image(args.reference, linear=args.linear_codes)
     options = dict(

@@ -22,7 +22,6 @@ import numpy as np
 
 from ..validation import InvalidInputError
 from .profile_models import PROFILE_MODELS, burley_parameters
-from .transport_profile import TRANSPORT_ETAS
 
 __all__ = ["MediumFit", "fit_medium", "MODEL_NAMES"]
 
@@ -160,9 +159,10 @@ def _check(r_mm, reflectance, stderr, model, eta):
         eta = float("nan")
     if not (np.isfinite(eta) and eta >= 1.0):
         raise InvalidInputError(f"eta: expected a finite number >= 1, got {eta!r}")
-    if model.startswith("transport") and not any(abs(eta - e) < 1e-6 for e in TRANSPORT_ETAS):
-        raise InvalidInputError(f"eta: the {model} model is tabulated for eta "
-                                f"{', '.join(map(str, TRANSPORT_ETAS))}, got {eta:g}")
+    try:  # the transport models have tables for some boundaries only
+        PROFILE_MODELS[model](np.ones(1), 1.0, 0.1, eta)
+    except ValueError as error:
+        raise InvalidInputError(f"{error} (model {model})") from None
     return r, y, stderr, eta
 
 

@@ -96,6 +96,8 @@ def test_bad_inputs_are_named():
         fit_medium(R, y, stderr=np.zeros_like(y))
     with pytest.raises(InvalidInputError, match="^eta: expected a finite number >= 1"):
         fit_medium(R, y, eta=0.5)
+    with pytest.raises(InvalidInputError, match="^eta: the transport model has tables for eta 1.3 "):
+        fit_medium(R, y, model="transport-diffuse", eta=1.0)
     with pytest.raises(InvalidInputError, match="^reflectance: expected finite values > 0"):
         fit_medium(R, -y)
     with pytest.raises(InvalidInputError, match="^r_mm: expected at least 3"):
