@@ -73,6 +73,10 @@ def add_parser(subparsers) -> None:
     parser.add_argument("--min-snr", type=float, default=3.0, metavar="SNR",
                         help="noise floor: trust samples out to where R / stderr falls below "
                         "this (default: 3)")
+    parser.add_argument("--format", default=None, choices=["hdrp", "unreal"],
+                        help="also write the engine's profile values of the measured medium under "
+                        "\"fit\".\"engine\": HDRP's Diffusion Profile (Burley's d) or Unreal's "
+                        "Subsurface Profile (d and the surface albedo), as `invsss export` writes them")
     parser.add_argument("--linear-codes", action="store_true",
                         help="8/16-bit codes are linear, not sRGB")
     parser.set_defaults(func=run)
@@ -121,6 +125,8 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
                                 "r_max_mm": np.asarray(trusted.r_max_mm).tolist(),
                                 "trusted": list(trusted.reasons)}
     content["fit"]["dipole"] = dipole.to_dict()
+    if args.format:
+        content["fit"]["engine"] = _engine_fields(medium, args.format)
     content["fit"]["measurement"] = {
         "mm_per_pixel": args.mm_per_pixel, "centre": list(measured.centre),
         "spot_area_mm2": spot_area, "lit_area_mm2": measured.lit_area_mm2,
@@ -138,7 +144,24 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
           f"wrote {args.out}")
     for line in _medium_lines(medium, trusted):
         print(line)
+    if args.format:
+        print(f"{args.format}: {json.dumps(content['fit']['engine']['fields'])}")
     return 0
+
+
+def _engine_fields(medium, format):
+    """The engine's profile values of the measured medium: Burley's d (and albedo for Unreal)."""
+    from ..io.engine_profiles import hdrp_profile, unreal_profile
+
+    d = np.atleast_1d(np.asarray(medium.burley_d, np.float64))
+    if format == "hdrp":
+        fields = hdrp_profile(d)
+    else:
+        fields = unreal_profile(d, albedo=np.clip(np.atleast_1d(medium.burley_albedo), 0.01, 1.0))
+    return {"format": format, "fields": fields, "burley_d_mm": d.tolist(),
+            "burley_albedo": np.atleast_1d(medium.burley_albedo).tolist(),
+            "note": "d and the albedo of the measured medium (Burley's searchlight fits); the scene's "
+                    "unit (worldScale, WorldUnitScale) is the default, set it for your scene"}
 
 
 def _fit_medium(measured, args):

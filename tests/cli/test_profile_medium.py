@@ -90,3 +90,28 @@ def test_profile_refuses_an_eta_without_a_table(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert code == 2
     assert "eta" in err and "1.3" in err and "\n" not in err
+
+
+@pytest.mark.slow
+def test_profile_writes_engine_values_the_engines_read_as_the_measured_medium(tmp_path, capsys):
+    from invsss.io.engine_readings import hdrp_reading, unreal_reading
+
+    skin, reference = _photographs("transport", 0.0)
+    invsss.write_image(tmp_path / "skin.exr", skin.astype(np.float32))
+    invsss.write_image(tmp_path / "ref.exr", reference.astype(np.float32))
+    readers = {"hdrp": hdrp_reading, "unreal": unreal_reading}
+    for engine, reader in readers.items():
+        out = tmp_path / f"{engine}.json"
+        assert main(["profile", str(tmp_path / "skin.exr"), str(tmp_path / "ref.exr"), "--mm-per-pixel",
+                     str(PITCH), "--filter-factor", "1", "--lit-radius-mm", "1.5", "--max-radius-mm", "8",
+                     "--format", engine, "--out", str(out)]) == 0
+        fit = json.loads(out.read_text())["fit"]
+        # What the engine renders from the written fields is Burley's d of the measured medium.
+        np.testing.assert_allclose(reader(fit["engine"]["fields"]), fit["medium"]["burley_d"][0], rtol=1e-6)
+        assert f"{engine}: " in capsys.readouterr().out
+    # And that d is the true medium's, through Burley's published fits.
+    from invsss.measurement.profile_models import burley_parameters
+
+    with jax.enable_x64(True):
+        _, d_true = burley_parameters(*MEDIUM)
+    assert abs(fit["medium"]["burley_d"][0] / float(d_true) - 1) < 0.02
