@@ -26,12 +26,6 @@ IDENTITY = {"light_shift": 0.0, "grazing": 0.0, "incidence": 0.0, "law_strength"
 #: A term set that scores this much (dB) below the plain fit on the fit's own
 #: mask is not kept: the plain fit is returned, with every term at its identity.
 WORSE_THAN_PLAIN_DB = 0.0
-#: The scan's starts the fit with the terms takes besides the plain fit's estimate
-#: (the plain fit takes ``n_starts``): the plain fit has searched the blur's basins.
-#: Measured on path-traced pairs (issue 49, docs/model.md): the same PSNR as with
-#: four. Carrying no second basin through the robust rounds as well cost the tuning
-#: ear's transmission fit 1.1 dB, and so did starting from the plain fit's active set.
-TERM_STARTS = 1
 #: A term that adds less than this (dB) to the fit's PSNR, measured by setting it
 #: to its identity in the final fit, is reported as not describing the pair.
 NEGLIGIBLE_DB = 0.05
@@ -43,8 +37,7 @@ def with_light_terms(inner: Fit) -> Fit:
     The terms nest the plain model (each has a value that is the identity): the
     plain model is fitted first, and its estimate, every term at its identity, is
     the start the fit with the terms keeps among its best, so that its loss ends at
-    or below the plain fit's. The fit with the terms takes that start and the scan's
-    best (:data:`TERM_STARTS`). :func:`against_plain` then measures what each term
+    or below the plain fit's. :func:`against_plain` then measures what each term
     added and falls back to the plain fit when the terms scored below it. A call
     with its own ``start`` (an alignment round after the first) skips the plain fit.
     """
@@ -61,11 +54,8 @@ def with_light_terms(inner: Fit) -> Fit:
             # The report it was given (the warp's sensitivity, say), then the comparison.
             return against_plain(solved.problem, solved.path, call.report(solved, **given), plain)
 
-        # The plain fit searched the blur's basins; the terms' scan adds its best start
-        # (a term whose identity is a stationary point, the transmission's tint, needs one).
-        extended = dataclasses.replace(options, n_starts=min(options.n_starts, TERM_STARTS))
-        return inner(dataclasses.replace(call, options=extended, report=compared,
-                                         start=Start({**estimate_of(plain), **IDENTITY}, with_scan=True)))
+        return inner(dataclasses.replace(call, start=Start({**estimate_of(plain), **IDENTITY}, with_scan=True),
+                                         report=compared))
 
     return fit
 
