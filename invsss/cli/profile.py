@@ -93,8 +93,9 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
     try:  # before reading anything: the transport models have tables for some eta only
         PROFILE_MODELS[args.model](np.ones(1), 1.0, 0.1, args.eta)
     except ValueError as error:
-        raise InvalidInputError(f"--eta: {str(error).removeprefix('eta: ')} (--model {args.model}); give a tabulated eta "
-                                "or another --model") from None
+        why = str(error).removeprefix("eta: ")
+        raise InvalidInputError(
+            f"--eta: {why} (--model {args.model}); give a tabulated eta or another --model") from None
     skin = read_image(args.skin, linear=args.linear_codes)
     reference = read_image(args.reference, linear=args.linear_codes)
     options = dict(
@@ -206,8 +207,9 @@ def _medium_lines(medium, trusted):
             lines.append(f"note: albedo {', '.join(f'{a:.4f}' for a in alpha)} lies outside the transport "
                          f"table's {low:.3f}-{high:.3f}: the reading there is extrapolated")
     return lines + [
-        f"medium ({medium.model}, eta {medium.eta:g}): sigma_s' {pm(medium.sigma_s_prime, medium.sigma_s_prime_stderr, 4)} "
-        f"/mm, sigma_a {pm(medium.sigma_a, medium.sigma_a_stderr, 5)} /mm",
+        f"medium ({medium.model}, eta {medium.eta:g}): "
+        f"sigma_s' {pm(medium.sigma_s_prime, medium.sigma_s_prime_stderr, 4)} /mm, "
+        f"sigma_a {pm(medium.sigma_a, medium.sigma_a_stderr, 5)} /mm",
         f"Burley: d {pm(medium.burley_d, medium.burley_d_stderr, 3)} mm, albedo "
         f"{pm(medium.burley_albedo, medium.burley_albedo_stderr, 3)}; reduced chi2 "
         f"{', '.join(f'{v:.2f}' for v in np.atleast_1d(medium.reduced_chi2))}",

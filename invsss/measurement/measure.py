@@ -93,7 +93,7 @@ class MeasuredProfile(eqx.Module):
     lit_area_mm2: float = eqx.field(static=True)
     lit_radius_mm: float = eqx.field(static=True)
     centre: tuple = eqx.field(static=True)
-    reflectance_stderr: np.ndarray = None
+    reflectance_stderr: np.ndarray | None = None
     spot_area_mm2: float | None = eqx.field(static=True, default=None)
 
     def fit(self, num_gaussians: int = 3, **kwargs) -> ProfileFit:

@@ -15,6 +15,8 @@ Burley's). Concrete data: NumPy and SciPy around JAX models.
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -217,4 +219,5 @@ def fit_medium(r_mm, reflectance, *, model: str = "transport", eta: float = 1.3,
             for c in range(columns.shape[1])
         ])
     pick = (lambda a: a[0]) if y.ndim == 1 else (lambda a: a)  # noqa: E731
-    return MediumFit(*(pick(fits[:, k]) for k in range(10)), model=model, eta=eta)
+    arrays = [f.name for f in dataclasses.fields(MediumFit)][:10]  # the fields before model and eta
+    return MediumFit(**{name: pick(fits[:, k]) for k, name in enumerate(arrays)}, model=model, eta=eta)
