@@ -202,6 +202,9 @@ def test_ctrl_c_at_any_moment_of_the_start_is_one_line_and_status_130(photos, tm
         reader = threading.Thread(target=read)
         reader.start()
         assert reached.wait(60)
+        # The reader also sets it when the stream ends: a child already gone here never
+        # showed the import (seen once in CI, where it then finished the fit with status 0).
+        assert child.poll() is None, (command[-1], after, "ended before the import was seen", lines[-3:])
         time.sleep(delay)
         child.send_signal(signal.SIGINT)
         child.wait(timeout=120)
