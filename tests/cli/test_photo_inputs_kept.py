@@ -186,8 +186,16 @@ def test_ctrl_c_at_any_moment_of_the_start_is_one_line_and_status_130(photos, tm
     for k, (command, after, delay) in enumerate(_cases()):
         out = tmp_path / f"run{k}"
         env = {**os.environ, "PYTHONPROFILEIMPORTTIME": "1"}
-        child = subprocess.Popen([*command, *_fit_args(photos, out, "--distance", "600")], cwd=ROOT, env=env,
-                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        # The child starts with SIGINT at its default, as a terminal's shell starts a
+        # command: an ignored SIGINT is inherited, and this test process may have been
+        # left with one by an earlier test in the same worker (seen in CI: the child then
+        # ignored the early signal and finished the fit with status 0).
+        previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+        try:
+            child = subprocess.Popen([*command, *_fit_args(photos, out, "--distance", "600")], cwd=ROOT, env=env,
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        finally:
+            signal.signal(signal.SIGINT, previous)
         lines, reached = [], threading.Event()
 
         def read(stream=child.stderr, lines=lines, reached=reached, after=after):
