@@ -39,6 +39,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..validation import InvalidInputError
+from .asset_values import positive as _positive
+from .asset_values import shape_parameters as _distances
+from .asset_values import transmission_term
 
 __all__ = [
     "ENGINE_FORMATS",
@@ -112,24 +115,6 @@ def searchlight_scaling(albedo):
     return 3.5 + 100.0 * (a - 0.33) ** 4
 
 
-def _distances(d, name="d") -> np.ndarray:
-    d = np.asarray(d, np.float64).reshape(-1)
-    if d.size not in (1, 3) or not np.all(np.isfinite(d)) or np.any(d <= 0):
-        raise InvalidInputError(f"{name}: expected one or three shape parameters > 0 (mm), got {d.tolist()}",
-                                field=name)
-    return np.broadcast_to(d, (3,)).copy()
-
-
-def _positive(value, name) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: expected a number > 0, got {value!r}", field=name) from None
-    if not np.isfinite(x) or x <= 0:
-        raise InvalidInputError(f"{name}: expected a number > 0, got {value!r}", field=name)
-    return x
-
-
 def _colour_and_scale(d: np.ndarray) -> tuple[list, float]:
     # The engines' colour pickers hold [0, 1]: the widest channel is 1 and the scale carries it.
     scale = float(d.max())
@@ -174,18 +159,8 @@ def hdrp_transmission(tint, thickness_scale: float, d_mm, thickness_map_mm: floa
     >>> f["transmissionTint"], f["thicknessRemap"], f["transmissionMode"]
     ([0.6, 0.6, 0.6], [0.0, 2.5], 'ThinObject')
     """
-    tau = np.broadcast_to(np.asarray(tint, np.float64).reshape(-1), (3,))
-    if not np.all(np.isfinite(tau)) or np.any(tau < 0.0):
-        raise InvalidInputError(f"light_terms.transmission: expected a tint >= 0 per channel, got {tau.tolist()}")
-    k = _positive(thickness_scale, "light_terms.thickness_scale")
+    tau, k, d = transmission_term(tint, thickness_scale, d_mm, "HDRP's thickness remap")
     t_max = _positive(thickness_map_mm, "thickness_map_mm")
-    d = _distances(d_mm, "d_mm")
-    if np.ptp(d) > 1e-6 * d.max():
-        raise InvalidInputError(
-            f"light_terms: the transmission's thickness scale is one number, but Burley's d differs by channel "
-            f"({', '.join(f'{x:.4g}' for x in d)} mm) and HDRP's thickness remap is one per profile: export the "
-            "profile without the transmission, or fit a grey pair"
-        )
     return {"transmissionMode": "ThinObject", "transmissionTint": tau.tolist(),
             "thicknessRemap": [0.0, float(k * d[0] * t_max)]}
 

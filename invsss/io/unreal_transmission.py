@@ -37,6 +37,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..validation import InvalidInputError
+from .asset_values import transmission_term
 
 __all__ = ["unreal_transmission", "UNREAL_TRANSMISSION_RANGE_MM", "UNREAL_NORMAL_SCALE"]
 
@@ -116,19 +117,7 @@ def unreal_transmission(tint, thickness_scale: float, d_mm, world_unit_scale: fl
     >>> [round(x, 2) for x in match["renderedOverFitted"][0]]
     [0.99, 1.01]
     """
-    tau = np.broadcast_to(np.asarray(tint, np.float64).reshape(-1), (3,))
-    if not np.all(np.isfinite(tau)) or np.any(tau < 0.0):
-        raise InvalidInputError(f"light_terms.transmission: expected a tint >= 0 per channel, got {tau.tolist()}")
-    k = float(thickness_scale)
-    if not np.isfinite(k) or k <= 0.0:
-        raise InvalidInputError(f"light_terms.thickness_scale: expected a number > 0, got {thickness_scale!r}")
-    d = np.broadcast_to(np.asarray(d_mm, np.float64).reshape(-1), (3,))
-    if np.ptp(d) > 1e-6 * d.max():
-        raise InvalidInputError(
-            f"light_terms: the transmission's thickness scale is one number, but Burley's d differs by channel "
-            f"({', '.join(f'{x:.4g}' for x in d)} mm) and Unreal's ExtinctionScale is one per profile: export "
-            "the profile without the transmission, or fit a grey pair"
-        )
+    tau, k, d = transmission_term(tint, thickness_scale, d_mm, "Unreal's ExtinctionScale")
     low, high = (float(x) for x in thickness_range_mm)
     if not 0.0 < low < high:
         raise InvalidInputError(f"thickness_range_mm: expected 0 < low < high (mm), got {thickness_range_mm!r}")
