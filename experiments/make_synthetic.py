@@ -786,13 +786,13 @@ pt_fran_smooth_point_fill_940 renders it refined by two levels of Loop subdivisi
 
 **leeperrysmith, flat_card and the path-traced pt_face_940, pt_face_940_turned,
 pt_face_skin1, pt_face_ear_backlit_940, pt_face_rough_area_940, pt_face_rough_940,
-pt_face_ear_glow_940, pt_face_nose_sidelit_940 and twowave_face** use "Infinite, 3D
-Head Scan" by Lee Perry-Smith (Infinite-Realities, www.ir-ltd.net), based on a work at
-www.triplegangers.com, licensed under Creative Commons Attribution 3.0 Unported
-(https://creativecommons.org/licenses/by/3.0/); the licence note asks that users always
-say where they got the files. We took the glTF conversion `LeePerrySmith.glb` and its
-colour map `Map-COL.jpg` as distributed with the three.js examples
-(examples/models/gltf/LeePerrySmith/, via a verbatim copy in
+pt_face_ear_glow_940, pt_face_nose_sidelit_940, pt_face_nose_backlit_940 and
+twowave_face** use "Infinite, 3D Head Scan" by Lee Perry-Smith (Infinite-Realities,
+www.ir-ltd.net), based on a work at www.triplegangers.com, licensed under Creative
+Commons Attribution 3.0 Unported (https://creativecommons.org/licenses/by/3.0/); the
+licence note asks that users always say where they got the files. We took the glTF
+conversion `LeePerrySmith.glb` and its colour map `Map-COL.jpg` as distributed with the
+three.js examples (examples/models/gltf/LeePerrySmith/, via a verbatim copy in
 github.com/espisepi/t-shirt-configurator-espinaco). The licence note is copied in
 `LICENSES/LeePerrySmith_License.txt`.
 
@@ -898,6 +898,7 @@ PATH_TRACED = {
     "pt_face_ear_glow_940": "face_ear_glow_940.toml",
     "pt_proc_ear_glow_940": "proc_ear_glow_940.toml",
     "pt_face_nose_sidelit_940": "face_nose_sidelit_940.toml",
+    "pt_face_nose_backlit_940": "face_nose_backlit_940.toml",
 }
 
 PATH_TRACED_HEAD = """
