@@ -8,10 +8,12 @@ second the warm one (what a sweep worker pays after its first trial). It prints
 per pair the seconds of both, their ratios to the plain fit's, the solver steps
 and the fit's PSNR on its mask.
 
-    python experiments/bench_terms.py PAIR_DIR [PAIR_DIR ...] [--terms shift,law] [--json OUT]
+    python experiments/bench_terms.py PAIR_DIR [PAIR_DIR ...] [--terms shift,law] [--term-starts scan] [--json OUT]
 
 ``--terms`` takes term sets separated by ``;`` (``"shift,law;transmission"``); a
 set with ``transmission`` also reads ``thickness.exr`` and ``key_irradiance.exr``.
+``--term-starts`` sets the fit's ``term_starts`` (``auto``, the default, ``plain``
+or ``scan``; docs/model.md, section 8, "Where a term fit starts").
 ``--json`` writes the rows as well (one per pair and setting), to compare runs of
 two versions of the code: ``--compare A.json B.json`` prints B's PSNR less A's
 and B's times over A's per pair and setting.
@@ -33,7 +35,7 @@ BUFFERS = ("normal", "light", "key", "fill_light")
 TRANSMISSION_BUFFERS = ("thickness", "key_irradiance")
 
 
-def child(pair_dir: str, terms: str, cache_dir: str) -> None:
+def child(pair_dir: str, terms: str, cache_dir: str, term_starts: str) -> None:
     """One process: two fits of ``pair_dir`` with ``terms`` ('' for plain); JSON on stdout."""
     from invsss.runtime.compile_cache import enable_compile_cache
     from invsss.runtime.determinism import use_deterministic_scheduler
@@ -51,7 +53,7 @@ def child(pair_dir: str, terms: str, cache_dir: str) -> None:
         found = {n: read_image(os.path.join(pair_dir, f"{n}.exr"), linear=True,
                                grey=grey and n in ("key", "thickness", "key_irradiance"))
                  for n in names if os.path.exists(os.path.join(pair_dir, f"{n}.exr"))}
-        options = {"light_terms": terms, "light_buffers": LightBuffers(**found)}
+        options = {"light_terms": terms, "light_buffers": LightBuffers(**found), "term_starts": term_starts}
     runs = []
     for _ in range(2):
         t0 = time.perf_counter()
@@ -61,9 +63,9 @@ def child(pair_dir: str, terms: str, cache_dir: str) -> None:
     print(json.dumps({"pair": os.path.basename(pair_dir.rstrip("/")), "terms": terms, "runs": runs}))
 
 
-def measure(pair_dir: str, terms: str) -> dict:
+def measure(pair_dir: str, terms: str, term_starts: str) -> dict:
     with tempfile.TemporaryDirectory(prefix="invsss-bench-terms-") as cache:
-        done = subprocess.run([sys.executable, __file__, "--child", pair_dir, terms, cache],
+        done = subprocess.run([sys.executable, __file__, "--child", pair_dir, terms, cache, term_starts],
                               capture_output=True, text=True)
     if done.returncode != 0:
         raise SystemExit(f"bench_terms: the fit of {pair_dir} with {terms or 'no terms'!r} failed:\n"
@@ -71,20 +73,20 @@ def measure(pair_dir: str, terms: str) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def table(pair_dirs, term_sets, out=None) -> None:
+def table(pair_dirs, term_sets, term_starts="auto", out=None) -> None:
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"bench_terms: fit_pair with the CLI defaults, one fresh process per pair and setting (empty "
-          f"compilation cache); {os.cpu_count()} CPUs, load average {load:.1f}; seconds")
+          f"compilation cache); term_starts={term_starts}; {os.cpu_count()} CPUs, load average {load:.1f}; seconds")
     header = f"{'pair':32s} {'setting':16s} {'cold':>7s} {'warm':>7s} {'x cold':>7s} {'x warm':>7s} " \
              f"{'steps':>6s} {'PSNR':>7s}"
     print(header)
     print("-" * len(header))
     rows = []
     for pair_dir in pair_dirs:
-        plain = measure(pair_dir, "")
+        plain = measure(pair_dir, "", term_starts)
         rows.append(plain)
         base = plain["runs"]
-        for row in [plain] + [measure(pair_dir, terms) for terms in term_sets]:
+        for row in [plain] + [measure(pair_dir, terms, term_starts) for terms in term_sets]:
             if row is not plain:
                 rows.append(row)
             cold, warm = row["runs"]
@@ -114,9 +116,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("pairs", nargs="*", help="pair folders")
     parser.add_argument("--terms", default="shift,law", help="term sets separated by ';' (default shift,law)")
+    parser.add_argument("--term-starts", default="auto", choices=("auto", "plain", "scan"),
+                        help="the fit's term_starts (default auto)")
     parser.add_argument("--json", default=None, metavar="OUT", help="also write the rows as JSON")
     parser.add_argument("--compare", nargs=2, default=None, metavar=("A", "B"), help="compare two --json files")
-    parser.add_argument("--child", nargs=3, default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--child", nargs=4, default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         child(*args.child)
@@ -125,7 +129,7 @@ def main() -> None:
     else:
         if not args.pairs:
             parser.error("give pair folders (or --compare A B)")
-        table(args.pairs, [t for t in args.terms.split(";") if t], args.json)
+        table(args.pairs, [t for t in args.terms.split(";") if t], args.term_starts, args.json)
 
 
 if __name__ == "__main__":

@@ -64,10 +64,17 @@ class Start:
         from an earlier fit of nearly the same pair). True: the scan runs and this
         start is kept among its best (a contained model's estimate, every added
         term at its identity, so the fit ends at or below that model's loss).
+    scan_after : bool
+        With ``with_scan`` False: once the solve from here has reached the
+        screening tolerance, the scan runs around where it ended, and the fit
+        also solves from any scanned point already below it
+        (:func:`~.search.solve_problem`): another basin, at the cost of a scan
+        where there is none.
     """
 
     values: dict
     with_scan: bool = False
+    scan_after: bool = False
 
 
 @dataclasses.dataclass(frozen=True)
@@ -137,7 +144,8 @@ def core(call: FitCall) -> FitResult:
     compiling = SolverCompilation(options)
     start = call.start
     problem = build_problem(call.pairs, options, None if start is None or start.with_scan else start.values,
-                            compiling.start, nested=start.values if start is not None and start.with_scan else None)
+                            compiling.start, nested=start.values if start is not None and start.with_scan else None,
+                            scan_after=start is not None and start.scan_after)
     with jax.enable_x64(True):
         steps = Steps(call.progress, call.stop, problem.to_loss)
         path = solve_problem(problem, options, steps, compiling.wait)

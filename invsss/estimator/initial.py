@@ -125,19 +125,11 @@ def choose_starts(losses, param, scales: DataScales, blur_at_zero: float | None,
     if blur_at_zero is None:
         starts = [_with(param, z_base, **c_mid, **d_mid)]
     else:
-        sigmas = np.geomspace(0.25, max(scales.size / 4.0, 1.0), _BLUR_GRID)
-        blur = np.log(sigmas / blur_at_zero)
-
-        def at(b):
-            u = {"sss_level": b} if "sss_level" in blocks else {"variances": 2.0 * b}
-            return _with(param, z_base, **u, **c_mid, **d_mid)
-
-        profile = _finite(losses([at(b) for b in blur]))
-        padded = np.concatenate([[np.inf], profile, [np.inf]])
-        minima = [i for i in range(len(blur)) if padded[i + 1] <= min(padded[i], padded[i + 2])]
-        order = sorted(minima, key=lambda i: profile[i])
+        points = blur_grid(param, scales, blur_at_zero, _with(param, z_base, **c_mid, **d_mid))
+        profile = _finite(losses(points))
+        order = profile_minima(profile)
         order += [i for i in np.argsort(profile) if i not in order]
-        starts = [at(blur[i]) for i in order[:n_starts]]
+        starts = [points[i] for i in order[:n_starts]]
     if not c_mid and not d_mid:
         return starts
     c_axis = list(softplus_inverse(np.asarray(_CORRECTION_GRID))) if c_mid else [None]
@@ -163,6 +155,24 @@ def choose_starts(losses, param, scales: DataScales, blur_at_zero: float | None,
         _lowest([point, *points], [score, *scores])[0]
         for (point, score), points, scores in zip(best, by_maxdd, _rows(losses, by_maxdd))
     ]
+
+
+def blur_grid(param, scales: DataScales, blur_at_zero: float, z_base) -> list:
+    """``z_base`` at each blur scale of the start scan's grid (a fine log grid of
+    blur widths from a quarter pixel to a quarter of the image), every other
+    unknown as ``z_base`` has it."""
+    sigmas = np.geomspace(0.25, max(scales.size / 4.0, 1.0), _BLUR_GRID)
+    blur = np.log(sigmas / blur_at_zero)
+    name = "sss_level" if "sss_level" in dict(param.blocks) else "variances"
+    return [_with(param, z_base, **{name: b if name == "sss_level" else 2.0 * b}) for b in blur]
+
+
+def profile_minima(profile) -> list[int]:
+    """The local minima of a loss profile along the blur grid, lowest first (an
+    end of the grid counts when its one neighbour is not lower)."""
+    padded = np.concatenate([[np.inf], profile, [np.inf]])
+    minima = [i for i in range(len(profile)) if padded[i + 1] <= min(padded[i], padded[i + 2])]
+    return sorted(minima, key=lambda i: profile[i])
 
 
 def _finite(scores) -> np.ndarray:

@@ -28,7 +28,10 @@ from .pigment import DEGREES as PIGMENT_DEGREES
 from .robust import check_robust
 from .solve import JACOBIANS, SOLVERS
 
-__all__ = ["FitOptions", "check_canvas"]
+__all__ = ["TERM_STARTS", "FitOptions", "check_canvas"]
+
+#: Where a fit with light terms may start (:attr:`FitOptions.term_starts`).
+TERM_STARTS = ("auto", "plain", "scan")
 
 
 def check_canvas(canvas) -> tuple[int, int]:
@@ -169,6 +172,17 @@ class FitOptions:
         reported in :attr:`FitResult.light_terms`.
     light_fixed : mapping
         The held values (filled from ``light_terms``; read-only).
+    term_starts : {"auto", "plain", "scan"}
+        Where the fit with ``light_terms`` starts. ``"plain"``: from the plain
+        fit's estimate with every term at its identity; once that solve reaches
+        the screening tolerance, the loss is scanned along the blur scale
+        around where it ended, and the fit also solves from each local minimum
+        already below it (another basin the terms lead to). ``"scan"``: from
+        that estimate and from the start scan's points with the terms on,
+        ranked by successive halving, with a second basin carried through the
+        robust rounds (today's 1.4-2 times the time of ``"plain"``). ``"auto"``
+        (default): ``"scan"`` when ``transmission`` is fitted, ``"plain"``
+        otherwise (docs/model.md, section 8, "Where a term fit starts").
     canvas : (int, int), optional
         Fit on a (height, width) canvas at least the pair's size: pairs of
         different sizes fitted on one canvas share one compilation (a sweep, a
@@ -251,6 +265,11 @@ class FitOptions:
         "'shift,law'; 'shift=1.3' holds kappa at a value measured on a registered pair (for --align), "
         "'law=0.93/0.8/0.7' the albedos", cli_default="none", metavar="TERMS")
     light_fixed: object = _option(None, "the held light-term values (filled from light_terms)", flag=None)
+    term_starts: str = _option(
+        "auto", "where the fit with light terms starts: 'plain', from the plain fit's estimate, then from any "
+        "blur scale the loss along it shows to be better; 'scan', also from the start scan's points with the "
+        "terms on, and a second basin carried to the end (1.4-2x the time); auto: scan with 'transmission', "
+        "plain otherwise (docs/model.md, section 8)", choices=lambda: TERM_STARTS)
     canvas: tuple | None = _option(
         None, "fit on a canvas of HxW pixels at least every pair's size (e.g. 256x256): pairs of different "
         "sizes then share their compiled functions, in this process and in the compilation cache, with the "
@@ -307,6 +326,10 @@ class FitOptions:
             raise InvalidInputError(
                 f"solver_jacobian: expected one of {', '.join(JACOBIANS)}, got {self.solver_jacobian!r}",
                 field="solver_jacobian")
+        if self.term_starts not in TERM_STARTS:
+            raise InvalidInputError(
+                f"term_starts: expected one of {', '.join(TERM_STARTS)}, got {self.term_starts!r}",
+                field="term_starts")
         if self.solver not in SOLVERS:
             raise InvalidInputError(f"solver: expected one of {', '.join(SOLVERS)}, got {self.solver!r}",
                                     field="solver")

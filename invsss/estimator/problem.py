@@ -25,7 +25,7 @@ from ..forward.params import PARAM_NAMES
 from ..runtime.executable_cache import persistent_jit
 from ..validation import InvalidInputError
 from .canvas import on_canvas
-from .initial import blur_reference, choose_starts, data_scales
+from .initial import blur_grid, blur_reference, choose_starts, data_scales, profile_minima
 from .inputs import prepare_pairs
 from .objective import Objective
 from .options import FitOptions
@@ -331,6 +331,9 @@ class FitProblem:
     nested : bool
         Whether ``starts[0]`` is a contained model's fit (``nested=``), which the
         solve never drops.
+    scan_after : bool
+        Whether the solve scans again around where its one start's solve ended
+        (``scan_after=``).
     z_base : array, shape (n,)
         The natural starting values of the free blocks, before the start search.
     to_loss : float
@@ -345,7 +348,8 @@ class FitProblem:
         Whether the weights are eliminated by least squares (``sog``).
     """
 
-    def __init__(self, data, options, profile_w, profile_v, start=None, before_scan=None, nested=None):
+    def __init__(self, data, options, profile_w, profile_v, start=None, before_scan=None, nested=None,
+                 scan_after=False):
         self.options, self.model = options, options.model
         self.given = tuple(data)
         self.shapes = tuple(tuple(np.shape(p.mask)) for p in self.given)
@@ -380,6 +384,7 @@ class FitProblem:
         self.to_loss = 2.0 * scale**2 / total
         self.starts = ()
         self.nested = False
+        self.scan_after = bool(scan_after) and start is not None
         if self.param.size and start is not None:
             # A known neighbourhood (an earlier fit of nearly the same pair): start
             # there, without the scan.
@@ -398,6 +403,18 @@ class FitProblem:
                 self.starts = (self._unknowns_at(nested), *self.starts)
                 self.nested = True
 
+    def blur_minima(self, z_base) -> list[tuple]:
+        """``(z, loss)`` at each local minimum of the loss along the start scan's
+        blur grid (:func:`~.initial.blur_grid`), lowest first, with every other
+        unknown at ``z_base``; empty where the blur scale is not free."""
+        blur0 = _blur_at_zero(self.roles, self.scales, self.fixed, self.variances)
+        if blur0 is None or "sss_level" not in self.param.free:
+            return []
+        points = blur_grid(self.param, self.scales, blur0, z_base)
+        losses = np.asarray(scan_losses(self.objective)(points), np.float64)
+        profile = np.where(np.isfinite(losses), losses, np.inf)
+        return [(_on_device(points[i]), float(profile[i])) for i in profile_minima(profile)]
+
     def _unknowns_at(self, natural_values: dict):
         """The unknowns at the given natural values of free blocks, the others at ``z_base``."""
         natural = {k: np.asarray(v) for k, v in self.param.natural(np.asarray(self.z_base, np.float64)).items()}
@@ -415,7 +432,8 @@ class FitProblem:
 
 
 def build_problem(
-    pairs, options: FitOptions | None = None, start: dict | None = None, before_scan=None, nested: dict | None = None
+    pairs, options: FitOptions | None = None, start: dict | None = None, before_scan=None, nested: dict | None = None,
+    scan_after: bool = False,
 ) -> FitProblem:
     """Check the pairs and build the problem :func:`invsss.fit_pairs` would solve.
 
@@ -440,6 +458,10 @@ def build_problem(
         plain fit, with every light term at its identity): put first among the
         scan's starts, and :attr:`FitProblem.nested` set, so that the solve
         always carries it to the end and cannot finish above it.
+    scan_after : bool
+        With ``start``: set :attr:`FitProblem.scan_after`, so that the solve
+        scans around where the start's solve ended and goes on from any scanned
+        point already below it (:func:`~.search.solve_problem`).
 
     Returns
     -------
@@ -482,4 +504,4 @@ def build_problem(
             profile_v = start_variances(profile_w, profile_v, data[0].channels[1])
             profile_w = np.ones(profile_v.shape[0])
         # --- end issue 34
-        return FitProblem(data, options, profile_w, profile_v, start, before_scan, nested)
+        return FitProblem(data, options, profile_w, profile_v, start, before_scan, nested, scan_after)

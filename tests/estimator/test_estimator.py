@@ -462,7 +462,7 @@ def test_options_object_gives_the_same_fit_as_keywords():
 @pytest.mark.parametrize(
     "field, value",
     [("model", "gaussian"), ("n_starts", True), ("max_steps", 0), ("robust", "l1"),
-     ("tap_weights", "box"), ("fix", {"maxdd": 0.0}), ("gauge", "sss_level")],
+     ("tap_weights", "box"), ("fix", {"maxdd": 0.0}), ("gauge", "sss_level"), ("term_starts", "grid")],
 )
 def test_fit_options_are_checked_at_construction(field, value):
     with pytest.raises(InvalidInputError) as err:
