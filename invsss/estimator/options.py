@@ -180,7 +180,8 @@ class FitOptions:
         already below it (another basin the terms lead to). ``"scan"``: from
         that estimate and from the start scan's points with the terms on,
         ranked by successive halving, with a second basin carried through the
-        robust rounds (today's 1.4-2 times the time of ``"plain"``). ``"auto"``
+        robust rounds (what every term fit did before; on the bundled pairs
+        about 1.7 times the warm time of ``"plain"``). ``"auto"``
         (default): ``"scan"`` when ``transmission`` is fitted, ``"plain"``
         otherwise (docs/model.md, section 8, "Where a term fit starts").
     canvas : (int, int), optional
@@ -268,7 +269,7 @@ class FitOptions:
     term_starts: str = _option(
         "auto", "where the fit with light terms starts: 'plain', from the plain fit's estimate, then from any "
         "blur scale the loss along it shows to be better; 'scan', also from the start scan's points with the "
-        "terms on, and a second basin carried to the end (1.4-2x the time); auto: scan with 'transmission', "
+        "terms on, and a second basin carried to the end (about 1.7x the time warm); auto: scan with 'transmission', "
         "plain otherwise (docs/model.md, section 8)", choices=lambda: TERM_STARTS)
     canvas: tuple | None = _option(
         None, "fit on a canvas of HxW pixels at least every pair's size (e.g. 256x256): pairs of different "

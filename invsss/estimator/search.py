@@ -84,10 +84,10 @@ def solve_problem(problem, options, steps, before_first_step=None) -> SolvePath:
 
     The starts stop at the looser :data:`~.solve.SCREEN_TOL` (they only pick the
     basin); with :attr:`~.problem.FitProblem.scan_after` the blur scale is then
-    scanned around where the one start ended (:func:`_scan_after`). The best is solved
-    again at the full tolerance, by the robust rounds or, without them, by a
-    ``refine`` solve. Both solvers carry their
-    tolerances as arrays, so they share one compiled step.
+    scanned around where the one start ended (:func:`_scan_after`). The best is
+    solved again at the full tolerance, by the robust rounds or, without them,
+    by a ``refine`` solve. Both solvers carry their tolerances as arrays, so
+    they share one compiled step.
     Stops early, keeping the best point so far, when ``steps.stop`` asks.
     ``before_first_step()`` runs after the first poll of ``steps.stop`` (the fit
     waits there for its solver's compilation).
@@ -138,9 +138,7 @@ def _starts(problem, options, run, screen):
     interrupted = False
 
     def known_basin(z):
-        # NumPy, not jax.numpy: this runs on the host after every step.
-        z = np.asarray(z)
-        return any(float(np.max(np.abs(z - m))) < SAME_BASIN for m in minima)
+        return _near_any(z, minima)
 
     def finish(number, record):
         nonlocal best
@@ -206,8 +204,7 @@ def _scan_after(problem, run, screen, best, records):
     minima = [np.asarray(r.z) for _, r in records]
 
     def known_basin(z):
-        z = np.asarray(z)
-        return any(float(np.max(np.abs(z - m))) < SAME_BASIN for m in minima)
+        return _near_any(z, minima)
 
     lower = [z0 for z0, loss in problem.blur_minima(end) if loss < here and not known_basin(z0)]
     for z0 in lower[: problem.options.n_starts]:
@@ -220,6 +217,15 @@ def _scan_after(problem, run, screen, best, records):
         if record.interrupted:
             return best, True
     return best, False
+
+
+def _near_any(z, minima) -> bool:
+    """Whether ``z`` is within :data:`SAME_BASIN` of an end point already reached.
+
+    NumPy, not jax.numpy: this runs on the host after every step.
+    """
+    z = np.asarray(z)
+    return any(float(np.max(np.abs(z - m))) < SAME_BASIN for m in minima)
 
 
 def _robust_rounds(problem, options, run, best, records) -> SolvePath:
