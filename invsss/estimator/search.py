@@ -240,7 +240,7 @@ def _robust_rounds(problem, options, run, best, records) -> SolvePath:
     """
     masks = [np.asarray(p.residual_weight) for p in problem.data]
     others = [(i, r) for i, r in sorted(records, key=lambda item: item[1].final)
-              if float(np.max(np.abs(np.asarray(r.z) - np.asarray(best.z)))) >= SAME_BASIN]
+              if not _near_any(r.z, [np.asarray(best.z)])]
     finished = []
     for number, record in [(None, best)] + others[:1]:
         path = SolvePath(problem.objective, record.z)
