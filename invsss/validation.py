@@ -29,6 +29,7 @@ __all__ = [
     "check_same_frame",
     "check_pair",
     "number_array",
+    "positive_number",
     "check_target_channels",
     "check_mask_background",
     "check_depth_steps",
@@ -171,6 +172,31 @@ def _first_non_number(value, key: str):
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
         return key, value
     return None
+
+
+def positive_number(value, name: str) -> float:
+    """``value`` as a finite float > 0, else a one-line error naming ``name``.
+
+    Examples
+    --------
+    >>> positive_number("0.5", "mm_per_pixel")
+    0.5
+    >>> positive_number(0, "mm_per_pixel")
+    Traceback (most recent call last):
+    ...
+    invsss.validation.InvalidInputError: mm_per_pixel: expected a finite number > 0, got 0
+    >>> positive_number("wide", "band_width_mm")
+    Traceback (most recent call last):
+    ...
+    invsss.validation.InvalidInputError: band_width_mm: expected a number, got 'wide'
+    """
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"{name}: expected a number, got {value!r}", field=name) from None
+    if not np.isfinite(x) or x <= 0:
+        raise InvalidInputError(f"{name}: expected a finite number > 0, got {value!r}", field=name)
+    return x
 
 
 def number_array(value, key: str, source: str = "params") -> np.ndarray:

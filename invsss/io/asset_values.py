@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..validation import InvalidInputError
+from ..validation import InvalidInputError, positive_number
 
-__all__ = ["shape_parameters", "positive", "transmission_term"]
+__all__ = ["shape_parameters", "transmission_term"]
 
 
 def shape_parameters(d, name="d") -> np.ndarray:
@@ -29,17 +29,6 @@ def shape_parameters(d, name="d") -> np.ndarray:
     return np.broadcast_to(d, (3,)).copy()
 
 
-def positive(value, name) -> float:
-    """``value`` as a finite float > 0, else a one-line error naming ``name``."""
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: expected a number > 0, got {value!r}", field=name) from None
-    if not np.isfinite(x) or x <= 0:
-        raise InvalidInputError(f"{name}: expected a number > 0, got {value!r}", field=name)
-    return x
-
-
 def transmission_term(tint, thickness_scale, d_mm, one_per_profile: str) -> tuple[np.ndarray, float, np.ndarray]:
     """A fitted ``transmission`` term's tint (per channel, >= 0), thickness scale ``k``
     (> 0) and the profile's ``d``, which must be one value for every channel: ``k`` is
@@ -54,7 +43,7 @@ def transmission_term(tint, thickness_scale, d_mm, one_per_profile: str) -> tupl
     tau = np.broadcast_to(np.asarray(tint, np.float64).reshape(-1), (3,))
     if not np.all(np.isfinite(tau)) or np.any(tau < 0.0):
         raise InvalidInputError(f"light_terms.transmission: expected a tint >= 0 per channel, got {tau.tolist()}")
-    k = positive(thickness_scale, "light_terms.thickness_scale")
+    k = positive_number(thickness_scale, "light_terms.thickness_scale")
     d = shape_parameters(d_mm, "d_mm")
     if np.ptp(d) > 1e-6 * d.max():
         raise InvalidInputError(

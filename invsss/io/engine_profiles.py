@@ -38,8 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..validation import InvalidInputError
-from .asset_values import positive as _positive
+from ..validation import InvalidInputError, positive_number
 from .asset_values import shape_parameters as _distances
 from .asset_values import transmission_term
 
@@ -133,7 +132,7 @@ def hdrp_profile(d_mm, world_scale: float = 1.0) -> dict:
     d = _distances(d_mm, "d_mm")
     colour, multiplier = _colour_and_scale(d)
     return {"scatteringDistance": colour, "scatteringDistanceMultiplier": multiplier,
-            "worldScale": _positive(world_scale, "world_scale")}
+            "worldScale": positive_number(world_scale, "world_scale")}
 
 
 #: What a thickness map's 1 stands for (mm) unless told: HDRP's default thickness
@@ -160,7 +159,7 @@ def hdrp_transmission(tint, thickness_scale: float, d_mm, thickness_map_mm: floa
     ([0.6, 0.6, 0.6], [0.0, 2.5], 'ThinObject')
     """
     tau, k, d = transmission_term(tint, thickness_scale, d_mm, "HDRP's thickness remap")
-    t_max = _positive(thickness_map_mm, "thickness_map_mm")
+    t_max = positive_number(thickness_map_mm, "thickness_map_mm")
     return {"transmissionMode": "ThinObject", "transmissionTint": tau.tolist(),
             "thicknessRemap": [0.0, float(k * d[0] * t_max)]}
 
@@ -174,7 +173,7 @@ def hdrp_distances(fields: dict) -> np.ndarray:
     [2.0, 1.0, 0.5]
     """
     colour = np.asarray(fields["scatteringDistance"], np.float64)[:3]
-    return colour * _positive(fields["scatteringDistanceMultiplier"], "scatteringDistanceMultiplier")
+    return colour * positive_number(fields["scatteringDistanceMultiplier"], "scatteringDistanceMultiplier")
 
 
 def unreal_profile(d_mm, albedo=UNREAL_DEFAULT_ALBEDO, world_unit_scale: float = 0.1) -> dict:
@@ -233,7 +232,7 @@ def unreal_profile(d_mm, albedo=UNREAL_DEFAULT_ALBEDO, world_unit_scale: float =
             f"d_mm: {d.tolist()} mm is over the {_UNREAL_DMFP_MAX_MM:g} mm diffuse mean free path Unreal encodes"
         )
     return {"SurfaceAlbedo": a.tolist(), "MeanFreePathColor": colour, "MeanFreePathDistance": distance,
-            "WorldUnitScale": _positive(world_unit_scale, "world_unit_scale"),
+            "WorldUnitScale": positive_number(world_unit_scale, "world_unit_scale"),
             "Implementation": "SIH_AFIS", "bEnableBurley": True, "bEnableMeanFreePath": True}
 
 
@@ -249,7 +248,7 @@ def unreal_distances(fields: dict) -> np.ndarray:
     [1.0, 0.5, 0.25]
     """
     colour = np.asarray(fields["MeanFreePathColor"], np.float64)[:3]
-    mfp_mm = colour * _positive(fields["MeanFreePathDistance"], "MeanFreePathDistance") * _MM_PER_CM
+    mfp_mm = colour * positive_number(fields["MeanFreePathDistance"], "MeanFreePathDistance") * _MM_PER_CM
     albedo = np.asarray(fields["SurfaceAlbedo"], np.float64)[:3]
     return mfp_mm / (UNREAL_DMFP_TO_MFP * perpendicular_scaling(albedo))
 
@@ -342,7 +341,7 @@ def engine_profile(params, format: str, *, mm_per_unit: float = 1.0, albedo=None
     """
     if format not in ENGINE_FORMATS:
         raise InvalidInputError(f"format: expected one of {', '.join(ENGINE_FORMATS)}, got {format!r}")
-    scale = _positive(mm_per_unit, "mm_per_unit")
+    scale = positive_number(mm_per_unit, "mm_per_unit")
     d = np.sqrt(np.asarray(params.variances, np.float64)) * scale
     if d.size not in (1, 3):
         raise InvalidInputError(
@@ -478,7 +477,7 @@ def engine_asset(params, extras: dict, format: str, *, source: str = "params", m
     recorded = extras.get("depth_unit")
     if mm_per_unit is None:
         mm_per_unit = DEPTH_UNITS[recorded or "mm"]
-    elif recorded is not None and _positive(mm_per_unit, "mm_per_unit") != DEPTH_UNITS[recorded]:
+    elif recorded is not None and positive_number(mm_per_unit, "mm_per_unit") != DEPTH_UNITS[recorded]:
         raise InvalidInputError(
             f"mm_per_unit: {mm_per_unit!r} disagrees with {source}, which records depth_unit {recorded} "
             f"({DEPTH_UNITS[recorded]:g} mm per unit); leave it out to use the recorded unit"

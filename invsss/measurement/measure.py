@@ -43,7 +43,7 @@ from __future__ import annotations
 import equinox as eqx
 import numpy as np
 
-from ..validation import InvalidInputError, check_image
+from ..validation import InvalidInputError, check_image, positive_number
 from .profile_fit import ProfileFit, fit_sum_of_gaussians
 
 __all__ = ["DIRECTIONS", "AVERAGINGS", "MeasuredProfile", "measure_profile", "column_average_gain"]
@@ -130,20 +130,10 @@ def column_average_gain(variances, band_width_mm: float):
     from scipy.special import erf
 
     v = np.asarray(variances, dtype=np.float64)
-    half = 0.5 * _positive(band_width_mm, "band_width_mm")
+    half = 0.5 * positive_number(band_width_mm, "band_width_mm")
     if not np.all(np.isfinite(v)) or np.any(v <= 0):
         raise InvalidInputError("variances: expected finite values > 0")
     return np.sqrt(2.0 * np.pi * v) * erf(half / np.sqrt(2.0 * v)) / (2.0 * half)
-
-
-def _positive(value, name):
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: expected a number, got {value!r}", field=name) from None
-    if not np.isfinite(v) or v <= 0:
-        raise InvalidInputError(f"{name}: expected a finite number > 0, got {value!r}", field=name)
-    return v
 
 
 def _as_channels(image):
@@ -280,11 +270,11 @@ def measure_profile(
             f"got {spectralon.shape[-1]}",
             field=spectralon_name,
         )
-    mm_per_pixel = _positive(mm_per_pixel, "mm_per_pixel")
-    band_width_mm = _positive(band_width_mm, "band_width_mm")
-    filter_factor = _positive(filter_factor, "filter_factor")
-    spot_area_mm2 = _positive(spot_area_mm2, "spot_area_mm2")
-    spectralon_reflectance = _positive(spectralon_reflectance, "spectralon_reflectance")
+    mm_per_pixel = positive_number(mm_per_pixel, "mm_per_pixel")
+    band_width_mm = positive_number(band_width_mm, "band_width_mm")
+    filter_factor = positive_number(filter_factor, "filter_factor")
+    spot_area_mm2 = positive_number(spot_area_mm2, "spot_area_mm2")
+    spectralon_reflectance = positive_number(spectralon_reflectance, "spectralon_reflectance")
     if not 0 < float(lit_threshold) < 1:
         raise InvalidInputError(f"lit_threshold: expected a fraction in (0, 1), got {lit_threshold!r}")
     if direction not in DIRECTIONS:
@@ -296,9 +286,9 @@ def measure_profile(
             f"averaging: expected one of {', '.join(AVERAGINGS)}, got {averaging!r}"
         )
     if saturation is not None:
-        saturation = _positive(saturation, "saturation")
+        saturation = positive_number(saturation, "saturation")
     if max_radius_mm is not None:
-        max_radius_mm = _positive(max_radius_mm, "max_radius_mm")
+        max_radius_mm = positive_number(max_radius_mm, "max_radius_mm")
     if lit_radius_mm is not None:
         lit_radius_mm = float(lit_radius_mm)
         if not np.isfinite(lit_radius_mm) or lit_radius_mm < 0:
