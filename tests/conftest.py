@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import tempfile
 
 import pytest
@@ -87,6 +88,26 @@ def _restore_cache_variables():
             os.environ.pop(name, None)
         else:
             os.environ[name] = value
+
+
+@pytest.fixture(autouse=True)
+def _signal_handlers_left_as_found(request):
+    """Fail the test that leaves SIGINT's or SIGTERM's handler changed, and put it back.
+
+    A handler is process state that outlives the test: a worker left with SIGINT
+    ignored passes that to every child it starts (an ignored signal survives
+    exec), and a later test of Ctrl-C in a child then sees its child finish
+    instead of stop (CI, 2026-11-28).
+    """
+    watched = (signal.SIGINT, signal.SIGTERM)
+    before = {sig: signal.getsignal(sig) for sig in watched}
+    yield
+    changed = {sig: signal.getsignal(sig) for sig in watched if signal.getsignal(sig) is not before[sig]}
+    for sig in changed:
+        signal.signal(sig, before[sig])
+    if changed:
+        pytest.fail(", ".join(f"{signal.Signals(sig).name}: handler {before[sig]!r} left as {now!r}"
+                              for sig, now in changed.items()) + f" by {request.node.nodeid}")
 
 
 @pytest.fixture(autouse=True, scope="module")
