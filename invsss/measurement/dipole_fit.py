@@ -16,7 +16,7 @@ import jax
 import numpy as np
 
 from ..forward.profiles import jensen_dipole
-from ..validation import InvalidInputError
+from ..validation import InvalidInputError, positive_number
 
 __all__ = ["DipoleFit", "fit_dipole"]
 
@@ -123,12 +123,7 @@ def fit_dipole(r_mm, reflectance, eta: float = 1.3) -> DipoleFit:
         raise InvalidInputError("r_mm: expected finite distances >= 0")
     if not (np.all(np.isfinite(y)) and np.all(y > 0)):
         raise InvalidInputError("reflectance: expected finite values > 0 (the fit is in log space)")
-    try:
-        eta = float(eta)
-    except (TypeError, ValueError):
-        eta = float("nan")
-    if not (np.isfinite(eta) and eta > 0):
-        raise InvalidInputError(f"eta: expected a finite number > 0, got {eta!r}")
+    eta = positive_number(eta, "eta")
     columns = y[:, None] if y.ndim == 1 else y
     # float64: in float32 the far tail underflows and the solver's finite
     # differences drown in rounding.
