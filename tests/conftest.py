@@ -97,12 +97,13 @@ def _signal_handlers_left_as_found(request):
     A handler is process state that outlives the test: a worker left with SIGINT
     ignored passes that to every child it starts (an ignored signal survives
     exec), and a later test of Ctrl-C in a child then sees its child finish
-    instead of stop (CI, 2026-11-28).
+    instead of stop (seen in CI's slow tier).
     """
     watched = (signal.SIGINT, signal.SIGTERM)
     before = {sig: signal.getsignal(sig) for sig in watched}
     yield
-    changed = {sig: signal.getsignal(sig) for sig in watched if signal.getsignal(sig) is not before[sig]}
+    after = {sig: signal.getsignal(sig) for sig in watched}
+    changed = {sig: handler for sig, handler in after.items() if handler is not before[sig]}
     for sig in changed:
         signal.signal(sig, before[sig])
     if changed:
