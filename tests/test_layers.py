@@ -42,7 +42,9 @@ ALLOWED = {
     "shaders": {"forward", "validation"},
     "torch": {"forward", "validation"},
     "estimator": {"forward", "runtime", "validation"},
-    "io": {"forward", "shaders", "validation"},
+    # runtime: ResultDir has a signal that ends the command at once release its lock
+    # (runtime/interrupts.py's quit cleanups, standard library only).
+    "io": {"forward", "runtime", "shaders", "validation"},
     "measurement": {"forward", "estimator", "validation"},
     # ``import invsss`` loads the forward model and nothing else (the rest is lazy),
     # after the command line's Ctrl-C guard (runtime/interrupts.py, standard library only).

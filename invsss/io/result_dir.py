@@ -33,9 +33,11 @@ look like one result, and a rerun would silently replace an earlier result.
   user put in ``DIR`` are never touched; files of the replaced result are
   removed with it.
 * **Nothing left behind by a failure.** A directory that opening had to create
-  is removed again if the run ends before :meth:`~ResultDir.commit`. (Only a
-  SIGKILL between opening and committing can leave it, holding just the hidden
-  lock file; the next run treats it as empty.)
+  is removed again if the run ends before :meth:`~ResultDir.commit`, also when a
+  signal ends the command at once (``os._exit`` runs no ``finally``; the lock
+  registers its release with :func:`invsss.runtime.interrupts.add_quit_cleanup`).
+  Only a SIGKILL between opening and committing can leave it, holding just the
+  hidden lock file; the next run treats it as empty.
 
 Fault injection for tests: when the environment variable
 ``INVSSS_TEST_PAUSE_IN_COMMIT`` holds seconds, :meth:`ResultDir.commit` pauses
@@ -61,6 +63,7 @@ import sys
 import time
 from collections.abc import Callable, Iterable, Mapping
 
+from ..runtime.interrupts import add_quit_cleanup, remove_quit_cleanup
 from ..validation import InvalidInputError
 from .writing import write_text_atomic
 
@@ -270,15 +273,16 @@ class ResultDir:
 
     def close(self) -> None:
         """Release the lock; remove the directory if this run created it and wrote nothing."""
-        if self._fd is None:
-            return
-        lock_path = os.path.join(self.path, _LOCK_NAME)
-        # Unlink while still holding the lock: a waiting run that opened the old
-        # file notices (inode check in _lock) and retries on a fresh one.
-        with contextlib.suppress(OSError):
-            os.unlink(lock_path)
-        os.close(self._fd)
-        self._fd = None
+        remove_quit_cleanup(self.close)
+        fd, self._fd = self._fd, None
+        if fd is not None:
+            # Unlink while still holding the lock: a waiting run that opened the old
+            # file notices (inode check in _lock) and retries on a fresh one.
+            with contextlib.suppress(OSError):
+                os.unlink(os.path.join(self.path, _LOCK_NAME))
+            with contextlib.suppress(OSError):  # closed already by a close this one interrupted
+                os.close(fd)
+        # Also when the lock was never taken: a signal between creating and locking.
         if self._created and not self.committed:
             with contextlib.suppress(OSError):
                 os.rmdir(self.path)  # only succeeds if empty: never removes the user's files
@@ -335,6 +339,9 @@ class ResultDir:
                 f"{self.path}: cannot write to the output directory ({err.strerror})"
             ) from None
         self._fd = fd
+        # A signal that ends the command at once (a second Ctrl-C, one raised in a
+        # garbage-collection callback) skips close(): it runs close() on its way out.
+        add_quit_cleanup(self.close)
 
     def _check_contents(self) -> None:
         path = self.path

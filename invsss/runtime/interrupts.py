@@ -29,6 +29,11 @@ unrelated ``ImportError``. :func:`guard_command_line`, called first thing by
 signal there end the process at once with one line and the same exit status.
 Nothing can be done earlier than that: a signal while Python itself starts (its
 ``site`` module, the first 0.02-0.1 s) is Python's own affair.
+
+Each of those ways out ends the process with ``os._exit``, which runs no ``finally``
+block and no ``atexit`` function. Work that must be undone however the process ends
+(an output directory opened and not yet written, :class:`invsss.io.ResultDir`)
+registers its undoing with :func:`add_quit_cleanup`; every one of them runs first.
 """
 
 from __future__ import annotations
@@ -39,12 +44,59 @@ import signal
 import sys
 from collections.abc import Callable, Iterator
 
-__all__ = ["Interrupted", "StopSignals", "command_finished", "guard_command_line", "is_command_line"]
+__all__ = [
+    "Interrupted",
+    "StopSignals",
+    "add_quit_cleanup",
+    "command_finished",
+    "guard_command_line",
+    "is_command_line",
+    "remove_quit_cleanup",
+]
 
 _SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 #: What the command is doing while :func:`guard_command_line`'s handler is in place.
 _phase = "while starting; nothing written"
+
+#: What to undo before a signal ends the process at once (:func:`add_quit_cleanup`).
+_quit_cleanups: list[Callable[[], object]] = []
+
+
+def add_quit_cleanup(cleanup: Callable[[], object]) -> None:
+    """Call ``cleanup()`` if a signal ends this process at once, before it exits.
+
+    The ways out of this module (a signal while starting or exiting, a second signal,
+    a signal raised where Python cannot propagate it) use ``os._exit``, which skips
+    ``finally`` blocks and ``atexit``. Cleanups run last-added first; one that fails
+    does not stop the others. Remove it with :func:`remove_quit_cleanup` once the
+    work it undoes is done or undone another way.
+
+    Examples
+    --------
+    >>> def undo():
+    ...     print("undone")
+    >>> add_quit_cleanup(undo)
+    >>> remove_quit_cleanup(undo)
+    """
+    _quit_cleanups.append(cleanup)
+
+
+def remove_quit_cleanup(cleanup: Callable[[], object]) -> None:
+    """Forget a cleanup given to :func:`add_quit_cleanup` (no error if it is not there)."""
+    with contextlib.suppress(ValueError):
+        _quit_cleanups.remove(cleanup)
+
+
+def _exit_now(status: int) -> None:
+    """Run the quit cleanups, then end the process with ``status`` at once."""
+    while _quit_cleanups:
+        cleanup = _quit_cleanups.pop()
+        try:
+            cleanup()
+        except BaseException:  # noqa: BLE001 -- on the way out: the other cleanups must still run
+            pass
+    os._exit(status)
 
 
 def is_command_line() -> bool:
@@ -125,7 +177,7 @@ def _quit(signum, frame) -> None:
         os.write(2, line.encode())
     except OSError:
         pass
-    os._exit(128 + signum)
+    _exit_now(128 + signum)
 
 
 class Interrupted(BaseException):
@@ -195,7 +247,7 @@ class StopSignals:
                 os.write(2, f"invsss: interrupted ({signal.Signals(self.signum).name}); nothing written\n".encode())
             except OSError:
                 pass
-            os._exit(128 + self.signum)
+            _exit_now(128 + self.signum)
         self._previous_hook(unraisable)
 
     def __call__(self) -> bool:
@@ -226,7 +278,7 @@ class StopSignals:
             # The second signal: the user does not want to wait. os._exit skips
             # interpreter teardown, which is where a half-stopped JAX runtime crashes.
             sys.stderr.flush()
-            os._exit(128 + signum)
+            _exit_now(128 + signum)
         self.signum = signum
         if self._on_first is not None:
             self._on_first(signum)

@@ -57,3 +57,32 @@ def test_other_unraisable_exceptions_still_reach_pythons_hook():
     done = _run(OTHER)
     assert done.returncode == 0 and "carried on" in done.stdout
     assert "ValueError: not a signal" in done.stderr
+
+
+CLEANUPS = textwrap.dedent("""
+    import os, signal, time
+    from invsss.runtime.interrupts import StopSignals, add_quit_cleanup, remove_quit_cleanup
+
+    def failing():
+        raise OSError("a cleanup that fails")
+
+    def forgotten():
+        print("forgotten ran", flush=True)
+
+    add_quit_cleanup(lambda: print("first added", flush=True))
+    add_quit_cleanup(failing)
+    add_quit_cleanup(forgotten)
+    add_quit_cleanup(lambda: print("last added", flush=True))
+    remove_quit_cleanup(forgotten)
+    with StopSignals() as stop, stop.deferred():
+        os.kill(os.getpid(), signal.SIGINT)
+        os.kill(os.getpid(), signal.SIGINT)  # the second: quit at once
+        time.sleep(0.5)
+    print("carried on", flush=True)
+""")
+
+
+def test_a_quit_runs_the_cleanups_last_added_first_past_one_that_fails():
+    done = _run(CLEANUPS)
+    assert done.returncode == 130, done
+    assert done.stdout.splitlines() == ["last added", "first added"], done
