@@ -16,10 +16,12 @@ from .arguments import add_model_arguments, model_choice
 def add_parser(subparsers) -> None:
     parser = subparsers.add_parser(
         "export",
-        help="write a params file's constants for a real-time shader (JSON or HLSL)",
+        help="write a params file's constants for a real-time shader (JSON or HLSL), or a "
+        "burley fit as an engine's profile asset (HDRP, Unreal)",
         description="Turn the parameters in PARAMS into the constants a real-time shader "
         "uses (per-pass widths, tap offsets and weights, layer blend factors, or the "
-        "separable kernel) and print them, or write them to --out.",
+        "separable kernel) and print them, or write them to --out. --format hdrp or unreal "
+        "writes the engine's profile asset instead, from a fit with --model burley.",
     )
     parser.add_argument("params", help="params JSON file")
     parser.add_argument(

@@ -234,6 +234,8 @@ def _run(args: argparse.Namespace, stop: StopSignals, notices: list[str]) -> int
                                          fix=dict(options.fix),  # type: ignore[call-overload]  # a mapping by now
                                          depth_scale=args.depth_scale, linear_codes=args.linear_codes)
         pairs = inputs.pairs
+        for path, pair in zip(args.depth, pairs):  # a distance was checked when it was read
+            photo_pair.check_depth_level(pair.depth, pair.mask, DEPTH_UNITS[args.depth_unit], f"--depth {path}")
         if args.distance:
             # One distance holds correction and maxdd (inputs.held says at what).
             options = dataclasses.replace(options, fix=inputs.fix)
@@ -293,8 +295,9 @@ def _run(args: argparse.Namespace, stop: StopSignals, notices: list[str]) -> int
         f"{'converged' if result.converged else 'NOT converged'} ({result.iterations} iterations); "
         f"wrote {', '.join(written)}"
     )
-    if blur_line(result.blur):
-        print(f"fit: {blur_line(result.blur)}")
+    unit = "mm" if args.distance else args.depth_unit
+    if blur_line(result.blur, unit):
+        print(f"fit: {blur_line(result.blur, unit)}")
     return 0
 
 
@@ -359,7 +362,8 @@ def _write_fit(out: ResultDir, names: list[str], result, pairs, inputs=None,
     for name, image in zip(names[1:], result.fitted):
         writers[name] = lambda path, image=image: write_image(path, np.asarray(image, np.float32))
     mask_notes = None if inputs is None else inputs.mask_notes  # a doubtful mask's line on the figure
-    writers["report.png"] = lambda path: plot_fit_report(result, pairs, path, mask_notes=mask_notes)
+    writers["report.png"] = lambda path: plot_fit_report(result, pairs, path, mask_notes=mask_notes,
+                                                         depth_unit=depth_unit)
     for name, mask in ({} if inputs is None else inputs.made_masks).items():
         writers[name] = lambda path, mask=mask: write_image(path, mask)  # DIR/mask_used.png
     info = {"command": "fit", "converged": bool(result.converged),

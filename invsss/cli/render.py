@@ -78,6 +78,11 @@ def add_parser(subparsers) -> None:
     parser.set_defaults(func=run)
 
 
+def _listed(words: list[str]) -> str:
+    """``a``, ``a and b``, ``a, b and c``."""
+    return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} and {words[-1]}"
+
+
 def _render_light_terms(args, extras, image):
     """The light terms of PARAMS (None without them, or with --no-light-terms) and
     the buffers they need, read and checked."""
@@ -89,14 +94,20 @@ def _render_light_terms(args, extras, image):
     terms.check(f"{args.params}: light_terms")
     buffers = {}
     # A term at its identity (a fit that fell back to the plain model) needs no buffer.
+    # Every missing buffer is named at once, not one per attempt.
+    missing = [flag for flag in dict.fromkeys(f for t in terms.used for f in NEEDED_BUFFERS[t])
+               if getattr(args, flag) is None]
+    if missing:
+        lacking = [t for t in terms.used if set(NEEDED_BUFFERS[t]) & set(missing)]
+        which = (f"the {lacking[0]!r} light term, which needs" if len(lacking) == 1
+                 else f"the {_listed([repr(t) for t in lacking])} light terms, which need")
+        raise InvalidInputError(
+            f"{args.params}: holds {which} {_listed(['--' + f.replace('_', '-') for f in missing])} "
+            f"(or --no-light-terms to render without the light terms)"
+        )
     for term in terms.used:
         for flag in NEEDED_BUFFERS[term]:
             path = getattr(args, flag)
-            if path is None:
-                raise InvalidInputError(
-                    f"{args.params}: holds the {term!r} light term, which needs --{flag.replace('_', '-')} "
-                    f"(or --no-light-terms to render without the light terms)"
-                )
             if flag in ("key", "key_irradiance") and flag not in buffers:
                 buffers[flag] = read_key_buffer(path, image, args.linear_codes, "--" + flag.replace("_", "-"))
             elif flag == "thickness" and flag not in buffers:

@@ -120,8 +120,9 @@ _UNDETERMINED_NOTE = (
 )
 
 
-def parameter_lines(result) -> list[str]:
-    """One line per parameter: value ± standard error, and what is fixed or undetermined."""
+def parameter_lines(result, depth_unit: str | None = None) -> list[str]:
+    """One line per parameter: value ± standard error, and what is fixed or undetermined
+    (the blur's depth in ``depth_unit`` when given)."""
     params = result.params
     stderr = dict(result.stderr or {})
     fixed = dict(result.fixed or {})
@@ -148,7 +149,7 @@ def parameter_lines(result) -> list[str]:
     )
     lines.append(f"loss {float(result.loss):.4g}   PSNR {float(result.psnr):.2f} dB   SSIM {float(result.ssim):.4f}")
     lines.append(f"gain {_format_value(result.gain)}   offset {_format_value(result.offset)}")
-    blur = blur_line(getattr(result, "blur", None))
+    blur = blur_line(getattr(result, "blur", None), depth_unit)
     if blur:
         lines.append(blur)
     if result.mix is not None:
@@ -378,7 +379,7 @@ def _draw_pair_rows(fig, grid, pairs, fitted, mask_notes=None) -> None:
         fig.colorbar(image, cax=ax.inset_axes([1.04, 0.08, 0.05, 0.84]), format="%.2g")
 
 
-def plot_fit_report(result, pairs, path, mask_notes=None) -> None:
+def plot_fit_report(result, pairs, path, mask_notes=None, depth_unit: str | None = None) -> None:
     """Draw a fit's report page and save it as an image.
 
     Parameters
@@ -393,6 +394,8 @@ def plot_fit_report(result, pairs, path, mask_notes=None) -> None:
     mask_notes : sequence of (str or None), optional
         Per pair, a short line on what its mask's checks found
         (:func:`invsss.io.skin_mask.mask_note`), drawn under its source panel.
+    depth_unit : str, optional
+        The depth's unit (``"mm"``), printed with the blur's depth.
 
     Raises
     ------
@@ -415,10 +418,10 @@ def plot_fit_report(result, pairs, path, mask_notes=None) -> None:
     >>> os.path.getsize(path) > 0
     True
     """
-    report_figure(result, pairs, mask_notes).savefig(os.fspath(path), dpi=_DPI)
+    report_figure(result, pairs, mask_notes, depth_unit).savefig(os.fspath(path), dpi=_DPI)
 
 
-def report_figure(result, pairs, mask_notes=None) -> Figure:
+def report_figure(result, pairs, mask_notes=None, depth_unit: str | None = None) -> Figure:
     """The page of :func:`plot_fit_report`, drawn on an Agg canvas, not yet saved."""
     pairs = [
         (p.source, p.target, p.depth, p.mask) if hasattr(p, "source") else tuple(p) for p in pairs
@@ -438,7 +441,7 @@ def report_figure(result, pairs, mask_notes=None) -> Figure:
             f"pairs: the result has {len(fitted)} fitted image(s) but {len(pairs)} pair(s) were given"
         )
     rows = len(pairs)
-    lines = parameter_lines(result)
+    lines = parameter_lines(result, depth_unit)
     # The text box grows with its lines (8 pt monospace: 0.147 in each, measured), so
     # a fit with many warnings keeps the last of them on the page.
     text_inches = max(2.3, 0.35 + 0.15 * len(lines))

@@ -17,8 +17,10 @@ def add_parser(subparsers) -> None:
         description="Render CONFIG (a TOML scene description: object, camera, lights, "
         "occluders, medium) with Mitsuba 3 into DIR: source.exr (Lambertian), target.exr "
         "(scattering medium, reflection removed), depth.exr (eye z, mm), mask.png, "
-        "normal.exr, coverage.exr and scene.json (everything needed to reproduce it, and "
-        "the target's noise estimate).",
+        "normal.exr, coverage.exr, the light terms' buffers (light.exr, key.exr, and "
+        "fill_light.exr where the scene has other lights), the transmission's (thickness.exr, "
+        "thickness_normal.exr, key_irradiance.exr) and scene.json (everything needed to "
+        "reproduce it, and the target's noise estimate).",
     )
     parser.add_argument("config", help="scene description (.toml)")
     parser.add_argument("--out", required=True, metavar="DIR",

@@ -137,19 +137,20 @@ def _with_error(values, errors, unit: str) -> str:
     return " / ".join(parts) + f" {unit}"
 
 
-def blur_line(record: dict | None) -> str | None:
-    """One line for people: the blur's width in pixels (and mm), with errors.
+def blur_line(record: dict | None, depth_unit: str | None = None) -> str | None:
+    """One line for people: the blur's width in pixels (and mm), with errors, and the
+    depth it is measured at (in ``depth_unit`` when the caller knows it).
 
     Examples
     --------
     >>> blur_line({"sigma_px": [2.5], "stderr_px": [0.1], "depth": 600.0, "resolved": True,
-    ...            "mm_per_px": 0.5, "sigma_mm": [1.25], "stderr_mm": [0.05]})
-    'blur 2.5 \u00b1 0.1 px (1.25 \u00b1 0.05 mm) RMS per axis at depth 600'
+    ...            "mm_per_px": 0.5, "sigma_mm": [1.25], "stderr_mm": [0.05]}, "mm")
+    'blur 2.5 \u00b1 0.1 px (1.25 \u00b1 0.05 mm) RMS per axis at depth 600 mm'
     """
     if not record:
         return None
     text = "blur " + _with_error(record["sigma_px"], record["stderr_px"], "px")
     if record.get("sigma_mm") is not None:
         text += " (" + _with_error(record["sigma_mm"], record["stderr_mm"], "mm") + ")"
-    text += f" RMS per axis at depth {record['depth']:g}"
+    text += f" RMS per axis at depth {record['depth']:g}" + (f" {depth_unit}" if depth_unit else "")
     return text + ("" if record["resolved"] else ": under a pixel, not resolved")

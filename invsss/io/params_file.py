@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from ..forward.models import MODEL_NAMES, get_model
 from ..forward.params import DEPTH_UNITS, PARAM_NAMES, SSSParams, entry_name
 from ..forward.passes import TAP_WEIGHTS
 from ..forward.screen_space import MODELS
@@ -406,12 +407,18 @@ def read_params(path) -> tuple[SSSParams, dict]:
         )
     if filled:
         # A renderer needs numbers: use the estimate that produced the fit's
-        # image for exactly the entries the data did not determine, and say so.
+        # image for exactly the entries the data did not determine, and say so,
+        # except for entries the file's model does not use (a burley fit's weights):
+        # they change nothing it renders.
         extras["filled_from_estimate"] = filled
-        warnings.warn(
-            f"{name}: {', '.join(filled)} not determined by the fit; using its point estimate",
-            stacklevel=2,
-        )
+        model = content.get("model")
+        used = get_model(model).parameters if model in MODEL_NAMES else frozenset(PARAM_NAMES)
+        mattering = [entry for entry in filled if entry.split("[")[0] in used]
+        if mattering:
+            warnings.warn(
+                f"{name}: {', '.join(mattering)} not determined by the fit; using its point estimate",
+                stacklevel=2,
+            )
     return params, extras
 
 

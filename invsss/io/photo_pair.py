@@ -37,6 +37,7 @@ __all__ = [
     "MASK_FILE",
     "PLAUSIBLE_DISTANCE_MM",
     "PhotoInputs",
+    "check_depth_level",
     "check_distance",
     "check_photo_arguments",
     "constant_depth",
@@ -99,6 +100,42 @@ def check_distance(distance_mm, name: str = "distance", *, notice: bool = True) 
             InputNotice, stacklevel=2,
         )
     return float(distance_mm)
+
+
+def check_depth_level(depth, mask, mm_per_unit: float, name: str) -> float | None:
+    """The skin's median depth in mm, with an :class:`~invsss.validation.InputNotice`
+    when it lies outside :data:`PLAUSIBLE_DISTANCE_MM`, as :func:`check_distance` does
+    for a distance; None where the mask has no pixel.
+
+    A depth map is checked for NaN and for values <= 0 when it is read; a file that is
+    not the depth at all (a photograph given as ``--depth``) or a depth in another
+    unit than ``--depth-unit`` passes those checks, and the fitted ``sss_level``
+    scales with it.
+
+    Examples
+    --------
+    >>> import warnings
+    >>> depth, mask = np.full((4, 4), 0.12), np.ones((4, 4))
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     check_depth_level(depth, mask, 1.0, "--depth target.exr")
+    0.12
+    >>> print(caught[0].message)
+    --depth target.exr: the skin's median depth is 0.12 mm, outside 100-5000 mm, where a face is photographed from; used as given, but the fitted sss_level scales with it (is it a depth map, and in --depth-unit?)
+    """  # noqa: E501
+    on = np.asarray(mask) > 0
+    if not on.any():
+        return None
+    median_mm = float(np.median(np.asarray(depth, np.float64)[on])) * mm_per_unit
+    low, high = PLAUSIBLE_DISTANCE_MM
+    if not low <= median_mm <= high:
+        warnings.warn(
+            f"{name}: the skin's median depth is {median_mm:.3g} mm, outside {low:g}-{high:g} mm, where a face is "
+            "photographed from; used as given, but the fitted sss_level scales with it (is it a depth map, and "
+            "in --depth-unit?)",
+            InputNotice, stacklevel=2,
+        )
+    return median_mm
 
 
 def constant_depth(shape, distance_mm) -> np.ndarray:

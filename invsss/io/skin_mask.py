@@ -287,7 +287,8 @@ def has_dark_background(mask, visible, near_infrared) -> bool:
     return True
 
 
-def mask_checks(mask, name: str, *, skin_share=None, skin_test: str = "not run") -> tuple[dict, list[str]]:
+def mask_checks(mask, name: str, *, skin_share=None, skin_test: str = "not run",
+                given: bool = False) -> tuple[dict, list[str]]:
     """The checks on a skin mask and the notices they give (none are warned here).
 
     Parameters
@@ -300,6 +301,8 @@ def mask_checks(mask, name: str, *, skin_share=None, skin_test: str = "not run")
         The share of the mask that passes the skin test, if one was run.
     skin_test : str
         What that test was, or why none was run.
+    given : bool
+        The user gave the mask (``--mask``): the notices then do not advise giving one.
 
     Returns
     -------
@@ -323,7 +326,8 @@ def mask_checks(mask, name: str, *, skin_share=None, skin_test: str = "not run")
     coverage, border = round(float(m.mean()), 4), round(border_share(m), 4)
     skin_share = None if skin_share is None else round(float(skin_share), 4)
     notices = []
-    tail = "a blur fitted on it measures the background as much as the skin; look at it, or give --mask"
+    advice = "it is used as given, so check that it is the skin you meant" if given else "look at it, or give --mask"
+    tail = f"a blur fitted on it measures the background as much as the skin; {advice}"
     if coverage > COVERAGE_LIMIT:
         notices.append(f"{name}: covers {coverage:.0%} of the frame (over {COVERAGE_LIMIT:.0%}); it likely holds "
                        f"background, and {tail}")
@@ -433,10 +437,10 @@ def check_skin_mask(mask, visible, near_infrared, name: str) -> dict:
     m = np.asarray(mask) > 0.5
     face = find_face(visible, near_infrared)
     if face is None:
-        checks, notices = mask_checks(m, name, skin_test="not run: no face found")
+        checks, notices = mask_checks(m, name, skin_test="not run: no face found", given=True)
     else:
         checks, notices = mask_checks(m, name, skin_share=_skin_share(m, skin_test(visible, near_infrared, face)),
-                                      skin_test="the skin model of the face found")
+                                      skin_test="the skin model of the face found", given=True)
     _warn(notices)
     return {"face": None if face is None else [round(float(v), 1) for v in face], "checks": checks,
             "notices": notices}

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 from contextlib import redirect_stderr, redirect_stdout
 
 import jax
@@ -113,6 +114,7 @@ def test_fit_prints_summary_and_progress(single_fit):
     assert "params.json" in summary[0] and "report.png" in summary[0]
     # Then the blur's width, what the pixels measured (invsss.estimator.blur_width).
     assert summary[1].startswith("fit: blur ") and " px RMS per axis at depth " in summary[1]
+    assert re.search(r" at depth [0-9.e+]+ mm$", summary[1]), summary[1]  # the depth with its unit
     # stderr is not a terminal here: plain progress lines, no carriage returns.
     lines = single_fit["stderr"].splitlines()
     assert "\r" not in single_fit["stderr"]

@@ -76,3 +76,12 @@ def test_cli_fit_with_light_terms(tmp_path, capsys):
     assert main(["render", *scene, "--out", str(tmp_path / "bad.exr")]) != 0
     err = capsys.readouterr().err
     assert "holds the 'shift' light term, which needs --light" in err and "Traceback" not in err
+    # Two terms without any buffer: every missing flag in the one line, not one per attempt.
+    both = json.loads(open(params_path).read())
+    both["light_terms"].update(law=[0.9] * source.shape[-1], law_strength=1.0)
+    (tmp_path / "both.json").write_text(json.dumps(both))
+    two = [*scene[:-1], str(tmp_path / "both.json")]
+    assert main(["render", *two, "--out", str(tmp_path / "bad.exr")]) != 0
+    err = capsys.readouterr().err
+    assert ("holds the 'shift' and 'law' light terms, which need --light, --key and --normal (or "
+            "--no-light-terms") in err, err

@@ -176,6 +176,21 @@ def test_only_the_null_entries_are_filled_and_named(tmp_path):
     assert extras["filled_from_estimate"] == ["weights[2]", "weights[3]"]
 
 
+def test_entries_the_files_model_does_not_use_are_filled_without_a_warning(tmp_path):
+    """A burley fit's weights do not enter its image: filling them is no news to a renderer."""
+    path = tmp_path / "params.json"
+    content = json.loads(open(_fit_file(tmp_path, [0.5, 0.25, None, None])).read())
+    path.write_text(json.dumps({**content, "model": "burley"}))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        params, extras = read_params(path)
+    np.testing.assert_allclose(np.asarray(params.weights), [0.5, 0.25, 0.3, 0.4], rtol=1e-6)
+    assert extras["filled_from_estimate"] == ["weights[2]", "weights[3]"]
+    path.write_text(json.dumps({**content, "model": "sog"}))  # sog uses them: the warning stays
+    with pytest.warns(UserWarning, match="weights\\[2\\], weights\\[3\\] not determined"):
+        read_params(path)
+
+
 def test_two_edits_of_determined_entries_give_different_params(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

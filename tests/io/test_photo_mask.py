@@ -120,6 +120,9 @@ def test_the_dark_background_rule_on_the_astronaut_is_mostly_not_skin():
     assert not checks["passed"] and len(checked["notices"]) == 3
     assert [str(w.message) for w in caught if issubclass(w.category, invsss.InputNotice)] == checked["notices"]
     assert all(n.startswith("old.png: ") and "\n" not in n for n in checked["notices"])
+    # The user gave this mask: the notices do not tell them to give one.
+    assert all(n.endswith("it is used as given, so check that it is the skin you meant")
+               for n in checked["notices"]), checked["notices"]
     assert mask_note(checked) == (f"mask: covers {checks['coverage']:.0%} of the frame, "
                                   f"{checks['border']:.0%} of its border, {checks['skin_share']:.0%} skin")
 
@@ -130,6 +133,7 @@ def test_a_mask_of_most_of_the_frame_gets_a_notice_and_a_face_mask_none():
     checks, notices = mask_checks(frame, "m.png")
     assert notices[0].startswith("m.png: covers 95% of the frame (over 75%)")
     assert notices[1].startswith("m.png: touches ")
+    assert all(n.endswith("look at it, or give --mask") for n in notices)  # a mask made from the pair
     face = np.zeros((40, 50))
     face[10:30, 15:35] = 1
     assert mask_checks(face, "m.png") == ({"coverage": 0.2, "border": 0.0, "skin_share": None,
