@@ -242,3 +242,21 @@ def test_fit_with_a_distance_of_1e9_warns_and_records_it(photos, tmp_path):
         "sss_level scales with it (is it in mm?)"]
     recorded = json.loads((out / "params.json").read_text())["warnings"]
     assert len([w for w in recorded if w.startswith(text)]) == 1 and recorded[0].startswith(text)
+
+
+@pytest.mark.slow  # one fit
+def test_a_depth_map_in_metres_read_as_mm_is_noted_and_recorded(photos, tmp_path):
+    """A depth map passes the reader's checks (finite, > 0) in any unit; its level on the
+    skin is noted as a --distance is, since sss_level scales with it."""
+    depth = tmp_path / "depth_m.exr"
+    invsss.write_image(depth, np.full((SIZE, SIZE), 0.6, np.float32))  # metres, read as mm
+    out = tmp_path / "run"
+    code, _, err = _run(_fit_args(photos, out, "--depth", str(depth)))
+    assert code == 0, err
+    text = f"--depth {depth}: the skin's median depth is 0.6 mm, outside 100-5000 mm"
+    assert len([line for line in err.splitlines() if line.startswith(f"invsss: warning: {text}")]) == 1, err
+    recorded = json.loads((out / "params.json").read_text())["warnings"]
+    assert len([w for w in recorded if w.startswith(text)]) == 1, recorded
+    # Given its unit, the same map is where a face is: no notice.
+    code, _, err = _run(_fit_args(photos, tmp_path / "again", "--depth", str(depth), "--depth-unit", "m"))
+    assert code == 0 and "outside 100-5000 mm" not in err, err
