@@ -104,10 +104,14 @@ def trusted_radii(measured, mm_per_pixel: float, *, min_snr: float = 3.0,
     reasons = (
         f"spot: distances below {measured.lit_radius_mm:.2f} mm (the lit spot) were never sampled",
         f"resolution: below {min_radius_px * mm_per_pixel:.2f} mm ({min_radius_px:g} px) "
-        f"and bins of fewer than 3 pixels left out ({int(np.sum(~resolved))} samples)",
-        "noise floor: R / stderr < " + f"{min_snr:g} from "
-        + ", ".join("never" if np.isnan(f) else f"{f:.2f} mm" for f in floors)
-        + " on (per channel)",
+        f"and bins of fewer than 3 pixels left out ({_samples(int(np.sum(~resolved)))})",
+        f"noise floor: R / stderr < {min_snr:g} "
+        + ", ".join("nowhere" if np.isnan(f) else f"from {f:.2f} mm on" for f in floors)
+        + (" (per channel)" if len(floors) > 1 else ""),
     )
     pick = (lambda a: a[..., 0]) if single else (lambda a: a)  # noqa: E731
     return TrustedRadii(pick(mask), pick(r_min), pick(r_max), reasons)
+
+
+def _samples(count: int) -> str:
+    return f"{count} sample" if count == 1 else f"{count} samples"
