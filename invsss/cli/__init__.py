@@ -33,7 +33,7 @@ import warnings
 from .. import __version__
 from ..runtime.determinism import use_deterministic_scheduler
 from ..runtime.interrupts import Interrupted, StopSignals, command_finished
-from ..validation import InvalidInputError
+from ..validation import InvalidInputError, did_you_mean
 from . import export, fit, profile, render, scene, sweep
 
 __all__ = ["build_parser", "main"]
@@ -61,6 +61,12 @@ def main(argv: list[str] | None = None) -> int:
     # Before JAX computes anything: XLA reads the flag when its backend starts.
     use_deterministic_scheduler()
     parser = build_parser()
+    unknown = _unknown_option(parser, sys.argv[1:] if argv is None else argv)
+    if unknown is not None:
+        command, line = unknown
+        command.print_usage(sys.stderr)
+        print(line, file=sys.stderr)
+        return 2
     try:
         args = parser.parse_args(argv)
     except SystemExit as exit_:  # --help, --version, or a usage error argparse printed
@@ -94,6 +100,28 @@ def main(argv: list[str] | None = None) -> int:
         return _interrupted(stop.signum)
     finally:
         command_finished()  # a signal from here on: one line, no traceback
+
+
+def _unknown_option(parser: argparse.ArgumentParser, argv: list[str]) -> tuple[argparse.ArgumentParser, str] | None:
+    """The command's parser and a one-line error for the first ``--option`` it does not
+    know, with the closest one it does; None if there is none (or no command).
+
+    argparse would report it only after the required options (``--output X`` was
+    answered with "required: --out"), and at the top level, without a suggestion.
+    """
+    commands = next((a.choices for a in parser._actions if isinstance(a, argparse._SubParsersAction)), {})
+    if not argv or argv[0] not in commands:
+        return None
+    command = commands[argv[0]]
+    known = list(command._option_string_actions)
+    for word in argv[1:]:
+        if word == "--":
+            break
+        name = word.split("=", 1)[0]
+        # argparse also takes a unique prefix of an option (--overw for --overwrite).
+        if name.startswith("--") and name not in known and not any(k.startswith(name) for k in known):
+            return command, f"invsss {argv[0]}: error: unrecognized option {name}{did_you_mean(name, known)}"
+    return None
 
 
 def _interrupted(signum: int) -> int:

@@ -228,3 +228,25 @@ def test_a_canvas_smaller_than_the_pair_is_one_line_error(scene, tmp_path, capsy
     last = capsys.readouterr().err.strip().splitlines()[-1]
     assert code == 2
     assert last == "invsss: error: canvas: the pair is 40 x 40 pixels, larger than the canvas of 8 x 8"
+
+
+@pytest.mark.parametrize("argv, expected", [
+    # argparse named neither: the first was reported at the top level without a hint, the
+    # second only as the missing --out.
+    (["fit", "--depth-units", "m"], "invsss fit: error: unrecognized option --depth-units (did you mean "
+                                    "'--depth-unit'?)"),
+    (["fit", "--source", "a.exr", "--output", "x"], "invsss fit: error: unrecognized option --output (did you "
+                                                    "mean '--out'?)"),
+    (["export", "p.json", "--formats=hdrp"], "invsss export: error: unrecognized option --formats (did you mean "
+                                             "'--format'?)"),
+])
+def test_an_unknown_option_is_named_with_the_closest_known_one(capsys, argv, expected):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[0].startswith(f"usage: invsss {argv[0]} ") and err[-1] == expected, err
+
+
+def test_a_unique_prefix_of_an_option_is_still_taken(capsys):
+    """argparse takes --overw for --overwrite: the check before it must not refuse it."""
+    assert main(["fit", "--overw", "--source", "a.exr"]) == 2  # refused by argparse, for --target and --out
+    assert "unrecognized option" not in capsys.readouterr().err
