@@ -31,7 +31,9 @@ def add_parser(subparsers) -> None:
     )
     parser.add_argument("skin", help="linear image of the spot-lit skin")
     parser.add_argument("reference", metavar="REF", help="linear image of the lit white reference")
-    parser.add_argument("--out", required=True, help="profile JSON to write (refused if it exists)")
+    parser.add_argument("--out", required=True, help="profile JSON to write (refused if it exists, unless --overwrite)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace an existing --out file (never one of the input images)")
     parser.add_argument("--mm-per-pixel", type=float, required=True, metavar="MM",
                         help="pixel pitch on the skin, mm")
     parser.add_argument("--centre", type=float, nargs=2, default=None, metavar=("ROW", "COL"),
@@ -86,8 +88,15 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
     from ..measurement.dipole_fit import fit_dipole
     from ..measurement.measure import measure_profile
 
+    if os.path.isdir(args.out):
+        raise InvalidInputError(f"{args.out}: is a folder; --out names the profile JSON file to write")
     if os.path.exists(args.out):
-        raise InvalidInputError(f"{args.out}: already exists; remove it or choose another --out")
+        if not args.overwrite:
+            raise InvalidInputError(f"{args.out}: already exists; pass --overwrite to replace it, or choose "
+                                    "another --out")
+        for flag, given in (("SKIN", args.skin), ("REF", args.reference)):
+            if os.path.isfile(given) and os.path.samefile(given, args.out):
+                raise InvalidInputError(f"{args.out}: is the input {flag} of this run; choose another --out")
     if not os.path.isdir(os.path.dirname(os.path.abspath(args.out))):
         raise InvalidInputError(f"{args.out}: cannot write, its directory does not exist")
     try:  # before reading anything: the transport models have tables for some eta only
