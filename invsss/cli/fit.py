@@ -290,15 +290,19 @@ def _run(args: argparse.Namespace, stop: StopSignals, notices: list[str]) -> int
             file=sys.stderr,
         )
         return stop.exit_status
+    _print_summary(result, written, "mm" if args.distance else args.depth_unit)
+    return 0
+
+
+def _print_summary(result, written: list[str], depth_unit: str) -> None:
+    """The fit's two lines on stdout: loss, PSNR, convergence and files; the blur's width."""
     print(
         f"fit: loss {result.loss:.4g}  PSNR {result.psnr:.2f} dB  SSIM {result.ssim:.4f}  "
         f"{'converged' if result.converged else 'NOT converged'} ({result.iterations} iterations); "
         f"wrote {', '.join(written)}"
     )
-    unit = "mm" if args.distance else args.depth_unit
-    if blur_line(result.blur, unit):
-        print(f"fit: {blur_line(result.blur, unit)}")
-    return 0
+    if blur_line(result.blur, depth_unit):
+        print(f"fit: {blur_line(result.blur, depth_unit)}")
 
 
 def _with_file_names(err: InvalidInputError, args: argparse.Namespace, count: int) -> InvalidInputError:
