@@ -114,9 +114,12 @@ def _unknown_option(parser: argparse.ArgumentParser, argv: list[str]) -> tuple[a
         return None
     command = commands[argv[0]]
     known = list(command._option_string_actions)
-    for word in argv[1:]:
-        if word == "--":
-            break
+    words = argv[1:argv.index("--")] if "--" in argv else argv[1:]
+    if any(word == "-h" or (len(word) > 2 and "--help".startswith(word)) for word in words):
+        return None  # argparse prints the help whatever else is on the line
+    for word in words:
+        if " " in word:
+            continue  # argparse takes a word with a space as a value, whatever it starts with
         name = word.split("=", 1)[0]
         # argparse also takes a unique prefix of an option (--overw for --overwrite).
         if name.startswith("--") and name not in known and not any(k.startswith(name) for k in known):

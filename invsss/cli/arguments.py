@@ -10,6 +10,7 @@ import numpy as np
 from ..forward.passes import TAP_WEIGHTS
 from ..forward.screen_space import MODELS
 from ..io import image_extension, read_image
+from ..io.params_file import warn_filled_for_model
 from ..validation import InvalidInputError
 
 
@@ -39,9 +40,16 @@ def check_output_path(path: str) -> None:
 
 
 def model_choice(args: argparse.Namespace, extras: dict) -> tuple[str, object]:
-    """Model and tap weights: the command-line flag wins over the params file."""
+    """Model and tap weights: the command-line flag wins over the params file.
+
+    Reading the file warned about the entries it filled from the fit's estimate only
+    where the file's own model uses them (a ``burley`` fit's weights change nothing it
+    renders); a ``--model`` that uses entries the file's model does not gets that
+    warning here.
+    """
     model = args.model or extras.get("model", MODELS[0])
     tap_weights = args.tap_weights or extras.get("tap_weights")
+    warn_filled_for_model(args.params, extras, model)
     return model, tap_weights
 
 

@@ -91,12 +91,12 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
     if os.path.isdir(args.out):
         raise InvalidInputError(f"{args.out}: is a folder; --out names the profile JSON file to write")
     if os.path.exists(args.out):
-        if not args.overwrite:
-            raise InvalidInputError(f"{args.out}: already exists; pass --overwrite to replace it, or choose "
-                                    "another --out")
         for flag, given in (("SKIN", args.skin), ("REF", args.reference)):
             if os.path.isfile(given) and os.path.samefile(given, args.out):
                 raise InvalidInputError(f"{args.out}: is the input {flag} of this run; choose another --out")
+        if not args.overwrite:
+            raise InvalidInputError(f"{args.out}: already exists; pass --overwrite to replace it, or choose "
+                                    "another --out")
     if not os.path.isdir(os.path.dirname(os.path.abspath(args.out))):
         raise InvalidInputError(f"{args.out}: cannot write, its directory does not exist")
     try:  # before reading anything: the transport models have tables for some eta only

@@ -46,6 +46,7 @@ from ..forward.transmission import TRANSMISSION_WRAP
 from ..validation import InvalidInputError
 from . import read_params
 from .light_constants import light_constants
+from .params_file import warn_filled_for_model
 from .shader_export import shader_files, write_shader
 from .writing import write_texts_atomic
 
@@ -546,6 +547,7 @@ def export_params(
     with jax.enable_x64(True):
         params, extras = read_params(params_json_path)
     model = model or extras.get("model", MODEL_NAMES[0])
+    warn_filled_for_model(params_json_path, extras, model)
     tap_weights = tap_weights or extras.get("tap_weights")
     if format in ("hdrp", "unreal"):  # issue 34: the engines' assets
         from .engine_profiles import engine_asset

@@ -45,6 +45,7 @@ __all__ = [
     "ParamsFile",
     "params_json_schema",
     "read_params",
+    "warn_filled_for_model",
     "write_params",
 ]
 
@@ -420,6 +421,34 @@ def read_params(path) -> tuple[SSSParams, dict]:
                 stacklevel=2,
             )
     return params, extras
+
+
+def warn_filled_for_model(name, extras: Mapping, model: str) -> None:
+    """Warn about the entries :func:`read_params` filled from the fit's estimate that
+    ``model`` uses and the file's own model does not.
+
+    :func:`read_params` warns only about filled entries the file's model uses (a
+    ``burley`` fit's weights change nothing it renders); a caller that renders or
+    exports the file with another model (``--model``) calls this with that model.
+
+    Examples
+    --------
+    >>> import warnings
+    >>> extras = {"model": "burley", "filled_from_estimate": ["weights[0]", "weights[1]"]}
+    >>> with warnings.catch_warnings(record=True) as caught:
+    ...     warnings.simplefilter("always")
+    ...     warn_filled_for_model("p.json", extras, "sog")
+    >>> print(caught[0].message)
+    p.json: weights[0], weights[1] not determined by the burley fit; model sog uses them, with their point estimate
+    """
+    own = extras.get("model")
+    if model == own or own not in MODEL_NAMES or model not in MODEL_NAMES:
+        return
+    newly = [entry for entry in extras.get("filled_from_estimate") or ()
+             if entry.split("[")[0] in get_model(model).parameters - get_model(own).parameters]
+    if newly:
+        warnings.warn(f"{os.fspath(name)}: {', '.join(newly)} not determined by the {own} fit; model {model} uses "
+                      "them, with their point estimate", stacklevel=2)
 
 
 def _params_of(content: Mapping, parsed: ParamsFile, name: str) -> tuple[SSSParams, list[str]]:

@@ -35,9 +35,10 @@ look like one result, and a rerun would silently replace an earlier result.
 * **Nothing left behind by a failure.** A directory that opening had to create
   is removed again if the run ends before :meth:`~ResultDir.commit`, also when a
   signal ends the command at once (``os._exit`` runs no ``finally``; the lock
-  registers its release with :func:`invsss.runtime.interrupts.add_quit_cleanup`).
-  Only a SIGKILL between opening and committing can leave it, holding just the
-  hidden lock file; the next run treats it as empty.
+  registers its release with :func:`invsss.runtime.interrupts.add_quit_cleanup`
+  as soon as it is held). A SIGKILL between opening and committing can leave it,
+  holding just the hidden lock file, and so can a signal in the microseconds
+  between creating the lock file and locking it; the next run treats it as empty.
 
 Fault injection for tests: when the environment variable
 ``INVSSS_TEST_PAUSE_IN_COMMIT`` holds seconds, :meth:`ResultDir.commit` pauses
@@ -272,20 +273,28 @@ class ResultDir:
             raise
 
     def close(self) -> None:
-        """Release the lock; remove the directory if this run created it and wrote nothing."""
-        remove_quit_cleanup(self.close)
-        fd, self._fd = self._fd, None
+        """Release the lock; remove the directory if this run created it and wrote nothing.
+
+        A signal that quits at once may run it again from inside a close it interrupted
+        (the quit cleanup is removed last, so that such a signal still finds it): each
+        step may then run twice, and each is harmless twice.
+        """
+        fd = self._fd
         if fd is not None:
             # Unlink while still holding the lock: a waiting run that opened the old
             # file notices (inode check in _lock) and retries on a fresh one.
             with contextlib.suppress(OSError):
                 os.unlink(os.path.join(self.path, _LOCK_NAME))
-            with contextlib.suppress(OSError):  # closed already by a close this one interrupted
+            # EBADF when a close this one interrupted had closed it already; the
+            # process then exits, with no other file opened in between.
+            with contextlib.suppress(OSError):
                 os.close(fd)
+            self._fd = None
         # Also when the lock was never taken: a signal between creating and locking.
         if self._created and not self.committed:
             with contextlib.suppress(OSError):
                 os.rmdir(self.path)  # only succeeds if empty: never removes the user's files
+        remove_quit_cleanup(self.close)
 
     def _lock(self) -> None:
         lock_path = os.path.join(self.path, _LOCK_NAME)
@@ -314,6 +323,9 @@ class ResultDir:
             except FileNotFoundError:
                 same = False
             if same:
+                # Ours from here: a signal that quits at once releases it (close()).
+                self._fd = fd
+                add_quit_cleanup(self.close)
                 break
             os.close(fd)
         record = {
@@ -329,19 +341,10 @@ class ResultDir:
         except OSError as err:
             # A full disk: refused now, before any work, leaving no empty lock
             # file (nor a directory this run made) behind.
-            with contextlib.suppress(OSError):
-                os.unlink(lock_path)
-            os.close(fd)
-            if self._created:
-                with contextlib.suppress(OSError):
-                    os.rmdir(self.path)
+            self.close()
             raise InvalidInputError(
                 f"{self.path}: cannot write to the output directory ({err.strerror})"
             ) from None
-        self._fd = fd
-        # A signal that ends the command at once (a second Ctrl-C, one raised in a
-        # garbage-collection callback) skips close(): it runs close() on its way out.
-        add_quit_cleanup(self.close)
 
     def _check_contents(self) -> None:
         path = self.path

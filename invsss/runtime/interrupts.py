@@ -61,6 +61,8 @@ _phase = "while starting; nothing written"
 
 #: What to undo before a signal ends the process at once (:func:`add_quit_cleanup`).
 _quit_cleanups: list[Callable[[], object]] = []
+# A child made by fork did not take the parent's locks: quitting, it must not release them.
+os.register_at_fork(after_in_child=_quit_cleanups.clear)
 
 
 def add_quit_cleanup(cleanup: Callable[[], object]) -> None:
@@ -90,6 +92,11 @@ def remove_quit_cleanup(cleanup: Callable[[], object]) -> None:
 
 def _exit_now(status: int) -> None:
     """Run the quit cleanups, then end the process with ``status`` at once."""
+    # A further signal must not cut a cleanup short (its handler would raise into it,
+    # or quit again): from here on both are ignored.
+    for sig in _SIGNALS:
+        with contextlib.suppress(ValueError, OSError):  # not the main thread: leave them
+            signal.signal(sig, signal.SIG_IGN)
     while _quit_cleanups:
         cleanup = _quit_cleanups.pop()
         try:

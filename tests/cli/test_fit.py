@@ -250,3 +250,11 @@ def test_a_unique_prefix_of_an_option_is_still_taken(capsys):
     """argparse takes --overw for --overwrite: the check before it must not refuse it."""
     assert main(["fit", "--overw", "--source", "a.exr"]) == 2  # refused by argparse, for --target and --out
     assert "unrecognized option" not in capsys.readouterr().err
+
+
+def test_a_value_with_a_space_and_help_beside_a_typo_are_argparses(capsys):
+    """A word with a space is a value to argparse whatever it starts with, and --help wins."""
+    assert main(["fit", "--source", "a.exr", "--out", "--my results"]) == 2  # for --target, not the value
+    assert "unrecognized option" not in capsys.readouterr().err
+    assert main(["fit", "--bogus", "--help"]) == 0
+    assert "usage: invsss fit" in capsys.readouterr().out

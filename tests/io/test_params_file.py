@@ -11,6 +11,7 @@ import pytest
 
 import invsss
 from invsss.io import PARAMS_KEYS, PARAMS_OPTIONAL_KEYS, read_params, write_params
+from invsss.io.export import export_params
 from invsss.io.params_file import MANIFEST_NAME, SCHEMA_VERSION, params_json_schema
 from invsss.forward.params import PARAM_NAMES, check_plausible
 from invsss.validation import InputNotice, InvalidInputError
@@ -186,6 +187,10 @@ def test_entries_the_files_model_does_not_use_are_filled_without_a_warning(tmp_p
         params, extras = read_params(path)
     np.testing.assert_allclose(np.asarray(params.weights), [0.5, 0.25, 0.3, 0.4], rtol=1e-6)
     assert extras["filled_from_estimate"] == ["weights[2]", "weights[3]"]
+    # Exported with a model that uses them (export --model sog), the warning comes back.
+    with pytest.warns(UserWarning, match="weights\\[2\\], weights\\[3\\] not determined by the burley fit; "
+                      "model sog uses them"):
+        export_params(path, None, "json", model="sog")
     path.write_text(json.dumps({**content, "model": "sog"}))  # sog uses them: the warning stays
     with pytest.warns(UserWarning, match="weights\\[2\\], weights\\[3\\] not determined"):
         read_params(path)

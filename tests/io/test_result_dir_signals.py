@@ -18,22 +18,24 @@ import textwrap
 
 import pytest
 
+from invsss.io.result_dir import result_state
 from tests import ROOT
 
 OPEN_THEN = textwrap.dedent("""
-    import gc, os, signal, sys, time
+    import os, signal, sys, time
     from invsss.io.result_dir import ResultDir
     from invsss.runtime.interrupts import StopSignals
 
-    class Collected:
-        def __del__(self):  # runs inside the collector: an exception here is unraisable
+    class Dropped:
+        def __del__(self):  # a finaliser, as JAX's gc callback is: an exception here is unraisable
             os.kill(os.getpid(), signal.SIGINT)
             time.sleep(0.5)  # the handler runs here and raises Interrupted
 
-    with StopSignals() as stop, ResultDir(sys.argv[1], names=["params.json"]):
+    with StopSignals() as stop, ResultDir(sys.argv[1], names=["params.json"]) as out:
+        if sys.argv[3] == "committed":
+            out.commit({"params.json": lambda path: open(path, "w").write("{}")})
         if sys.argv[2] == "unraisable":
-            Collected()
-            gc.collect()
+            Dropped()  # freed at once (no reference is kept), which runs __del__
         else:  # a second signal while the fit runs: quit without saving
             with stop.deferred():
                 os.kill(os.getpid(), signal.SIGINT)
@@ -43,9 +45,9 @@ OPEN_THEN = textwrap.dedent("""
 """)
 
 
-def _quit_inside(out, how):
-    done = subprocess.run([sys.executable, "-c", OPEN_THEN, str(out), how], cwd=ROOT, capture_output=True,
-                          text=True, timeout=120)
+def _quit_inside(out, how, when="before the commit"):
+    done = subprocess.run([sys.executable, "-c", OPEN_THEN, str(out), how, when.split()[0]], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)
     assert done.returncode == 130 and "carried on" not in done.stdout, done
     return done
 
@@ -66,3 +68,12 @@ def test_a_folder_of_the_users_keeps_its_files_and_loses_the_lock(tmp_path, how)
     _quit_inside(out, how)
     assert sorted(os.listdir(out)) == ["notes.txt"]
     assert (out / "notes.txt").read_text() == "mine"
+
+
+@pytest.mark.parametrize("how", ["unraisable", "second signal"])
+def test_a_result_committed_before_the_signal_stays_whole(tmp_path, how):
+    """The cleanup releases the lock of a committed result and removes nothing of it."""
+    out = tmp_path / "run"
+    _quit_inside(out, how, "committed")
+    assert sorted(os.listdir(out)) == ["invsss-manifest.json", "params.json"]
+    assert result_state(out) == "complete"
