@@ -5,11 +5,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import tempfile
 
 import numpy as np
 
 from ..io import read_image
+from ..io.writing import check_file_target, write_text_atomic
 from ..measurement.medium_fit import MODEL_NAMES
 from ..measurement.profile_models import PROFILE_MODELS
 from ..measurement.transport_table import ONE_MINUS_ALPHA
@@ -88,17 +88,11 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
     from ..measurement.dipole_fit import fit_dipole
     from ..measurement.measure import measure_profile
 
-    if os.path.isdir(args.out):
-        raise InvalidInputError(f"{args.out}: is a folder; --out names the profile JSON file to write")
-    if os.path.exists(args.out):
-        for flag, given in (("SKIN", args.skin), ("REF", args.reference)):
-            if os.path.isfile(given) and os.path.samefile(given, args.out):
-                raise InvalidInputError(f"{args.out}: is the input {flag} of this run; choose another --out")
-        if not args.overwrite:
-            raise InvalidInputError(f"{args.out}: already exists; pass --overwrite to replace it, or choose "
-                                    "another --out")
-    if not os.path.isdir(os.path.dirname(os.path.abspath(args.out))):
-        raise InvalidInputError(f"{args.out}: cannot write, its directory does not exist")
+    # Never an input, --overwrite or not; then the checks every file output gets.
+    for flag, given in (("SKIN", args.skin), ("REF", args.reference)):
+        if os.path.isfile(args.out) and os.path.isfile(given) and os.path.samefile(given, args.out):
+            raise InvalidInputError(f"{args.out}: is the input {flag} of this run; choose another --out")
+    check_file_target(args.out, overwrite=args.overwrite, role="the profile JSON")
     try:  # before reading anything: the transport models have tables for some eta only
         PROFILE_MODELS[args.model](np.ones(1), 1.0, 0.1, args.eta)
     except ValueError as error:
@@ -144,11 +138,7 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
         "r_mm": measured.r_mm.tolist(), "reflectance": np.asarray(measured.reflectance).tolist(),
         "reflectance_stderr": np.nan_to_num(np.asarray(measured.reflectance_stderr), nan=-1.0).tolist(),
     }
-    text = json.dumps(content, indent=2) + "\n"
-    folder = os.path.dirname(os.path.abspath(args.out))
-    with tempfile.NamedTemporaryFile("w", dir=folder, suffix=".tmp", delete=False) as handle:
-        handle.write(text)
-    os.replace(handle.name, args.out)  # never a half-written profile under the real name
+    write_text_atomic(args.out, json.dumps(content, indent=2) + "\n")  # never a half-written profile
     print(f"profile: {measured.r_mm.size} samples from {measured.r_mm[0]:.2f} to "
           f"{measured.r_mm[-1]:.2f} mm; {args.gaussians} Gaussians (rms {float(gaussians.rms):.3f}); "
           f"wrote {args.out}")

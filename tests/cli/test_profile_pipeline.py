@@ -64,5 +64,5 @@ def test_profile_refuses_an_out_it_may_not_write_before_reading(tmp_path, capsys
     err = capsys.readouterr().err.strip()
     expected = {"exists": "already exists; pass --overwrite to replace it",
                 "an input": "is the input SKIN of this run; choose another --out",
-                "a folder": "is a folder; --out names the profile JSON file to write"}[case]
+                "a folder": "is a folder, in the way of the profile JSON"}[case]
     assert err.startswith(f"invsss: error: {out}: ") and expected in err and "\n" not in err, err
