@@ -301,8 +301,9 @@ def _print_summary(result, written: list[str], depth_unit: str) -> None:
         f"{'converged' if result.converged else 'NOT converged'} ({result.iterations} iterations); "
         f"wrote {', '.join(written)}"
     )
-    if blur_line(result.blur, depth_unit):
-        print(f"fit: {blur_line(result.blur, depth_unit)}")
+    blur = blur_line(result.blur, depth_unit)
+    if blur:
+        print(f"fit: {blur}")
 
 
 def _with_file_names(err: InvalidInputError, args: argparse.Namespace, count: int) -> InvalidInputError:

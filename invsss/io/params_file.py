@@ -414,7 +414,7 @@ def read_params(path) -> tuple[SSSParams, dict]:
         extras["filled_from_estimate"] = filled
         model = content.get("model")
         used = get_model(model).parameters if model in MODEL_NAMES else frozenset(PARAM_NAMES)
-        mattering = [entry for entry in filled if entry.split("[")[0] in used]
+        mattering = _entries_of(filled, used)
         if mattering:
             warnings.warn(
                 f"{name}: {', '.join(mattering)} not determined by the fit; using its point estimate",
@@ -444,11 +444,16 @@ def warn_filled_for_model(name, extras: Mapping, model: str) -> None:
     own = extras.get("model")
     if model == own or own not in MODEL_NAMES or model not in MODEL_NAMES:
         return
-    newly = [entry for entry in extras.get("filled_from_estimate") or ()
-             if entry.split("[")[0] in get_model(model).parameters - get_model(own).parameters]
+    only_there = get_model(model).parameters - get_model(own).parameters
+    newly = _entries_of(extras.get("filled_from_estimate") or (), only_there)
     if newly:
         warnings.warn(f"{os.fspath(name)}: {', '.join(newly)} not determined by the {own} fit; model {model} uses "
                       "them, with their point estimate", stacklevel=2)
+
+
+def _entries_of(entries, parameters) -> list[str]:
+    """Those of ``entries`` (``"maxdd"``, ``"weights[2]"``: :func:`entry_name`'s) that belong to ``parameters``."""
+    return [entry for entry in entries if entry.split("[")[0] in parameters]
 
 
 def _params_of(content: Mapping, parsed: ParamsFile, name: str) -> tuple[SSSParams, list[str]]:
