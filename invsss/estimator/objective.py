@@ -35,6 +35,7 @@ from ..forward.light_terms import (
     lit_source,
     propagation_offsets,
 )
+from ..forward.models import get_model
 from ..forward.stretch import stretch_factors
 from ..forward.transmission import transmitted_source, wrapped_back_lighting
 from .basis import basis_images
@@ -47,6 +48,14 @@ __all__ = ["Objective"]
 
 #: The unknowns of the terms applied to the blurred images (``law`` changes the source).
 _AFTER_BLUR = tuple(LIGHT_UNKNOWNS[term] for term in AFTER_BLUR)
+#: The unknowns of the terms that change the source before the blur: a move in one
+#: of them moves the image the passes blur, not the passes.
+_LIGHTING = (LIGHT_UNKNOWNS["law"], LIGHT_UNKNOWNS["law_strength"], LIGHT_UNKNOWNS["fill"],
+             LIGHT_UNKNOWNS["transmission"], LIGHT_UNKNOWNS["thickness_scale"])
+#: The layouts whose passes treat every channel of the image alike (one set of
+#: variances and taps for all): the burley disk has a variance per channel, and a
+#: layered render with fixed weights may have a weight per channel.
+_SAME_PASSES_PER_CHANNEL = ("chained",)
 #: The unknowns the blurred basis images depend on (the grey mix apart: the blur is
 #: linear in the image); the others act after the blur.
 _BLURRED_BY = ("sss_level", "correction", "maxdd", "variances", "weights", LIGHT_UNKNOWNS["law"],
@@ -232,18 +241,26 @@ class Objective(eqx.Module):
         are linear in the image, so the blur of the mixed source is the mix of the
         blurred source channels, and each channel is blurred once (a three-channel
         blur costs about 1.25 grey ones on CPU: the sample positions are shared),
-        where differencing the mix would cost two blurs.
+        where differencing the mix would cost two blurs. For the same reason the
+        unknowns of the terms that light the source (:data:`_LIGHTING`) are
+        differenced in one blur with the source (:meth:`_blurred_with_lighting_slopes`).
         """
         h = jnp.asarray(step, z.dtype)
         taken = (z + h) - z  # divide by the step actually taken
         blocks = self.param.layout()
-        if "mix" in natural:
-            channels = self.blurred_bases({k: v for k, v in natural.items() if k != "mix"})
-            blurred = tuple(jnp.einsum("ihwc,c->ihw", x, natural["mix"])[..., None] for x in channels)
-        else:
-            blurred = self.blurred_bases(natural)
         columns: list[list[Any]] = [[None] * z.size for _ in self.pairs]
-        differenced = [j for name, (first, stop) in blocks.items() if name in _BLURRED_BY for j in range(first, stop)]
+        lighting = [j for name, (first, stop) in blocks.items() if name in _LIGHTING for j in range(first, stop)]
+        if lighting and self._passes_alike_per_channel():
+            channels, blurred = self._blurred_with_lighting_slopes(z, natural, h, taken, lighting, columns)
+        else:
+            lighting = []
+            if "mix" in natural:
+                channels = self.blurred_bases({k: v for k, v in natural.items() if k != "mix"})
+                blurred = tuple(jnp.einsum("ihwc,c->ihw", x, natural["mix"])[..., None] for x in channels)
+            else:
+                blurred = self.blurred_bases(natural)
+        differenced = [j for name, (first, stop) in blocks.items() if name in _BLURRED_BY
+                       for j in range(first, stop) if j not in lighting]
         if differenced:
 
             def column(j):
@@ -264,6 +281,42 @@ class Objective(eqx.Module):
             jnp.stack([jnp.zeros_like(b) if c is None else c for c in cols]) for b, cols in zip(blurred, columns)
         )
         return blurred, slopes
+
+    def _passes_alike_per_channel(self) -> bool:
+        """Whether the blur gives every channel of the image the same passes, so
+        that images side by side as channels blur as they would one by one."""
+        layout = get_model(self.model).layout
+        return (layout == "layered" and self.linear_weights) or layout in _SAME_PASSES_PER_CHANNEL
+
+    def _blurred_with_lighting_slopes(self, z, natural, h, taken, lighting, columns) -> tuple[tuple, tuple]:
+        """The blurred basis images of every pair, unmixed and mixed (as
+        :meth:`_blurred_with_slopes` makes them), and in ``columns`` their forward
+        differences along the unknowns ``lighting`` (of :data:`_LIGHTING`).
+
+        Those unknowns move the source, not the passes, so the source and its
+        moved copies go through one blur side by side as channels: the sample
+        positions and tap weights, which depend on the depth and the blur
+        parameters alone, are worked out once for all of them instead of once per
+        moved copy. On pt_face_940 with ``shift,law`` (128 x 128, one core) the
+        Jacobian took 35 ms in place of 41. The differences are those of a blur
+        per copy to rounding; the passes mix no channels.
+        """
+        unmixed_natural = {k: v for k, v in natural.items() if k != "mix"}
+        moved = [self.param.natural(z.at[j].add(h)) for j in lighting]
+        unmixed, mixed = [], []
+        for p, pair in enumerate(self.pairs):
+            sources = [_lit_source(pair, values).source for values in [natural, *moved]]
+            c = pair.source.shape[-1]
+            side_by_side = eqx.tree_at(lambda q: q.source, pair, jnp.concatenate(sources, axis=-1))
+            images = basis_images(side_by_side, unmixed_natural, self.model, self.tap_weights, self.linear_weights)
+            copies = [images[..., i * c:(i + 1) * c] for i in range(len(sources))]
+            unmixed.append(copies[0])
+            if "mix" in natural:
+                copies = [jnp.einsum("ihwc,c->ihw", x, natural["mix"])[..., None] for x in copies]
+            for copy, j in zip(copies[1:], lighting):
+                columns[p][j] = (copy - copies[0]) / taken[j]
+            mixed.append(copies[0])
+        return tuple(unmixed), tuple(mixed)
 
     def explicit_residual(self, z, coef, offset) -> Float[Array, " N"]:
         """The residual with the linear unknowns given instead of projected out."""

@@ -121,3 +121,52 @@ def test_difference_jacobian_matches_forward_mode_for_every_kind_of_unknown():
             assert np.linalg.norm(exact[:, k]) > 0, name
             error = np.linalg.norm(approx[:, k] - exact[:, k]) / np.linalg.norm(exact[:, k])
             assert error < tolerance, (name, k, error)
+
+
+@pytest.mark.parametrize("grey_target", [True, False])
+def test_lighting_differences_side_by_side_equal_one_blur_per_move(grey_target):
+    """The law, the fill and the transmission move the source, and their columns
+    of the difference Jacobian come from one blur of the source and its moved
+    copies side by side as channels. Each must equal the difference of two
+    separate blurs, the source at ``z`` and at ``z`` moved in that unknown (made
+    here with the objective's own ``blurred_bases``), to rounding: a copy sliced
+    from the wrong channels, or mixed with the wrong weights, is off by the size
+    of the column itself."""
+    size = 20
+    pair = _lit_pair(size, 4, 1.0)
+    rng = np.random.default_rng(5)
+    target = pair.target if grey_target else np.stack([pair.target, 0.8 * pair.target, 0.6 * pair.target], -1)
+    pair = invsss.ImagePair(pair.source, target, pair.depth, pair.mask, normal=pair.normal, light=pair.light,
+                            key=pair.key, fill_light=-pair.light,
+                            thickness=rng.uniform(1.0, 8.0, (size, size)),
+                            key_irradiance=rng.uniform(0.2, 1.0, (size, size, 3)))
+    options = FitOptions(profile={"weights": [0.5, 0.3, 0.2], "variances": [0.25, 1.2, 5.0]}, n_starts=1,
+                         light_terms=("shift", "law", "fill", "transmission"))
+    problem = build_problem([pair], options)
+    blocks = problem.param.layout()
+    lighting = [name for name in ("law", "law_strength", "fill_strength", "transmission", "thickness_scale")
+                if name in blocks]
+    assert len(lighting) == 5 and ("mix" in blocks) == grey_target
+    step = 1e-5
+    with jax.enable_x64(True):
+        objective = problem.objective
+        z = problem.z0 + jnp.asarray(np.random.default_rng(6).uniform(-0.2, 0.2, problem.param.size))
+        blurred, slopes = jax.jit(lambda u: objective._blurred_with_slopes(u, objective.param.natural(u), step))(z)
+
+        def one_blur(u):
+            values = objective.param.natural(u)
+            # blurred_bases mixes the source to grey before the blur; the slopes mix after it.
+            return objective.blurred_bases(values)[0]
+
+        at_z = jax.jit(one_blur)(z)
+        np.testing.assert_allclose(np.asarray(blurred[0]), np.asarray(at_z), rtol=0,
+                                   atol=1e-12 * float(jnp.abs(at_z).max()))
+        for name in lighting:
+            first, stop = blocks[name]
+            for j in range(first, stop):
+                moved = z.at[j].add(step)
+                expected = (jax.jit(one_blur)(moved) - at_z) / (moved[j] - z[j])
+                column = np.asarray(slopes[0][j])
+                norm = float(np.linalg.norm(np.asarray(expected)))
+                assert norm > 0, (name, j)
+                assert np.linalg.norm(column - np.asarray(expected)) < 1e-5 * norm, (name, j)
