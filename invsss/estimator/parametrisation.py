@@ -51,7 +51,8 @@ scale                                                behind the key light's term
 ``softplus`` keeps the correction non-negative while letting it approach 0
 smoothly (its floor is 0, reached only in the limit ``z -> -inf``); the logs make
 multiplicative uncertainty additive, which is what the solver's steps and the
-Gauss-Newton covariance assume.
+Gauss-Newton covariance assume. Each ``exp`` holds ``z`` within ``+-LOG_LIMIT``: an
+unknown the data bound on one side only may otherwise walk off to infinity.
 
 The gauge (docs/model.md, section 6): scaling every variance by ``a^2`` and ``L`` by
 ``1 / a`` gives the same image, so one of them must be fixed: ``gauge="variances"``
@@ -122,6 +123,13 @@ SCALED_BLOCKS = ("vignetting", "pigment",
                    if term not in ("law", "thickness_scale", "transmission")))
 #: Blocks that are ``ref * exp(z)``: positive, their uncertainty relative.
 _LOG_BLOCKS = ("sss_level", "maxdd", "variances", "thickness_scale")
+#: How far a ``ref * exp(z)`` unknown may go from its reference: ``|z|`` beyond this
+#: (a factor of 1e26) maps to the value at the limit. Such a value is only bounded
+#: by the data, not measured (maxdd where no depth slope reaches it, once the
+#: correction has gone to 0, walks off without changing the loss: 5.9e44 on
+#: pt_proc_ear_glow_940's plain fit), and ``exp`` overflows near 710, and float32,
+#: which the fit's result is returned in, near 88.
+LOG_LIMIT = 60.0
 _SCALARS = ("sss_level", "correction", "maxdd")
 
 
@@ -290,13 +298,13 @@ class Parametrisation(eqx.Module):
         for name, u in self.split(z).items():
             ref = self.reference[name] if xp is jnp else np.asarray(self.reference[name])
             if name in _LOG_BLOCKS:
-                out[name] = ref * xp.exp(u)
+                out[name] = ref * xp.exp(xp.clip(u, -LOG_LIMIT, LOG_LIMIT))
             elif name == "correction":
                 out[name] = ref * _softplus(u, xp)
             elif name in ("weights", "mix"):
                 out[name] = _simplex(u, 0, xp)
             elif name == "gain_ratio":
-                out[name] = xp.exp(u)
+                out[name] = xp.exp(xp.clip(u, -LOG_LIMIT, LOG_LIMIT))
             elif name in SCALED_BLOCKS:
                 out[name] = ref * u
             elif name == "law":

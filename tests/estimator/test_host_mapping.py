@@ -78,3 +78,29 @@ def test_sum_of_gaussians_is_the_same_in_numpy_and_jax():
         with jax.enable_x64(True):
             traced = jax.jit(sum_of_gaussians)(jnp.asarray(r), jnp.asarray(weights), jnp.asarray(variances))
         np.testing.assert_allclose(host, np.asarray(traced), rtol=1e-13, atol=0.0)
+
+
+def test_log_unknowns_beyond_the_limit_map_to_the_limit_in_both_paths():
+    """An unknown the data bound on one side only (maxdd where no slope reaches it)
+    can walk off; ``exp`` would overflow (float64 near 710, the returned float32
+    near 88). Beyond ``LOG_LIMIT`` the value is the limit's, finite, the same on
+    the host and traced, and its derivative 0."""
+    from invsss.estimator.parametrisation import LOG_LIMIT
+
+    param = _param(np.random.default_rng(5))
+    first, _ = param.layout()["maxdd"]
+    ratio, _ = param.layout()["gain_ratio"]
+    far = np.zeros(param.size)
+    far[first], far[ratio] = 837.0, -900.0
+    at_limit = far.copy()
+    at_limit[first], at_limit[ratio] = LOG_LIMIT, -LOG_LIMIT
+    host, limit = param.natural(far), param.natural(at_limit)
+    with jax.enable_x64(True):
+        traced = eqx.filter_jit(lambda p, u: p.natural(u))(param, jnp.asarray(far))
+        slope = jax.grad(lambda u: param.natural(u)["maxdd"])(jnp.asarray(far))
+    for name in ("maxdd", "gain_ratio"):
+        assert np.all(np.isfinite(host[name])) and np.all(np.asarray(host[name], np.float32) < np.inf), name
+        np.testing.assert_array_equal(host[name], limit[name])
+        np.testing.assert_allclose(np.asarray(traced[name]), host[name], rtol=1e-15)
+    assert float(host["maxdd"]) > 1e20 and float(host["gain_ratio"][0]) < 1e-20
+    assert float(slope[first]) == 0.0
