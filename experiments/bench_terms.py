@@ -17,6 +17,13 @@ or ``scan``; docs/model.md, section 8, "Where a term fit starts").
 ``--json`` writes the rows as well (one per pair and setting), to compare runs of
 two versions of the code: ``--compare A.json B.json`` prints B's PSNR less A's
 and B's times over A's per pair and setting.
+
+``--perturb SEED`` multiplies every target pixel by ``1 + 1e-12 n`` (``n`` standard
+normal, drawn with ``SEED``) before the fits: a change at the size of the float64
+rounding that any edit of the code makes. Comparing such runs with an unperturbed
+one shows how far a pair's fit moves for reasons no edit chose (docs/model.md,
+section 8, "How far rounding alone moves a fit"), the floor under which a PSNR
+or time difference between two versions of the code means nothing.
 """
 
 from __future__ import annotations
@@ -29,13 +36,19 @@ import sys
 import tempfile
 import time
 
+import numpy as np
+
 _T_START = time.perf_counter()
 
 BUFFERS = ("normal", "light", "key", "fill_light")
 TRANSMISSION_BUFFERS = ("thickness", "key_irradiance")
 
 
-def child(pair_dir: str, terms: str, cache_dir: str, term_starts: str) -> None:
+#: The relative size of ``--perturb``'s change of the targets.
+PERTURBATION = 1e-12
+
+
+def child(pair_dir: str, terms: str, cache_dir: str, term_starts: str, perturb: str = "0") -> None:
     """One process: two fits of ``pair_dir`` with ``terms`` ('' for plain); JSON on stdout."""
     from invsss.runtime.compile_cache import enable_compile_cache
     from invsss.runtime.determinism import use_deterministic_scheduler
@@ -46,6 +59,10 @@ def child(pair_dir: str, terms: str, cache_dir: str, term_starts: str) -> None:
     from invsss.estimator import fit_pair
 
     pair = load_pair(*(os.path.join(pair_dir, f) for f in ("source.exr", "target.exr", "depth.exr", "mask.png")))
+    target = pair.target
+    if int(perturb):
+        noise = np.random.default_rng(int(perturb)).standard_normal(np.shape(target))
+        target = np.asarray(target, np.float64) * (1.0 + PERTURBATION * noise)
     options = {}
     if terms:
         names = BUFFERS + (TRANSMISSION_BUFFERS if "transmission" in terms else ())
@@ -57,15 +74,15 @@ def child(pair_dir: str, terms: str, cache_dir: str, term_starts: str) -> None:
     runs = []
     for _ in range(2):
         t0 = time.perf_counter()
-        result = fit_pair(pair.source, pair.target, pair.depth, pair.mask, **options)
+        result = fit_pair(pair.source, target, pair.depth, pair.mask, **options)
         runs.append({"seconds": time.perf_counter() - t0, "iterations": int(result.iterations),
                      "psnr": float(result.psnr), "loss": float(result.loss)})
     print(json.dumps({"pair": os.path.basename(pair_dir.rstrip("/")), "terms": terms, "runs": runs}))
 
 
-def measure(pair_dir: str, terms: str, term_starts: str) -> dict:
+def measure(pair_dir: str, terms: str, term_starts: str, perturb: int = 0) -> dict:
     with tempfile.TemporaryDirectory(prefix="invsss-bench-terms-") as cache:
-        done = subprocess.run([sys.executable, __file__, "--child", pair_dir, terms, cache, term_starts],
+        done = subprocess.run([sys.executable, __file__, "--child", pair_dir, terms, cache, term_starts, str(perturb)],
                               capture_output=True, text=True)
     if done.returncode != 0:
         raise SystemExit(f"bench_terms: the fit of {pair_dir} with {terms or 'no terms'!r} failed:\n"
@@ -73,20 +90,21 @@ def measure(pair_dir: str, terms: str, term_starts: str) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def table(pair_dirs, term_sets, term_starts="auto", out=None) -> None:
+def table(pair_dirs, term_sets, term_starts="auto", out=None, perturb=0) -> None:
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     print(f"bench_terms: fit_pair with the CLI defaults, one fresh process per pair and setting (empty "
-          f"compilation cache); term_starts={term_starts}; {os.cpu_count()} CPUs, load average {load:.1f}; seconds")
+          f"compilation cache); term_starts={term_starts}; {os.cpu_count()} CPUs, load average {load:.1f}; seconds"
+          + (f"; targets perturbed by {PERTURBATION:g} (seed {perturb})" if perturb else ""))
     header = f"{'pair':32s} {'setting':16s} {'cold':>7s} {'warm':>7s} {'x cold':>7s} {'x warm':>7s} " \
              f"{'steps':>6s} {'PSNR':>7s}"
     print(header)
     print("-" * len(header))
     rows = []
     for pair_dir in pair_dirs:
-        plain = measure(pair_dir, "", term_starts)
+        plain = measure(pair_dir, "", term_starts, perturb)
         rows.append(plain)
         base = plain["runs"]
-        for row in [plain] + [measure(pair_dir, terms, term_starts) for terms in term_sets]:
+        for row in [plain] + [measure(pair_dir, terms, term_starts, perturb) for terms in term_sets]:
             if row is not plain:
                 rows.append(row)
             cold, warm = row["runs"]
@@ -120,7 +138,9 @@ def main() -> None:
                         help="the fit's term_starts (default auto)")
     parser.add_argument("--json", default=None, metavar="OUT", help="also write the rows as JSON")
     parser.add_argument("--compare", nargs=2, default=None, metavar=("A", "B"), help="compare two --json files")
-    parser.add_argument("--child", nargs=4, default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--perturb", type=int, default=0, metavar="SEED",
+                        help=f"multiply the targets by 1 + {PERTURBATION:g} n, n drawn with SEED (default 0: not)")
+    parser.add_argument("--child", nargs=5, default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         child(*args.child)
@@ -129,7 +149,7 @@ def main() -> None:
     else:
         if not args.pairs:
             parser.error("give pair folders (or --compare A B)")
-        table(args.pairs, [t for t in args.terms.split(";") if t], args.term_starts, args.json)
+        table(args.pairs, [t for t in args.terms.split(";") if t], args.term_starts, args.json, args.perturb)
 
 
 if __name__ == "__main__":
