@@ -19,9 +19,11 @@ two versions of the code: ``--compare A.json B.json`` prints B's PSNR less A's
 and B's times over A's per pair and setting.
 
 ``--perturb SEED`` multiplies every target pixel by ``1 + 1e-12 n`` (``n`` standard
-normal, drawn with ``SEED``) before the fits: a change at the size of the float64
-rounding that any edit of the code makes. Comparing such runs with an unperturbed
-one shows how far a pair's fit moves for reasons no edit chose (docs/model.md,
+normal, drawn with ``SEED``) before the fits: about 4500 times float64's machine
+epsilon, and far below anything a camera or a renderer could tell apart;
+an edit of the code changes the numbers of a fit by rounding that grows over its
+steps. Comparing such runs with an unperturbed one shows how far a pair's fit
+moves for reasons no edit chose (docs/model.md,
 section 8, "How far rounding alone moves a fit"), the floor under which a PSNR
 or time difference between two versions of the code means nothing.
 """

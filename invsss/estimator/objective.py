@@ -58,9 +58,7 @@ _LIGHTING = (LIGHT_UNKNOWNS["law"], LIGHT_UNKNOWNS["law_strength"], LIGHT_UNKNOW
 _SAME_PASSES_PER_CHANNEL = ("chained",)
 #: The unknowns the blurred basis images depend on (the grey mix apart: the blur is
 #: linear in the image); the others act after the blur.
-_BLURRED_BY = ("sss_level", "correction", "maxdd", "variances", "weights", LIGHT_UNKNOWNS["law"],
-               LIGHT_UNKNOWNS["law_strength"], LIGHT_UNKNOWNS["fill"], LIGHT_UNKNOWNS["transmission"],
-               LIGHT_UNKNOWNS["thickness_scale"])
+_BLURRED_BY = ("sss_level", "correction", "maxdd", "variances", "weights", *_LIGHTING)
 
 
 def _lit_source(pair, natural):
@@ -190,7 +188,8 @@ class Objective(eqx.Module):
         """The residual at ``z`` and its Jacobian, the blur by forward differences.
 
         The blurred basis images are differentiated by forward differences of
-        ``step`` in each unknown the blur depends on (one blur per unknown, where
+        ``step`` in each unknown the blur depends on (one blur per unknown of the
+        passes, and one for all those of the source together, where
         forward mode costs about two: each tap gathers the tangent image and the
         image's slope), except the grey mix, whose columns are exact and cost no
         blur (:meth:`_blurred_with_slopes`). The terms after the blur, the

@@ -122,13 +122,14 @@ SCALED_BLOCKS = ("vignetting", "pigment",
                  *(name for term, name in LIGHT_UNKNOWNS.items()
                    if term not in ("law", "thickness_scale", "transmission")))
 #: Blocks that are ``ref * exp(z)``: positive, their uncertainty relative.
-_LOG_BLOCKS = ("sss_level", "maxdd", "variances", "thickness_scale")
+LOG_BLOCKS = ("sss_level", "maxdd", "variances", "thickness_scale")
 #: How far a ``ref * exp(z)`` unknown may go from its reference: ``|z|`` beyond this
 #: (a factor of 1e26) maps to the value at the limit. Such a value is only bounded
 #: by the data, not measured (maxdd where no depth slope reaches it, once the
 #: correction has gone to 0, walks off without changing the loss: 5.9e44 on
 #: pt_proc_ear_glow_940's plain fit), and ``exp`` overflows near 710, and float32,
-#: which the fit's result is returned in, near 88.
+#: which the fit's result is returned in, near 88. An unknown at the limit stays
+#: there (its column of the Jacobian is 0) and is reported as undetermined.
 LOG_LIMIT = 60.0
 _SCALARS = ("sss_level", "correction", "maxdd")
 
@@ -297,7 +298,7 @@ class Parametrisation(eqx.Module):
         out = dict(self.values)
         for name, u in self.split(z).items():
             ref = self.reference[name] if xp is jnp else np.asarray(self.reference[name])
-            if name in _LOG_BLOCKS:
+            if name in LOG_BLOCKS:
                 out[name] = ref * xp.exp(xp.clip(u, -LOG_LIMIT, LOG_LIMIT))
             elif name == "correction":
                 out[name] = ref * _softplus(u, xp)
@@ -321,8 +322,8 @@ class Parametrisation(eqx.Module):
         for name, shape in self.blocks:
             x = np.asarray(natural[name], np.float64)
             ref = np.asarray(self.reference[name], np.float64)
-            if name in _LOG_BLOCKS:
-                u = np.log(x / ref)
+            if name in LOG_BLOCKS:
+                u = np.clip(np.log(x / ref), -LOG_LIMIT, LOG_LIMIT)
             elif name == "correction":
                 u = softplus_inverse(np.maximum(x / ref, 1e-12))
             elif name in ("weights", "mix"):
@@ -334,8 +335,8 @@ class Parametrisation(eqx.Module):
                 u = logit(np.clip(x, 1e-12, 1.0 - 1e-12)) - ref
             elif name == "transmission":
                 u = np.sqrt(np.maximum(x, 0.0) / ref)
-            else:
-                u = np.log(x)
+            else:  # gain_ratio
+                u = np.clip(np.log(x), -LOG_LIMIT, LOG_LIMIT)
             parts.append(np.broadcast_to(u, shape).ravel())
         # device_put, not jnp.asarray: that compiles a small copy for every new shape.
         return jax.device_put(np.concatenate(parts) if parts else np.zeros(0))

@@ -49,7 +49,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .parametrisation import SCALED_BLOCKS
+from .parametrisation import LOG_BLOCKS, LOG_LIMIT, SCALED_BLOCKS
 from .robust import psi_and_slope
 
 __all__ = [
@@ -189,6 +189,7 @@ def linearise(objective, z, coef, offset) -> dict:
         [jax.jacfwd(residual_z)(z), jax.jacfwd(residual_linear)(theta[n_z:])], axis=1
     )
     return {
+        "z": z,
         "residual": residual_linear(theta[n_z:]),
         "jacobian": jacobian,
         "values": reported(theta),
@@ -276,6 +277,7 @@ def gauss_newton_uncertainty(
     null_dirs = u[:, null] / d[:, None]  # in theta units
 
     stderr, undetermined = {}, {}
+    z, layout = np.asarray(lin["z"]), objective.param.layout()
     for name, value in values.items():
         g = np.asarray(jacs[name]).reshape(-1, p)
         val = np.asarray(value).ravel()
@@ -298,6 +300,10 @@ def gauss_newton_uncertainty(
             vague = np.zeros(val.shape, bool)
         else:
             vague = std > np.abs(val)
+        if name in LOG_BLOCKS and name in layout:
+            # Held at LOG_LIMIT: bounded by the data, not measured (past it, g is 0
+            # and the standard error would come out 0).
+            vague = vague | (np.abs(z[slice(*layout[name])]) >= LOG_LIMIT)
         bad = on_null | vague | ~np.isfinite(std)
         shape = np.shape(value)
         stderr[name] = np.where(bad, np.nan, std).reshape(shape)

@@ -123,8 +123,13 @@ def test_difference_jacobian_matches_forward_mode_for_every_kind_of_unknown():
             assert error < tolerance, (name, k, error)
 
 
-@pytest.mark.parametrize("grey_target", [True, False])
-def test_lighting_differences_side_by_side_equal_one_blur_per_move(grey_target):
+@pytest.mark.parametrize("grey_target, model, fix, side_by_side", [
+    (True, "sog", {}, True), (False, "sog", {}, True),
+    pytest.param(True, "thesis", {}, True, marks=pytest.mark.slow),
+    # Fixed weights: the layered render mixes them per channel, so one blur per move.
+    pytest.param(True, "sog", {"weights": [0.5, 0.3, 0.2]}, False, marks=pytest.mark.slow),
+])
+def test_lighting_differences_side_by_side_equal_one_blur_per_move(grey_target, model, fix, side_by_side):
     """The law, the fill and the transmission move the source, and their columns
     of the difference Jacobian come from one blur of the source and its moved
     copies side by side as channels. Each must equal the difference of two
@@ -141,8 +146,9 @@ def test_lighting_differences_side_by_side_equal_one_blur_per_move(grey_target):
                             thickness=rng.uniform(1.0, 8.0, (size, size)),
                             key_irradiance=rng.uniform(0.2, 1.0, (size, size, 3)))
     options = FitOptions(profile={"weights": [0.5, 0.3, 0.2], "variances": [0.25, 1.2, 5.0]}, n_starts=1,
-                         light_terms=("shift", "law", "fill", "transmission"))
+                         light_terms=("shift", "law", "fill", "transmission"), model=model, fix=fix)
     problem = build_problem([pair], options)
+    assert problem.objective._passes_alike_per_channel() == side_by_side
     blocks = problem.param.layout()
     lighting = [name for name in ("law", "law_strength", "fill_strength", "transmission", "thickness_scale")
                 if name in blocks]

@@ -39,3 +39,36 @@ def test_a_start_far_along_an_unbounded_maxdd_ends_finite_and_reported():
     assert float(fit.values["maxdd"]) > 1e20  # held at the limit: the data never pulled it back
     assert "maxdd" in fit.undetermined
     assert abs(float(fit.values["sss_level"]) / 600.0 - 1.0) < 0.01
+
+
+
+def test_a_log_unknown_past_the_limit_is_reported_undetermined():
+    """Past the limit a scale moves with no unknown, so the standard error the
+    covariance gives it is 0: an exact value, where the data only bound it. Linearised
+    with maxdd's unknown at 837 (where pt_proc_ear_glow_940's walk ended), maxdd is
+    reported undetermined; the blur scale, measured, is not."""
+    import jax
+
+    from invsss.estimator import build_problem
+    from invsss.estimator.uncertainty import gauss_newton_uncertainty, linearise
+
+    rng = np.random.default_rng(1)
+    source = rng.uniform(0.2, 1.0, (24, 24))
+    depth = 500.0 + 0.2 * np.arange(24)[None, :] * np.ones((24, 1))
+    mask = np.ones((24, 24))
+    target = np.asarray(invsss.render(source, depth, mask, invsss.SSSParams(600.0, 0.5, 5.0, [0.6, 0.4], [0.5, 2.0])))
+    target = target + rng.normal(0.0, 0.01, target.shape)
+    problem = build_problem([(source, target, depth, mask)],
+                            FitOptions(profile={"weights": [0.6, 0.4], "variances": [0.5, 2.0]}, robust=None,
+                                       n_starts=1))
+    first, _ = problem.param.layout()["maxdd"]
+    with jax.enable_x64(True):
+        z = np.asarray(problem.starts[0]).copy()
+        z[first] = 837.0
+        z = jax.device_put(z)
+        _, _, _, coef, offset = problem.objective.linear(z)
+        lin = jax.tree_util.tree_map(np.asarray, linearise(problem.objective, z, coef, offset))
+        unc = gauss_newton_uncertainty(problem.objective, lin, problem.scales.correction, None, None)
+    assert np.all(np.asarray(lin["value_jacobians"]["maxdd"]) == 0)  # what would make it look exact
+    assert bool(unc.undetermined["maxdd"]) and np.isnan(float(unc.stderr["maxdd"]))
+    assert not bool(unc.undetermined["sss_level"])
