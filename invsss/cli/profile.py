@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 
 import numpy as np
 
 from ..io import read_image
-from ..io.writing import check_file_target, write_text_atomic
+from ..io.writing import check_file_target, same_file, write_text_atomic
 from ..measurement.medium_fit import MODEL_NAMES
 from ..measurement.profile_models import PROFILE_MODELS
 from ..measurement.transport_table import ONE_MINUS_ALPHA
@@ -90,7 +89,7 @@ def run(args: argparse.Namespace, stop: StopSignals) -> int:
 
     # Never an input, --overwrite or not; then the checks every file output gets.
     for flag, given in (("SKIN", args.skin), ("REF", args.reference)):
-        if os.path.isfile(args.out) and os.path.isfile(given) and os.path.samefile(given, args.out):
+        if same_file(given, args.out):
             raise InvalidInputError(f"{args.out}: is the input {flag} of this run; choose another --out")
     check_file_target(args.out, overwrite=args.overwrite, role="the profile JSON")
     try:  # before reading anything: the transport models have tables for some eta only

@@ -66,7 +66,7 @@ from collections.abc import Callable, Iterable, Mapping
 
 from ..runtime.interrupts import add_quit_cleanup, remove_quit_cleanup
 from ..validation import InvalidInputError
-from .writing import write_text_atomic
+from .writing import same_file, write_text_atomic
 
 __all__ = [
     "MANIFEST_NAME",
@@ -385,12 +385,7 @@ class ResultDir:
         found: dict[str, str] = {}
         for label, given in self.inputs:
             for name in sorted(names):
-                target = os.path.join(self.path, name)
-                try:
-                    same = os.path.isfile(given) and os.path.isfile(target) and os.path.samefile(given, target)
-                except OSError:
-                    same = False
-                if same:
+                if same_file(given, os.path.join(self.path, name)):
                     found.setdefault(name, label)
         return found
 

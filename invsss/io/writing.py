@@ -18,7 +18,8 @@ from ..validation import InvalidInputError, check_image, one_line
 from .colour import linear_to_srgb
 from .rasters import image_extension, openimageio
 
-__all__ = ["write_image", "write_text_atomic", "write_texts_atomic", "check_file_target", "atomic_output"]
+__all__ = ["write_image", "write_text_atomic", "write_texts_atomic", "check_file_target", "atomic_output",
+           "same_file"]
 
 # Bits written for each extension when write_image is not told (EXR/TIFF keep
 # full float precision, PNG/JPEG are 8-bit sRGB like any viewer expects).
@@ -64,6 +65,15 @@ def write_text_atomic(path, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` so that an interrupted run leaves no half file."""
     with _atomic_target(os.fspath(path)) as temporary:
         _write_temporary(temporary, text)
+
+
+def same_file(a, b) -> bool:
+    """Whether ``a`` and ``b`` are one existing regular file, through any path or link
+    (False where either is missing or cannot be examined)."""
+    try:
+        return os.path.isfile(a) and os.path.isfile(b) and os.path.samefile(a, b)
+    except OSError:
+        return False
 
 
 def check_file_target(path, *, overwrite: bool, option: str = "--overwrite", role: str = "") -> None:
