@@ -61,6 +61,12 @@ _SAME_PASSES_PER_CHANNEL = ("chained",)
 _BLURRED_BY = ("sss_level", "correction", "maxdd", "variances", "weights", *_LIGHTING)
 
 
+def _mixed(images: Float[Array, "nb H W C"], mix: Float[Array, " C"]) -> Float[Array, "nb H W 1"]:
+    """Blurred source channels mixed to the grey image the model fits (the passes
+    are linear in the image: blurring the mix is mixing the blurs)."""
+    return jnp.einsum("ihwc,c->ihw", images, mix)[..., None]
+
+
 def _lit_source(pair, natural):
     """The pair with the terms that change the source applied to it (docs/model.md,
     section 8): the ``law`` (and ``fill``, when its strength is among the natural
@@ -255,7 +261,7 @@ class Objective(eqx.Module):
             lighting = []
             if "mix" in natural:
                 channels = self.blurred_bases({k: v for k, v in natural.items() if k != "mix"})
-                blurred = tuple(jnp.einsum("ihwc,c->ihw", x, natural["mix"])[..., None] for x in channels)
+                blurred = tuple(_mixed(x, natural["mix"]) for x in channels)
             else:
                 blurred = self.blurred_bases(natural)
         differenced = [j for name, (first, stop) in blocks.items() if name in _BLURRED_BY
@@ -275,7 +281,7 @@ class Objective(eqx.Module):
             for j in range(first, stop):
                 d_mix = jax.jvp(lambda u: self.param.natural(u)["mix"], (z,), (jnp.zeros_like(z).at[j].set(1.0),))[1]
                 for p, x in enumerate(channels):
-                    columns[p][j] = jnp.einsum("ihwc,c->ihw", x, d_mix)[..., None]
+                    columns[p][j] = _mixed(x, d_mix)
         slopes = tuple(
             jnp.stack([jnp.zeros_like(b) if c is None else c for c in cols]) for b, cols in zip(blurred, columns)
         )
@@ -311,7 +317,7 @@ class Objective(eqx.Module):
             copies = [images[..., i * c:(i + 1) * c] for i in range(len(sources))]
             unmixed.append(copies[0])
             if "mix" in natural:
-                copies = [jnp.einsum("ihwc,c->ihw", x, natural["mix"])[..., None] for x in copies]
+                copies = [_mixed(x, natural["mix"]) for x in copies]
             for copy, j in zip(copies[1:], lighting):
                 columns[p][j] = (copy - copies[0]) / taken[j]
             mixed.append(copies[0])
